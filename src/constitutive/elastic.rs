@@ -1,0 +1,123 @@
+//! Isotropic linear (hypo)elasticity in plane strain (DESIGN D22).
+
+use super::{mat4_mul_vec, ConstitutiveError, ConstitutiveModel, Mat4, PointState, StressUpdate, Voigt};
+
+/// Isotropic linear elasticity with Young's modulus `youngs_modulus` (kPa) and
+/// Poisson's ratio `poisson_ratio`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LinearElastic {
+    /// Young's modulus E, kPa.
+    pub youngs_modulus: f64,
+    /// Poisson's ratio ν, in (−1, 0.5).
+    pub poisson_ratio: f64,
+}
+
+impl LinearElastic {
+    /// New elastic law; the caller (scene validation) guarantees E > 0 and −1 < ν < 0.5.
+    pub fn new(youngs_modulus: f64, poisson_ratio: f64) -> Self {
+        Self { youngs_modulus, poisson_ratio }
+    }
+
+    /// Bulk modulus K = E / (3(1 − 2ν)), kPa.
+    pub fn bulk_modulus(&self) -> f64 {
+        self.youngs_modulus / (3.0 * (1.0 - 2.0 * self.poisson_ratio))
+    }
+
+    /// Shear modulus G = E / (2(1 + ν)), kPa.
+    pub fn shear_modulus(&self) -> f64 {
+        self.youngs_modulus / (2.0 * (1.0 + self.poisson_ratio))
+    }
+
+    /// The 4×4 plane-strain stiffness D of DESIGN D22 (zz row kept: σzz evolves).
+    pub fn stiffness(&self) -> Mat4 {
+        let g = self.shear_modulus();
+        let lambda = self.bulk_modulus() - 2.0 * g / 3.0;
+        let d = lambda + 2.0 * g;
+        [
+            [d, lambda, lambda, 0.0],
+            [lambda, d, lambda, 0.0],
+            [lambda, lambda, d, 0.0],
+            [0.0, 0.0, 0.0, g],
+        ]
+    }
+
+    /// The compliance C = D⁻¹ (DESIGN D22).
+    pub fn compliance(&self) -> Mat4 {
+        let e = self.youngs_modulus;
+        let nu = self.poisson_ratio;
+        let g = self.shear_modulus();
+        [
+            [1.0 / e, -nu / e, -nu / e, 0.0],
+            [-nu / e, 1.0 / e, -nu / e, 0.0],
+            [-nu / e, -nu / e, 1.0 / e, 0.0],
+            [0.0, 0.0, 0.0, 1.0 / g],
+        ]
+    }
+}
+
+impl ConstitutiveModel for LinearElastic {
+    fn name(&self) -> &'static str {
+        "linear_elastic"
+    }
+
+    fn elastic_stiffness(&self) -> Mat4 {
+        self.stiffness()
+    }
+
+    fn p_wave_modulus(&self) -> f64 {
+        self.bulk_modulus() + 4.0 * self.shear_modulus() / 3.0
+    }
+
+    fn is_elastic(&self) -> bool {
+        true
+    }
+
+    fn has_symmetric_tangent(&self) -> bool {
+        true
+    }
+
+    fn update(
+        &self,
+        stress_rotated: &Voigt,
+        strain_increment: &Voigt,
+        state_n: &PointState,
+        _strength_kappa: Option<f64>,
+    ) -> Result<StressUpdate, ConstitutiveError> {
+        let d = self.stiffness();
+        let increment = mat4_mul_vec(&d, strain_increment);
+        let mut stress = *stress_rotated;
+        for (s, ds) in stress.iter_mut().zip(increment) {
+            *s += ds;
+        }
+        if stress.iter().any(|s| !s.is_finite()) {
+            return Err(ConstitutiveError::NonFinite(format!("elastic stress {stress:?}")));
+        }
+        Ok(StressUpdate { stress, state: *state_n, tangent: d, yielded: false })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// D · C = I to round-off (D22).
+    #[test]
+    fn compliance_inverts_stiffness() {
+        let law = LinearElastic::new(20_000.0, 0.2);
+        let (d, c) = (law.stiffness(), law.compliance());
+        for i in 0..4 {
+            for j in 0..4 {
+                let dc: f64 = (0..4).map(|k| d[i][k] * c[k][j]).sum();
+                let expected = if i == j { 1.0 } else { 0.0 };
+                assert!((dc - expected).abs() < 1e-14, "DC[{i}][{j}] = {dc}");
+            }
+        }
+    }
+
+    /// Uniaxial stress: with σyy = σzz = 0 imposed through C, εxx = σ/E.
+    #[test]
+    fn one_dimensional_modulus_with_zero_poisson() {
+        let law = LinearElastic::new(1000.0, 0.0);
+        assert!((law.p_wave_modulus() - 1000.0).abs() < 1e-9);
+    }
+}

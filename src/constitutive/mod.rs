@@ -1,0 +1,124 @@
+//! Constitutive interface: the stress update, its algorithmic tangent and the
+//! state variables a material point carries (DESIGN §5).
+//!
+//! The engine calls [`ConstitutiveModel::update`] once per material point per
+//! Newton iteration (implicit) or per step (explicit). Models are stateless
+//! values; everything that evolves lives in [`PointState`] and the stress.
+//!
+//! Sign convention (DESIGN D1–D2): stress is tension-positive, Voigt order
+//! `[xx, yy, zz, xy]`; strains carry engineering shear `γxy = 2 εxy`.
+
+pub mod elastic;
+
+use std::fmt::Debug;
+
+pub use elastic::LinearElastic;
+
+/// Voigt 4-vector `[xx, yy, zz, xy]` (DESIGN D2).
+pub type Voigt = [f64; 4];
+/// 4×4 matrix acting on Voigt vectors, row-major `m[row][col]`.
+pub type Mat4 = [[f64; 4]; 4];
+
+/// State variables carried by every material point.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PointState {
+    /// Local equivalent plastic strain κ, accumulated by increments (DESIGN D27).
+    pub plastic_strain_eq: f64,
+    /// Nonlocal equivalent plastic strain κ̄ (DESIGN D35); equals κ in local runs.
+    pub plastic_strain_eq_nonlocal: f64,
+    /// Accumulated plastic strain (Voigt, engineering shear), for output and
+    /// the dissipation metric (DESIGN D43).
+    pub plastic_strain: Voigt,
+}
+
+/// Result of one stress update.
+#[derive(Clone, Copy, Debug)]
+pub struct StressUpdate {
+    /// Updated (tension-positive) stress σ_{n+1}.
+    pub stress: Voigt,
+    /// Updated state variables.
+    pub state: PointState,
+    /// Algorithmic tangent dσ_{n+1}/dΔε (DESIGN D32); the elastic D on the elastic branch.
+    pub tangent: Mat4,
+    /// True when the return mapping was active (plastic flow in this update).
+    pub yielded: bool,
+}
+
+/// Why a stress update could not be completed.
+#[derive(Debug, Clone, thiserror::Error, PartialEq)]
+pub enum ConstitutiveError {
+    /// The return mapping did not converge even with the maximum sub-stepping.
+    #[error("return mapping did not converge ({reason}); trial stress {trial_stress:?} kPa, κ = {kappa}")]
+    ReturnMappingFailed {
+        /// What failed (iteration limit, negative multiplier, ...).
+        reason: String,
+        /// The trial stress of the failed update (kPa).
+        trial_stress: Voigt,
+        /// The equivalent plastic strain at the start of the update.
+        kappa: f64,
+    },
+    /// The input or the result contains a NaN or an infinite value.
+    #[error("non-finite value in the stress update: {0}")]
+    NonFinite(String),
+}
+
+/// A constitutive law as seen by the MPM engine.
+pub trait ConstitutiveModel: Send + Sync + Debug {
+    /// Short model name (`"linear_elastic"`, `"hmc"`), written to `run.json`.
+    fn name(&self) -> &'static str;
+
+    /// Elastic stiffness D (DESIGN D22), kPa.
+    fn elastic_stiffness(&self) -> Mat4;
+
+    /// P-wave modulus K + 4G/3 (kPa), for the explicit stable time step (DESIGN D20).
+    fn p_wave_modulus(&self) -> f64;
+
+    /// True when the model never yields: the engine then skips the return
+    /// mapping and uses the constant elastic tangent.
+    fn is_elastic(&self) -> bool;
+
+    /// True when the algorithmic tangent is always symmetric (elastic, or
+    /// associated perfectly plastic), so that sparse Cholesky may be used.
+    fn has_symmetric_tangent(&self) -> bool;
+
+    /// Stress update (DESIGN §5.6).
+    ///
+    /// * `stress_rotated` – σ_n^R, the committed stress rotated by the incremental spin (D13);
+    /// * `strain_increment` – Δε of the step so far (D12);
+    /// * `state_n` – committed state at the start of the step;
+    /// * `strength_kappa` – `Some(κ̄)` in nonlocal runs: the strength is evaluated at this
+    ///   frozen value and κ is accumulated locally; `None` in local runs (strength at κ).
+    fn update(
+        &self,
+        stress_rotated: &Voigt,
+        strain_increment: &Voigt,
+        state_n: &PointState,
+        strength_kappa: Option<f64>,
+    ) -> Result<StressUpdate, ConstitutiveError>;
+}
+
+/// `D · a` for a 4×4 matrix and a Voigt vector.
+pub fn mat4_mul_vec(m: &Mat4, a: &Voigt) -> Voigt {
+    let mut out = [0.0; 4];
+    for (row, o) in m.iter().zip(out.iter_mut()) {
+        *o = row[0] * a[0] + row[1] * a[1] + row[2] * a[2] + row[3] * a[3];
+    }
+    out
+}
+
+/// Compression-positive mean stress p = −(σxx + σyy + σzz)/3 (DESIGN D1), kPa.
+pub fn mean_stress(stress: &Voigt) -> f64 {
+    -(stress[0] + stress[1] + stress[2]) / 3.0
+}
+
+/// Second deviatoric invariant J2 (DESIGN D4), kPa².
+pub fn j2(stress: &Voigt) -> f64 {
+    let p = mean_stress(stress);
+    let (sx, sy, sz) = (stress[0] + p, stress[1] + p, stress[2] + p);
+    0.5 * (sx * sx + sy * sy + sz * sz) + stress[3] * stress[3]
+}
+
+/// Deviatoric stress q = sqrt(3 J2) (DESIGN D5, paper eq. 7), kPa.
+pub fn deviatoric_stress(stress: &Voigt) -> f64 {
+    (3.0 * j2(stress)).sqrt()
+}
