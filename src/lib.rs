@@ -9,3 +9,4 @@ pub mod constitutive;
 pub mod grid;
 pub mod particles;
 pub mod shape;
+pub mod transfer;

@@ -1,0 +1,391 @@
+//! Particle ↔ grid transfer kernels (DESIGN D10–D14), shared by the implicit
+//! and the explicit integrator.
+//!
+//! All nodal sums are formed in a fixed order (particles binned by cell with a
+//! stable counting sort, cell sums in particle order, node sums over the four
+//! neighbouring cells in a fixed order), so results are bit-identical whatever
+//! the number of rayon threads.
+
+use rayon::prelude::*;
+
+use crate::constitutive::{Mat4, Voigt};
+use crate::grid::{Grid, ShapeAt};
+
+/// Sentinel for "no slot" in index maps.
+pub const NONE: u32 = u32::MAX;
+
+/// A particle that is not inside the grid.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OutsideGrid {
+    /// Particle index.
+    pub particle: usize,
+    /// Its position, m.
+    pub position: [f64; 2],
+}
+
+/// Shape functions at every particle position (evaluated once per step at
+/// start-of-step positions, DESIGN §2).
+pub fn shapes_at(grid: &Grid, positions: &[[f64; 2]]) -> Result<Vec<ShapeAt>, OutsideGrid> {
+    positions
+        .par_iter()
+        .enumerate()
+        .map(|(p, &x)| grid.shape_at(x).ok_or(OutsideGrid { particle: p, position: x }))
+        .collect()
+}
+
+/// Particles binned by cell (stable counting sort), the active cells and the
+/// active nodes (DESIGN §2: a cell is active if it holds ≥ 1 point; a node is
+/// active if it belongs to an active cell).
+#[derive(Clone, Debug, Default)]
+pub struct ParticleBins {
+    /// `order[cell_start[c]..cell_start[c+1]]` are the particles of cell `c`, in index order.
+    pub cell_start: Vec<u32>,
+    /// Particle indices sorted by cell.
+    pub order: Vec<u32>,
+    /// Indices of the active cells, increasing.
+    pub active_cells: Vec<u32>,
+    /// For every cell, its slot in `active_cells`, or [`NONE`].
+    pub cell_slot: Vec<u32>,
+    /// For every grid node, whether it is active.
+    pub node_active: Vec<bool>,
+}
+
+impl ParticleBins {
+    /// Bin the particles whose shapes are `shapes`.
+    pub fn new(grid: &Grid, shapes: &[ShapeAt]) -> Self {
+        let n_cells = grid.cell_count();
+        let mut counts = vec![0u32; n_cells + 1];
+        for s in shapes {
+            counts[s.cell as usize + 1] += 1;
+        }
+        for c in 0..n_cells {
+            counts[c + 1] += counts[c];
+        }
+        let cell_start = counts.clone();
+        let mut next = counts;
+        let mut order = vec![0u32; shapes.len()];
+        for (p, s) in shapes.iter().enumerate() {
+            let c = s.cell as usize;
+            order[next[c] as usize] = p as u32;
+            next[c] += 1;
+        }
+        let mut active_cells = Vec::new();
+        let mut cell_slot = vec![NONE; n_cells];
+        let mut node_active = vec![false; grid.node_count()];
+        for c in 0..n_cells {
+            if cell_start[c + 1] > cell_start[c] {
+                cell_slot[c] = active_cells.len() as u32;
+                active_cells.push(c as u32);
+                let (ci, cj) = grid.cell_ij(c);
+                for n in grid.cell_nodes(ci, cj) {
+                    node_active[n as usize] = true;
+                }
+            }
+        }
+        Self { cell_start, order, active_cells, cell_slot, node_active }
+    }
+
+    /// Particles in cell `cell`, in index order.
+    pub fn particles_in(&self, cell: usize) -> &[u32] {
+        &self.order[self.cell_start[cell] as usize..self.cell_start[cell + 1] as usize]
+    }
+}
+
+/// Sum particle contributions into grid nodes: `contribution(p)` returns the
+/// contributions of particle `p` to the four nodes of its cell (local order).
+/// Returns one `[f64; K]` per grid node (zero at inactive nodes). Deterministic.
+pub fn scatter<const K: usize, F>(grid: &Grid, bins: &ParticleBins, contribution: F) -> Vec<[f64; K]>
+where
+    F: Fn(usize) -> [[f64; K]; 4] + Sync,
+{
+    let cell_sums: Vec<[[f64; K]; 4]> = bins
+        .active_cells
+        .par_iter()
+        .map(|&c| {
+            let mut sum = [[0.0; K]; 4];
+            for &p in bins.particles_in(c as usize) {
+                let contrib = contribution(p as usize);
+                for a in 0..4 {
+                    for k in 0..K {
+                        sum[a][k] += contrib[a][k];
+                    }
+                }
+            }
+            sum
+        })
+        .collect();
+    gather_cells_to_nodes(grid, bins, &cell_sums)
+}
+
+/// Add per-active-cell nodal contributions into node values, each node
+/// summing its (up to four) cells in the fixed order lower-left, lower-right,
+/// upper-left, upper-right.
+fn gather_cells_to_nodes<const K: usize>(grid: &Grid, bins: &ParticleBins, cell_sums: &[[[f64; K]; 4]]) -> Vec<[f64; K]> {
+    let (ncx, ncy) = (grid.cells[0] as isize, grid.cells[1] as isize);
+    let nx = grid.cells[0] + 1;
+    (0..grid.node_count())
+        .into_par_iter()
+        .map(|node| {
+            let mut value = [0.0; K];
+            if !bins.node_active[node] {
+                return value;
+            }
+            let (i, j) = ((node % nx) as isize, (node / nx) as isize);
+            // (cell offset, local index of this node in that cell)
+            for (di, dj, local) in [(-1, -1, 2usize), (0, -1, 3), (-1, 0, 1), (0, 0, 0)] {
+                let (ci, cj) = (i + di, j + dj);
+                if ci < 0 || cj < 0 || ci >= ncx || cj >= ncy {
+                    continue;
+                }
+                let slot = bins.cell_slot[(cj * ncx + ci) as usize];
+                if slot != NONE {
+                    let contrib = &cell_sums[slot as usize][local];
+                    for k in 0..K {
+                        value[k] += contrib[k];
+                    }
+                }
+            }
+            value
+        })
+        .collect()
+}
+
+/// Lumped nodal mass m_i = Σ_p N_ip m_p (DESIGN D10).
+pub fn nodal_mass(grid: &Grid, bins: &ParticleBins, shapes: &[ShapeAt], mass: &[f64]) -> Vec<f64> {
+    scatter::<1, _>(grid, bins, |p| {
+        let s = &shapes[p];
+        let m = mass[p];
+        [[s.n[0] * m], [s.n[1] * m], [s.n[2] * m], [s.n[3] * m]]
+    })
+    .into_iter()
+    .map(|v| v[0])
+    .collect()
+}
+
+/// Mass-weighted nodal sum Σ_p N_ip m_p q_p of a particle vector field (momentum
+/// when `q = v`, DESIGN D10). Divide by the nodal mass to get the nodal field.
+pub fn nodal_mass_weighted(grid: &Grid, bins: &ParticleBins, shapes: &[ShapeAt], mass: &[f64], field: &[[f64; 2]]) -> Vec<[f64; 2]> {
+    scatter::<2, _>(grid, bins, |p| {
+        let s = &shapes[p];
+        let (m, q) = (mass[p], field[p]);
+        let mut c = [[0.0; 2]; 4];
+        for a in 0..4 {
+            c[a] = [s.n[a] * m * q[0], s.n[a] * m * q[1]];
+        }
+        c
+    })
+}
+
+/// Body force f_i = Σ_p N_ip m_p b (DESIGN D10), for a uniform acceleration `b` (m/s²).
+pub fn body_force(grid: &Grid, bins: &ParticleBins, shapes: &[ShapeAt], mass: &[f64], b: [f64; 2]) -> Vec<[f64; 2]> {
+    scatter::<2, _>(grid, bins, |p| {
+        let s = &shapes[p];
+        let m = mass[p];
+        let mut c = [[0.0; 2]; 4];
+        for a in 0..4 {
+            c[a] = [s.n[a] * m * b[0], s.n[a] * m * b[1]];
+        }
+        c
+    })
+}
+
+/// Internal force f_i^int = Σ_p V_p B_ipᵀ σ_p (DESIGN D11), kN per metre run.
+pub fn internal_force(grid: &Grid, bins: &ParticleBins, shapes: &[ShapeAt], volume: &[f64], stress: &[Voigt]) -> Vec<[f64; 2]> {
+    scatter::<2, _>(grid, bins, |p| {
+        let s = &shapes[p];
+        let (v, sig) = (volume[p], &stress[p]);
+        let mut c = [[0.0; 2]; 4];
+        for a in 0..4 {
+            let [dx, dy] = s.dn[a];
+            c[a] = [v * (dx * sig[0] + dy * sig[3]), v * (dy * sig[1] + dx * sig[3])];
+        }
+        c
+    })
+}
+
+/// Interpolate a nodal vector field at a particle: g_p = Σ_i N_ip g_i.
+#[inline]
+pub fn interpolate(shape: &ShapeAt, nodal: &[[f64; 2]]) -> [f64; 2] {
+    let mut g = [0.0; 2];
+    for a in 0..4 {
+        let gi = nodal[shape.nodes[a] as usize];
+        g[0] += shape.n[a] * gi[0];
+        g[1] += shape.n[a] * gi[1];
+    }
+    g
+}
+
+/// Gradient of a nodal vector field at a particle, L = Σ_i g_i ⊗ ∇N_ip,
+/// row-major `[L11, L12, L21, L22]` with `L_ij = ∂g_i/∂x_j` (DESIGN D12).
+#[inline]
+pub fn gradient(shape: &ShapeAt, nodal: &[[f64; 2]]) -> [f64; 4] {
+    let mut l = [0.0; 4];
+    for a in 0..4 {
+        let gi = nodal[shape.nodes[a] as usize];
+        let [dx, dy] = shape.dn[a];
+        l[0] += gi[0] * dx;
+        l[1] += gi[0] * dy;
+        l[2] += gi[1] * dx;
+        l[3] += gi[1] * dy;
+    }
+    l
+}
+
+/// Small-strain increment Δε = [L11, L22, 0, L12 + L21] and incremental spin
+/// ω = ½(L12 − L21) of a displacement-increment gradient (DESIGN D12).
+#[inline]
+pub fn strain_and_spin(l: &[f64; 4]) -> (Voigt, f64) {
+    ([l[0], l[3], 0.0, l[1] + l[2]], 0.5 * (l[1] - l[2]))
+}
+
+/// Jaumann rotation of the stored stress by the incremental spin ω (DESIGN D13).
+#[inline]
+pub fn rotate_stress(stress: &Voigt, spin: f64) -> Voigt {
+    let [sxx, syy, szz, sxy] = *stress;
+    [sxx + 2.0 * spin * sxy, syy - 2.0 * spin * sxy, szz, sxy + spin * (syy - sxx)]
+}
+
+/// Stiffness contribution V_p B_pᵀ D B_p of one particle to its cell's 8×8 block
+/// (row-major, dof order [u0x, u0y, u1x, …]), accumulated into `block` (DESIGN §3).
+#[inline]
+pub fn add_particle_stiffness(block: &mut [f64; 64], shape: &ShapeAt, volume: f64, tangent: &Mat4) {
+    // DB_b (4×2) for every node b
+    let mut db = [[[0.0; 2]; 4]; 4];
+    for b in 0..4 {
+        let [dx, dy] = shape.dn[b];
+        for r in 0..4 {
+            db[b][r] = [tangent[r][0] * dx + tangent[r][3] * dy, tangent[r][1] * dy + tangent[r][3] * dx];
+        }
+    }
+    for a in 0..4 {
+        let [dx, dy] = shape.dn[a];
+        for b in 0..4 {
+            for c in 0..2 {
+                // rows of B_aᵀ: x-row = [dx, 0, 0, dy], y-row = [0, dy, 0, dx]
+                let kx = dx * db[b][0][c] + dy * db[b][3][c];
+                let ky = dy * db[b][1][c] + dx * db[b][3][c];
+                block[(2 * a) * 8 + 2 * b + c] += volume * kx;
+                block[(2 * a + 1) * 8 + 2 * b + c] += volume * ky;
+            }
+        }
+    }
+}
+
+/// Per-active-cell stiffness blocks Σ_{p ∈ cell} V_p B_pᵀ D_p B_p, in the order of
+/// `bins.active_cells` (deterministic: particles summed in index order).
+pub fn cell_stiffness_blocks(bins: &ParticleBins, shapes: &[ShapeAt], volume: &[f64], tangent: &[Mat4]) -> Vec<[f64; 64]> {
+    bins.active_cells
+        .par_iter()
+        .map(|&c| {
+            let mut block = [0.0; 64];
+            for &p in bins.particles_in(c as usize) {
+                let p = p as usize;
+                add_particle_stiffness(&mut block, &shapes[p], volume[p], &tangent[p]);
+            }
+            block
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn setup() -> (Grid, Vec<[f64; 2]>, Vec<f64>, Vec<[f64; 2]>) {
+        let grid = Grid { origin: [0.0, 0.0], cell_size: 0.25, cells: [6, 5] };
+        // pseudo-random points (deterministic LCG) inside part of the grid
+        let mut seed = 12345u64;
+        let mut rnd = || {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let n = 400;
+        let pos: Vec<[f64; 2]> = (0..n).map(|_| [0.1 + 1.2 * rnd(), 0.05 + 1.1 * rnd()]).collect();
+        let mass: Vec<f64> = (0..n).map(|_| 0.5 + rnd()).collect();
+        let vel: Vec<[f64; 2]> = (0..n).map(|_| [rnd() - 0.5, 2.0 * rnd() - 1.0]).collect();
+        (grid, pos, mass, vel)
+    }
+
+    /// DESIGN D10: Σ_i m_i = Σ_p m_p and Σ_i p_i = Σ_p m_p v_p (partition of unity),
+    /// and G2P of the nodal velocity field conserves momentum when mapped back
+    /// with the same weights (Σ_p m_p Σ_i N_ip v_i = Σ_i m_i v_i).
+    #[test]
+    fn p2g_conserves_mass_and_momentum() {
+        let (grid, pos, mass, vel) = setup();
+        let shapes = shapes_at(&grid, &pos).unwrap();
+        let bins = ParticleBins::new(&grid, &shapes);
+        let m_nodes = nodal_mass(&grid, &bins, &shapes, &mass);
+        let p_nodes = nodal_mass_weighted(&grid, &bins, &shapes, &mass, &vel);
+        let total_mass: f64 = mass.iter().sum();
+        let grid_mass: f64 = m_nodes.iter().sum();
+        assert!((grid_mass - total_mass).abs() <= 1e-13 * total_mass, "mass {grid_mass} vs {total_mass}");
+        for c in 0..2 {
+            let mp: f64 = (0..pos.len()).map(|p| mass[p] * vel[p][c]).sum();
+            let mg: f64 = p_nodes.iter().map(|v| v[c]).sum();
+            assert!((mp - mg).abs() <= 1e-13 * total_mass, "momentum {c}: {mp} vs {mg}");
+        }
+        // G2P of nodal velocity, then momentum of the particles
+        let v_nodes: Vec<[f64; 2]> = p_nodes
+            .iter()
+            .zip(&m_nodes)
+            .map(|(p, &m)| if m > 0.0 { [p[0] / m, p[1] / m] } else { [0.0; 2] })
+            .collect();
+        for c in 0..2 {
+            let grid_momentum: f64 = p_nodes.iter().map(|v| v[c]).sum();
+            let back: f64 = (0..pos.len()).map(|p| mass[p] * interpolate(&shapes[p], &v_nodes)[c]).sum();
+            assert!((grid_momentum - back).abs() <= 1e-12 * total_mass, "G2P momentum {c}");
+        }
+    }
+
+    /// The internal force of a uniform stress sums to zero over the grid
+    /// (Σ_i ∇N_i = 0) and the particle stiffness block is symmetric for symmetric D.
+    #[test]
+    fn internal_force_and_stiffness_consistency() {
+        let (grid, pos, mass, _) = setup();
+        let shapes = shapes_at(&grid, &pos).unwrap();
+        let bins = ParticleBins::new(&grid, &shapes);
+        let stress = vec![[-3.0, 5.0, 1.0, 2.0]; pos.len()];
+        let f = internal_force(&grid, &bins, &shapes, &mass, &stress);
+        let (fx, fy) = f.iter().fold((0.0, 0.0), |acc, v| (acc.0 + v[0], acc.1 + v[1]));
+        assert!(fx.abs() < 1e-12 && fy.abs() < 1e-12);
+        let d = crate::constitutive::LinearElastic::new(1000.0, 0.3).stiffness();
+        let blocks = cell_stiffness_blocks(&bins, &shapes, &mass, &vec![d; pos.len()]);
+        for b in &blocks {
+            for i in 0..8 {
+                for j in 0..8 {
+                    assert!((b[i * 8 + j] - b[j * 8 + i]).abs() < 1e-10 * b[0].abs().max(1.0));
+                }
+            }
+        }
+    }
+
+    /// The stiffness block times nodal displacements equals the internal force
+    /// of the stress D·Δε those displacements produce (K u = f_int(u), linear elasticity).
+    #[test]
+    fn stiffness_block_matches_internal_force_of_linear_field() {
+        let grid = Grid { origin: [0.0, 0.0], cell_size: 1.0, cells: [1, 1] };
+        let pos = vec![[0.2, 0.3], [0.7, 0.1], [0.6, 0.9], [0.1, 0.8], [0.5, 0.5]];
+        let vol = vec![0.2, 0.3, 0.1, 0.25, 0.15];
+        let shapes = shapes_at(&grid, &pos).unwrap();
+        let bins = ParticleBins::new(&grid, &shapes);
+        let d = crate::constitutive::LinearElastic::new(500.0, 0.25).stiffness();
+        let blocks = cell_stiffness_blocks(&bins, &shapes, &vol, &vec![d; pos.len()]);
+        let u: Vec<[f64; 2]> = vec![[0.01, -0.02], [0.03, 0.005], [-0.01, 0.02], [0.004, 0.001]];
+        let stress: Vec<Voigt> = shapes
+            .iter()
+            .map(|s| {
+                let (eps, _) = strain_and_spin(&gradient(s, &u));
+                crate::constitutive::mat4_mul_vec(&d, &eps)
+            })
+            .collect();
+        let f = internal_force(&grid, &bins, &shapes, &vol, &stress);
+        let nodes = grid.cell_nodes(0, 0);
+        for a in 0..4 {
+            for c in 0..2 {
+                let ku: f64 = (0..4).map(|b| (0..2).map(|e| blocks[0][(2 * a + c) * 8 + 2 * b + e] * u[nodes[b] as usize][e]).sum::<f64>()).sum();
+                let fi = f[nodes[a] as usize][c];
+                assert!((ku - fi).abs() < 1e-12 * fi.abs().max(1.0), "node {a} comp {c}: {ku} vs {fi}");
+            }
+        }
+    }
+}
