@@ -10,3 +10,4 @@ pub mod grid;
 pub mod particles;
 pub mod shape;
 pub mod transfer;
+pub mod scene;

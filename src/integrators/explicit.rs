@@ -1,0 +1,201 @@
+//! Explicit integrator (DESIGN §4): MUSL central difference, matrix-free,
+//! with the same transfer kernels and stress-update stage as the implicit one.
+//!
+//! Per step: P2G of mass, momentum and forces → nodal momentum update with
+//! Dirichlet conditions → G2P of velocity and position → re-map of the
+//! particle momentum → strain increment from the re-mapped nodal velocity and
+//! stress update → grid reset.
+
+use super::{evaluate_stresses, TrialStresses};
+use crate::bc::DofConstraint;
+use crate::error::RunError;
+use crate::integrators::implicit::update_kinematics;
+use crate::profile::Stage;
+use crate::simulation::{Simulation, StepReport};
+use crate::transfer::{self, ParticleBins};
+
+impl Simulation {
+    /// Stable time step Δt = α_CFL · min_p h / (c_p + |v_p|) (DESIGN D20), and the
+    /// limit at α = 1. With driven points also Δt ≤ α·2·sqrt(m_i/k_i) at their nodes.
+    fn explicit_time_step(&self, nodal_mass: &[f64], shapes: &[crate::grid::ShapeAt]) -> (f64, f64, String) {
+        let p = &self.particles;
+        let h = self.grid.cell_size;
+        let mut limit = f64::INFINITY;
+        let mut reason = String::from("wave speed, DESIGN D20");
+        for i in 0..p.len() {
+            let density = p.mass[i] / p.volume[i];
+            let c = (self.materials[p.material[i] as usize].p_wave_modulus() / density).sqrt();
+            let speed = (p.velocity[i][0].powi(2) + p.velocity[i][1].powi(2)).sqrt();
+            limit = limit.min(h / (c + speed));
+        }
+        if !self.driven.is_empty() {
+            let mut spring = vec![0.0; nodal_mass.len()];
+            for k in 0..self.driven.len() {
+                let s = &shapes[self.driven.particle[k]];
+                for a in 0..4 {
+                    spring[s.nodes[a] as usize] += self.driven.stiffness[k] * s.n[a];
+                }
+            }
+            for (node, &k) in spring.iter().enumerate() {
+                if k > 0.0 && nodal_mass[node] > 0.0 {
+                    let penalty_limit = 2.0 * (nodal_mass[node] / k).sqrt();
+                    if penalty_limit < limit {
+                        limit = penalty_limit;
+                        reason = "penalty springs of driven points, DESIGN §4".into();
+                    }
+                }
+            }
+        }
+        (self.scene.solver.cfl * limit, limit, reason)
+    }
+
+    /// One MUSL step (DESIGN §4).
+    pub(crate) fn explicit_step(&mut self) -> Result<StepReport, RunError> {
+        let step = self.step + 1;
+        let t = self.time;
+        let grid = self.grid.clone();
+        let n_nodes = grid.node_count();
+        let setup = self.profile.time(Stage::Setup, || {
+            let shapes = transfer::shapes_at(&grid, &self.particles.position)
+                .map_err(|o| RunError::ParticleLeftGrid { step, time: t, particle: o.particle, position: o.position })?;
+            let bins = ParticleBins::new(&grid, &shapes);
+            let traction_shapes = self.traction.shapes(&grid).ok_or(RunError::NonFinite { step, time: t, what: "a traction point left the grid".into() })?;
+            Ok((shapes, bins, traction_shapes))
+        })?;
+        let (shapes, bins, traction_shapes) = setup;
+        let p = &self.particles;
+
+        // 1. P2G: mass, momentum, forces at t.
+        let (mass, mut momentum, force) = self.profile.time(Stage::P2G, || {
+            let mass = transfer::nodal_mass(&grid, &bins, &shapes, &p.mass);
+            let momentum = transfer::nodal_mass_weighted(&grid, &bins, &shapes, &p.mass, &p.velocity);
+            let internal = transfer::internal_force(&grid, &bins, &shapes, &p.volume, &p.stress);
+            let g = self.scene.loads.gravity_at(t);
+            let mut external =
+                if g != 0.0 { transfer::body_force(&grid, &bins, &shapes, &p.mass, [0.0, -g]) } else { vec![[0.0; 2]; n_nodes] };
+            self.traction.add_forces(&traction_shapes, &mut external);
+            self.driven.add_forces(p, &shapes, &vec![[0.0; 2]; n_nodes], t, &mut external);
+            let force: Vec<[f64; 2]> = external.iter().zip(&internal).map(|(e, i)| [e[0] - i[0], e[1] - i[1]]).collect();
+            (mass, momentum, force)
+        });
+
+        // Time step, checked every step as the points move.
+        let (cfl_dt, limit, reason) = self.explicit_time_step(&mass, &shapes);
+        let dt = match self.scene.scene.dt {
+            Some(fixed) if fixed > limit => return Err(RunError::UnstableTimeStep { step, time: t, dt: fixed, limit, reason }),
+            Some(fixed) => fixed,
+            None => cfl_dt,
+        };
+        let end = self.scene.scene.end_time.unwrap_or(f64::INFINITY);
+        let dt = dt.min(end - t).max(0.0);
+        if !(dt > 0.0) || !dt.is_finite() {
+            return Err(RunError::NonFinite { step, time: t, what: format!("explicit time step {dt}") });
+        }
+
+        // 2. Nodal update with damping (D21) and Dirichlet conditions.
+        let max_mass = mass.iter().cloned().fold(0.0, f64::max);
+        let tiny = 1e-12 * max_mass;
+        let damping = self.scene.solver.damping;
+        let mut rate = vec![[0.0; 2]; n_nodes]; // f_i / m_i, the nodal acceleration
+        let mut reaction = vec![[0.0; 2]; n_nodes];
+        for node in 0..n_nodes {
+            if mass[node] <= tiny {
+                momentum[node] = [0.0; 2];
+                continue;
+            }
+            for c in 0..2 {
+                let d = 2 * node + c;
+                let v = momentum[node][c] / mass[node];
+                let mut f = force[node][c];
+                match self.constraints.dof[d] {
+                    DofConstraint::Fixed => {
+                        reaction[node][c] = -f;
+                        momentum[node][c] = 0.0;
+                        rate[node][c] = -v / dt;
+                    }
+                    DofConstraint::Prescribed { rate: r, gradient } => {
+                        let x = grid.node_position(node);
+                        let target = r + gradient[0] * x[0] + gradient[1] * x[1];
+                        reaction[node][c] = -f;
+                        rate[node][c] = (target - v) / dt;
+                        momentum[node][c] = mass[node] * target;
+                    }
+                    DofConstraint::Free => {
+                        if v != 0.0 {
+                            f -= damping * f.abs() * v.signum();
+                        }
+                        momentum[node][c] += dt * f;
+                        rate[node][c] = f / mass[node];
+                    }
+                }
+            }
+        }
+
+        // 3. G2P: v_p += Δt Σ N a_i, x_p += Δt Σ N p_i/m_i.
+        let velocity_nodes: Vec<[f64; 2]> =
+            momentum.iter().zip(&mass).map(|(q, &m)| if m > tiny { [q[0] / m, q[1] / m] } else { [0.0; 2] }).collect();
+        let start = std::time::Instant::now();
+        {
+            let p = &mut self.particles;
+            for i in 0..p.len() {
+                let a = transfer::interpolate(&shapes[i], &rate);
+                let v = transfer::interpolate(&shapes[i], &velocity_nodes);
+                p.velocity[i][0] += dt * a[0];
+                p.velocity[i][1] += dt * a[1];
+                p.acceleration[i] = a;
+                p.position[i][0] += dt * v[0];
+                p.position[i][1] += dt * v[1];
+            }
+        }
+        self.profile.add(Stage::G2P, start.elapsed().as_secs_f64());
+
+        // 4. Re-map the updated particle momentum (MUSL), Dirichlet again.
+        let du: Vec<[f64; 2]> = self.profile.time(Stage::P2G, || {
+            let p = &self.particles;
+            let remapped = transfer::nodal_mass_weighted(&grid, &bins, &shapes, &p.mass, &p.velocity);
+            (0..n_nodes)
+                .map(|node| {
+                    let mut u = [0.0; 2];
+                    if mass[node] > tiny {
+                        for (c, uc) in u.iter_mut().enumerate() {
+                            *uc = match self.constraints.dof[2 * node + c] {
+                                DofConstraint::Fixed => 0.0,
+                                DofConstraint::Prescribed { .. } => dt * velocity_nodes[node][c],
+                                DofConstraint::Free => dt * remapped[node][c] / mass[node],
+                            };
+                        }
+                    }
+                    u
+                })
+                .collect()
+        });
+
+        // 5. Strain increment and stress update; F, V (positions already moved).
+        let mut trial = TrialStresses::default();
+        self.profile
+            .time(Stage::StressUpdate, || evaluate_stresses(&self.particles, &self.materials, &shapes, &du, None, &mut trial))
+            .map_err(|(particle, source)| RunError::Constitutive { step, time: t + dt, particle, source })?;
+        let start = std::time::Instant::now();
+        {
+            let p = &mut self.particles;
+            for i in 0..p.len() {
+                update_kinematics(p, i, [0.0; 2], &trial.gradient[i]);
+                p.stress[i] = trial.stress[i];
+                p.state[i] = trial.state[i];
+            }
+            if let Some(i) = (0..p.len()).find(|&i| !grid.contains(p.position[i])) {
+                return Err(RunError::ParticleLeftGrid { step, time: t + dt, particle: i, position: p.position[i] });
+            }
+            if let Some(i) = (0..p.len()).find(|&i| p.stress[i].iter().any(|s| !s.is_finite())) {
+                return Err(RunError::NonFinite { step, time: t + dt, what: format!("stress of material point {i}") });
+            }
+        }
+        self.traction.advect(&traction_shapes, &du);
+        self.profile.add(Stage::G2P, start.elapsed().as_secs_f64());
+        self.reaction = reaction;
+        self.last_increment = du;
+        self.step = step;
+        self.time = t + dt;
+        Ok(StepReport { step, time: self.time, dt, iterations: 0, substeps: 1 })
+    }
+}

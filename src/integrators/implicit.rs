@@ -1,0 +1,409 @@
+//! Implicit integrator (DESIGN §3): full Newton–Raphson on the nodal
+//! equilibrium of each step, quasi-static or dynamic with the Newmark
+//! trapezoidal rule (paper eq. 2, DESIGN D15–D17), consistent tangent
+//! assembled per cell and factorised by the sparse direct solver.
+//!
+//! One step reads like paper Fig. 1: shape functions at the start-of-step
+//! positions → nodal mass/momentum and external forces (P2G) → Newton on Δu
+//! (stress update, internal force, tangent, solve) → G2P update of the points
+//! → grid reset (nothing nodal is kept).
+
+use mpm_solvers::{Assembler, FactorKind, SparseMatrix};
+
+use super::{evaluate_stresses, TrialStresses};
+use crate::bc::{DofConstraint, DofMap};
+use crate::error::RunError;
+use crate::grid::ShapeAt;
+use crate::profile::Stage;
+use crate::scene::AnalysisKind;
+use crate::simulation::{Simulation, StepReport};
+use crate::transfer::{self, ParticleBins, NONE};
+
+/// Why one attempt at a (sub-)step failed; all are retried with a halved step.
+#[derive(Debug)]
+pub(crate) enum StepFailure {
+    /// Residual grew in three consecutive iterations.
+    Diverged(Vec<f64>),
+    /// Iteration limit reached.
+    IterationLimit(Vec<f64>),
+    /// Stress update failed at a particle.
+    Constitutive(usize, crate::constitutive::ConstitutiveError),
+    /// Non-finite residual or solution.
+    NonFinite(String, Vec<f64>),
+    /// A point moved more than half a cell in one dynamic step (DESIGN §3 motion limit).
+    Motion(f64),
+    /// Linear solver error.
+    Solver(String),
+    /// Not retried: a point left the grid.
+    LeftGrid(usize, [f64; 2]),
+}
+
+/// Start-of-step nodal quantities of a (sub-)step.
+struct StepGrid {
+    shapes: Vec<ShapeAt>,
+    bins: ParticleBins,
+    dofs: DofMap,
+    /// Lumped nodal mass (dynamic only, else empty).
+    mass: Vec<f64>,
+    /// Nodal velocity v_n and acceleration a_n (dynamic only).
+    velocity: Vec<[f64; 2]>,
+    acceleration: Vec<[f64; 2]>,
+    /// External force at t_{n+1} (body force + traction), per grid node.
+    external: Vec<[f64; 2]>,
+    traction_shapes: Vec<ShapeAt>,
+}
+
+/// Residual-side quantities of one Newton iterate.
+struct Residual {
+    /// R = f_ext + f_pen − f_int − M a, per grid node.
+    residual: Vec<[f64; 2]>,
+    /// ‖R‖ over free dofs.
+    norm: f64,
+    /// Reference force of DESIGN D18.
+    reference: f64,
+}
+
+impl Simulation {
+    /// One implicit step of `dt`, halving it on Newton failure up to
+    /// `solver.max_halvings` times (DESIGN §3).
+    pub(crate) fn implicit_step(&mut self) -> Result<StepReport, RunError> {
+        let dt = self.implicit_dt();
+        let t0 = self.time;
+        let mut report = StepReport { step: self.step + 1, dt, ..Default::default() };
+        self.advance_implicit(t0, dt, 0, &mut report)?;
+        self.step += 1;
+        self.time = t0 + dt;
+        report.time = self.time;
+        Ok(report)
+    }
+
+    fn advance_implicit(&mut self, t: f64, dt: f64, depth: usize, report: &mut StepReport) -> Result<(), RunError> {
+        match self.try_implicit(t, dt) {
+            Ok(iterations) => {
+                report.iterations += iterations;
+                report.substeps += 1;
+                self.solver_usage.newton_iterations += iterations;
+                Ok(())
+            }
+            Err(StepFailure::LeftGrid(particle, position)) => {
+                Err(RunError::ParticleLeftGrid { step: self.step + 1, time: t + dt, particle, position })
+            }
+            Err(failure) if depth < self.scene.solver.max_halvings => {
+                let _ = failure;
+                self.solver_usage.halvings += 1;
+                self.advance_implicit(t, 0.5 * dt, depth + 1, report)?;
+                self.advance_implicit(t + 0.5 * dt, 0.5 * dt, depth + 1, report)
+            }
+            Err(failure) => Err(self.failure_to_error(failure, t + dt, depth)),
+        }
+    }
+
+    fn failure_to_error(&self, failure: StepFailure, time: f64, halvings: usize) -> RunError {
+        let step = self.step + 1;
+        match failure {
+            StepFailure::Constitutive(particle, source) => RunError::Constitutive { step, time, particle, source },
+            StepFailure::Solver(message) => RunError::Solver { step, time, message },
+            StepFailure::LeftGrid(particle, position) => RunError::ParticleLeftGrid { step, time, particle, position },
+            StepFailure::Diverged(history) => {
+                RunError::NewtonFailed { step, time, halvings, cause: "residual grew in 3 consecutive iterations".into(), history }
+            }
+            StepFailure::IterationLimit(history) => RunError::NewtonFailed {
+                step,
+                time,
+                halvings,
+                cause: format!("no convergence within {} iterations", self.scene.solver.max_iterations),
+                history,
+            },
+            StepFailure::NonFinite(what, history) => RunError::NewtonFailed { step, time, halvings, cause: format!("non-finite {what}"), history },
+            StepFailure::Motion(d) => RunError::NewtonFailed {
+                step,
+                time,
+                halvings,
+                cause: format!("a material point moved {d:.3e} m > h/2 in one step"),
+                history: Vec::new(),
+            },
+        }
+    }
+
+    fn dynamic(&self) -> bool {
+        self.analysis() == AnalysisKind::ImplicitDynamic
+    }
+
+    /// Shape functions, bins, dof map, nodal mass/kinematics and external
+    /// forces at t + dt for the step starting at `t`.
+    fn prepare_step(&mut self, t: f64, dt: f64) -> Result<StepGrid, StepFailure> {
+        let p = &self.particles;
+        let grid = &self.grid;
+        let profile = &self.profile;
+        let (shapes, bins, dofs, traction_shapes) = profile.time(Stage::Setup, || {
+            let shapes = transfer::shapes_at(grid, &p.position).map_err(|o| StepFailure::LeftGrid(o.particle, o.position))?;
+            let bins = ParticleBins::new(grid, &shapes);
+            let dofs = DofMap::new(&bins, &self.constraints);
+            let traction_shapes = self.traction.shapes(grid).ok_or_else(|| StepFailure::LeftGrid(usize::MAX, [f64::NAN; 2]))?;
+            Ok((shapes, bins, dofs, traction_shapes))
+        })?;
+        let dynamic = self.dynamic();
+        let (mass, velocity, acceleration, external) = profile.time(Stage::P2G, || {
+            let (mut mass, mut velocity, mut acceleration) = (Vec::new(), Vec::new(), Vec::new());
+            if dynamic {
+                mass = transfer::nodal_mass(grid, &bins, &shapes, &p.mass);
+                let momentum = transfer::nodal_mass_weighted(grid, &bins, &shapes, &p.mass, &p.velocity);
+                let ma = transfer::nodal_mass_weighted(grid, &bins, &shapes, &p.mass, &p.acceleration);
+                velocity = divide_by_mass(&momentum, &mass);
+                acceleration = divide_by_mass(&ma, &mass);
+                // Dirichlet: fixed dofs neither move nor accelerate.
+                for (d, c) in self.constraints.dof.iter().enumerate() {
+                    if *c == DofConstraint::Fixed {
+                        velocity[d / 2][d % 2] = 0.0;
+                        acceleration[d / 2][d % 2] = 0.0;
+                    }
+                }
+            }
+            let g = self.scene.loads.gravity_at(t + dt);
+            let mut external = if g != 0.0 {
+                transfer::body_force(grid, &bins, &shapes, &p.mass, [0.0, -g])
+            } else {
+                vec![[0.0; 2]; grid.node_count()]
+            };
+            self.traction.add_forces(&traction_shapes, &mut external);
+            (mass, velocity, acceleration, external)
+        });
+        Ok(StepGrid { shapes, bins, dofs, mass, velocity, acceleration, external, traction_shapes })
+    }
+
+    /// Newmark acceleration a_{n+1} = (4/Δt²) Δu − (4/Δt) v_n − a_n (DESIGN D15) at grid dof `d`.
+    fn newmark_acceleration(sg: &StepGrid, du: &[[f64; 2]], dt: f64, node: usize, c: usize) -> f64 {
+        4.0 / (dt * dt) * du[node][c] - 4.0 / dt * sg.velocity[node][c] - sg.acceleration[node][c]
+    }
+
+    /// Residual R = f_ext + f_pen − f_int − M a (DESIGN D16) and its norms (D18).
+    fn residual(&self, sg: &StepGrid, trial: &TrialStresses, du: &[[f64; 2]], t1: f64, dt: f64) -> Residual {
+        let grid = &self.grid;
+        let p = &self.particles;
+        let internal = self.profile.time(Stage::P2G, || transfer::internal_force(grid, &sg.bins, &sg.shapes, &p.volume, &trial.stress));
+        let mut penalty = vec![[0.0; 2]; grid.node_count()];
+        self.driven.add_forces(p, &sg.shapes, du, t1, &mut penalty);
+        let dynamic = self.dynamic();
+        let mut residual = vec![[0.0; 2]; grid.node_count()];
+        let (mut norm2, mut ext2, mut int2, mut inertia2) = (0.0, 0.0, 0.0, 0.0);
+        for node in 0..grid.node_count() {
+            if !sg.bins.node_active[node] {
+                continue;
+            }
+            for c in 0..2 {
+                let inertia = if dynamic { sg.mass[node] * Self::newmark_acceleration(sg, du, dt, node, c) } else { 0.0 };
+                let ext = sg.external[node][c] + penalty[node][c];
+                let r = ext - internal[node][c] - inertia;
+                residual[node][c] = r;
+                ext2 += ext * ext;
+                int2 += internal[node][c] * internal[node][c];
+                inertia2 += inertia * inertia;
+                if sg.dofs.index[2 * node + c] != NONE {
+                    norm2 += r * r;
+                }
+            }
+        }
+        let floor = 1e-6 * self.max_youngs_modulus() * grid.cell_size;
+        let reference = ext2.sqrt().max(int2.sqrt()).max(inertia2.sqrt()).max(floor);
+        Residual { residual, norm: norm2.sqrt(), reference }
+    }
+
+    /// Largest Young's modulus of the materials, kPa.
+    pub(crate) fn max_youngs_modulus(&self) -> f64 {
+        self.scene.materials.values().map(|m| m.youngs_modulus()).fold(0.0, f64::max)
+    }
+
+    /// Assemble K_T (+ 4M/Δt² when dynamic) and factorise it (DESIGN D17, D19).
+    fn factorise_tangent(&mut self, sg: &StepGrid, trial: &TrialStresses, dt: f64) -> Result<(), StepFailure> {
+        let element_dofs = sg.dofs.element_dofs(&self.grid, &sg.bins);
+        let n = sg.dofs.n_free;
+        let matrix: SparseMatrix = {
+            let _guard = ();
+            let start = std::time::Instant::now();
+            let reuse = matches!(&self.assembler, Some((key, a)) if *key == element_dofs && a.n_dofs() == n);
+            if !reuse {
+                let assembler = Assembler::new(n, &element_dofs).map_err(|e| StepFailure::Solver(e.to_string()))?;
+                self.assembler = Some((element_dofs, assembler));
+            }
+            let mut blocks = transfer::cell_stiffness_blocks(&sg.bins, &sg.shapes, &self.particles.volume, &trial.tangent);
+            for block in blocks.iter_mut() {
+                for (b, bg) in block.iter_mut().zip(self.background_block.iter()) {
+                    *b += bg;
+                }
+            }
+            self.driven.add_stiffness(&sg.shapes, &sg.bins, &mut blocks);
+            let diagonal = self.dynamic().then(|| {
+                let mut diag = vec![0.0; n];
+                for (d, &index) in sg.dofs.index.iter().enumerate() {
+                    if index != NONE {
+                        diag[index as usize] = 4.0 / (dt * dt) * sg.mass[d / 2];
+                    }
+                }
+                diag
+            });
+            let (_, assembler) = self.assembler.as_ref().expect("assembler set above");
+            let m = assembler.assemble_with_diagonal(&blocks, diagonal.as_deref());
+            self.profile.add(Stage::Assembly, start.elapsed().as_secs_f64());
+            m
+        };
+        let symmetric = self.symmetric_tangent;
+        let kind = self
+            .profile
+            .time(Stage::Factorisation, || self.solver.factorize(&matrix, symmetric))
+            .map_err(|e| StepFailure::Solver(e.to_string()))?;
+        match kind {
+            FactorKind::Cholesky => self.solver_usage.cholesky += 1,
+            FactorKind::Lu => self.solver_usage.lu += 1,
+        }
+        self.solver_usage.max_unknowns = self.solver_usage.max_unknowns.max(n);
+        Ok(())
+    }
+
+    /// Newton–Raphson for one (sub-)step from `t` to `t + dt`; commits the
+    /// particles on convergence and returns the iteration count.
+    fn try_implicit(&mut self, t: f64, dt: f64) -> Result<usize, StepFailure> {
+        let t1 = t + dt;
+        let sg = self.prepare_step(t, dt)?;
+        let n_nodes = self.grid.node_count();
+        // Δu⁰: prescribed nodal increments (validation scenes), zero elsewhere.
+        let mut du = vec![[0.0; 2]; n_nodes];
+        for (d, c) in self.constraints.dof.iter().enumerate() {
+            if matches!(c, DofConstraint::Prescribed { .. }) && sg.bins.node_active[d / 2] {
+                du[d / 2][d % 2] = self.constraints.prescribed_value(&self.grid, d, t1) - self.constraints.prescribed_value(&self.grid, d, t);
+            }
+        }
+        let settings = self.scene.solver.clone();
+        let mut trial = TrialStresses::default();
+        let mut history = Vec::new();
+        let mut energy0 = 0.0;
+        let mut last_correction: Vec<f64> = Vec::new();
+        let mut growth = 0;
+        for iteration in 0..=settings.max_iterations {
+            self.profile
+                .time(Stage::StressUpdate, || evaluate_stresses(&self.particles, &self.materials, &sg.shapes, &du, None, &mut trial))
+                .map_err(|(p, e)| StepFailure::Constitutive(p, e))?;
+            let res = self.residual(&sg, &trial, &du, t1, dt);
+            if !res.norm.is_finite() {
+                return Err(StepFailure::NonFinite("residual".into(), history));
+            }
+            history.push(res.norm);
+            let force_ok = res.norm <= settings.tolerance_force * res.reference;
+            let free_residual = gather_free(&sg.dofs, &res.residual);
+            // DESIGN D18, energy norm: work of the new residual on the last correction.
+            let energy_ok = iteration == 0 || dot(&last_correction, &free_residual).abs() <= settings.tolerance_energy * energy0;
+            if force_ok && energy_ok {
+                self.commit_implicit(&sg, &trial, &du, &res, t1, dt)?;
+                return Ok(iteration);
+            }
+            if iteration == settings.max_iterations {
+                return Err(StepFailure::IterationLimit(history));
+            }
+            if history.len() >= 2 && history[history.len() - 1] > history[history.len() - 2] {
+                growth += 1;
+                if growth >= 3 {
+                    return Err(StepFailure::Diverged(history));
+                }
+            } else {
+                growth = 0;
+            }
+            self.factorise_tangent(&sg, &trial, dt)?;
+            let mut correction = free_residual.clone();
+            self.profile
+                .time(Stage::Solve, || self.solver.solve_in_place(&mut correction))
+                .map_err(|e| StepFailure::Solver(e.to_string()))?;
+            if correction.iter().any(|v| !v.is_finite()) {
+                return Err(StepFailure::NonFinite("solution of the linear system".into(), history));
+            }
+            if iteration == 0 {
+                energy0 = dot(&correction, &free_residual).abs().max(f64::MIN_POSITIVE);
+            }
+            for (d, &index) in sg.dofs.index.iter().enumerate() {
+                if index != NONE {
+                    du[d / 2][d % 2] += correction[index as usize];
+                }
+            }
+            last_correction = correction;
+        }
+        Err(StepFailure::IterationLimit(history))
+    }
+
+    /// Accept the converged iterate: velocities/accelerations (dynamic), then
+    /// positions, deformation gradients, volumes, stresses (DESIGN D14–D15).
+    fn commit_implicit(&mut self, sg: &StepGrid, trial: &TrialStresses, du: &[[f64; 2]], res: &Residual, t1: f64, dt: f64) -> Result<(), StepFailure> {
+        let start = std::time::Instant::now();
+        let dynamic = self.dynamic();
+        let n = self.particles.len();
+        let motion: Vec<[f64; 2]> = sg.shapes.iter().map(|s| transfer::interpolate(s, du)).collect();
+        if dynamic {
+            let max_motion = motion.iter().map(|u| (u[0] * u[0] + u[1] * u[1]).sqrt()).fold(0.0, f64::max);
+            if max_motion > 0.5 * self.grid.cell_size {
+                return Err(StepFailure::Motion(max_motion));
+            }
+        }
+        // Reactions at the nodes (support forces), −R.
+        self.reaction = res.residual.iter().map(|r| [-r[0], -r[1]]).collect();
+        let p = &mut self.particles;
+        if dynamic {
+            let mut a_new = vec![[0.0; 2]; self.grid.node_count()];
+            for node in 0..a_new.len() {
+                if sg.bins.node_active[node] {
+                    for c in 0..2 {
+                        a_new[node][c] = Self::newmark_acceleration(sg, du, dt, node, c);
+                    }
+                }
+            }
+            for i in 0..n {
+                let a = transfer::interpolate(&sg.shapes[i], &a_new);
+                for c in 0..2 {
+                    p.velocity[i][c] += 0.5 * dt * (p.acceleration[i][c] + a[c]);
+                }
+                p.acceleration[i] = a;
+            }
+        }
+        for i in 0..n {
+            update_kinematics(p, i, motion[i], &trial.gradient[i]);
+            p.stress[i] = trial.stress[i];
+            p.state[i] = trial.state[i];
+        }
+        if let Some(i) = (0..n).find(|&i| !self.grid.contains(p.position[i])) {
+            return Err(StepFailure::LeftGrid(i, p.position[i]));
+        }
+        self.traction.advect(&sg.traction_shapes, du);
+        self.last_increment = du.to_vec();
+        let _ = t1;
+        self.profile.add(Stage::G2P, start.elapsed().as_secs_f64());
+        Ok(())
+    }
+}
+
+/// x_p += u_p; F_p ← (I + L) F_p; V_p ← det(I + L) V_p; accumulate Δε (DESIGN D14).
+pub(crate) fn update_kinematics(p: &mut crate::particles::Particles, i: usize, motion: [f64; 2], l: &[f64; 4]) {
+    p.position[i][0] += motion[0];
+    p.position[i][1] += motion[1];
+    let df = [1.0 + l[0], l[1], l[2], 1.0 + l[3]];
+    let f = p.def_grad[i];
+    p.def_grad[i] = [df[0] * f[0] + df[1] * f[2], df[0] * f[1] + df[1] * f[3], df[2] * f[0] + df[3] * f[2], df[2] * f[1] + df[3] * f[3]];
+    p.volume[i] *= df[0] * df[3] - df[1] * df[2];
+    let (de, _) = transfer::strain_and_spin(l);
+    for k in 0..4 {
+        p.strain[i][k] += de[k];
+    }
+}
+
+fn divide_by_mass(weighted: &[[f64; 2]], mass: &[f64]) -> Vec<[f64; 2]> {
+    weighted.iter().zip(mass).map(|(w, &m)| if m > 0.0 { [w[0] / m, w[1] / m] } else { [0.0; 2] }).collect()
+}
+
+fn gather_free(dofs: &DofMap, nodal: &[[f64; 2]]) -> Vec<f64> {
+    let mut out = vec![0.0; dofs.n_free];
+    for (d, &index) in dofs.index.iter().enumerate() {
+        if index != NONE {
+            out[index as usize] = nodal[d / 2][d % 2];
+        }
+    }
+    out
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}

@@ -1,0 +1,73 @@
+//! The stress-update stage shared by both integrators: for each material
+//! point, Δε and ω from the nodal displacement increment (DESIGN D12), Jaumann
+//! rotation of the stored stress (D13), and the constitutive update (§5).
+
+use std::sync::Arc;
+
+use rayon::prelude::*;
+
+use crate::constitutive::{ConstitutiveError, ConstitutiveModel, Mat4, PointState, Voigt};
+use crate::grid::ShapeAt;
+use crate::particles::Particles;
+use crate::transfer;
+
+/// Trial stresses, states and tangents of all material points for a given
+/// displacement increment (not yet committed).
+#[derive(Clone, Debug, Default)]
+pub struct TrialStresses {
+    /// σ_{n+1}, kPa.
+    pub stress: Vec<Voigt>,
+    /// State after the update.
+    pub state: Vec<PointState>,
+    /// Algorithmic tangents dσ/dΔε.
+    pub tangent: Vec<Mat4>,
+    /// Displacement-increment gradient L per point (row-major 2×2).
+    pub gradient: Vec<[f64; 4]>,
+}
+
+/// Evaluate the stress update at every material point for the nodal
+/// increment `du`. `strength_kappa` (nonlocal runs) gives the frozen κ̄ each
+/// point's strength is evaluated at. On failure returns the lowest-index
+/// failing point (deterministic whatever the thread count).
+pub fn evaluate_stresses(
+    particles: &Particles,
+    materials: &[Arc<dyn ConstitutiveModel>],
+    shapes: &[ShapeAt],
+    du: &[[f64; 2]],
+    strength_kappa: Option<&[f64]>,
+    trial: &mut TrialStresses,
+) -> Result<(), (usize, ConstitutiveError)> {
+    let n = particles.len();
+    trial.stress.resize(n, [0.0; 4]);
+    trial.state.resize(n, PointState::default());
+    trial.gradient.resize(n, [0.0; 4]);
+    trial.tangent.resize(n, [[0.0; 4]; 4]);
+    let failures: Vec<(usize, ConstitutiveError)> = trial
+        .stress
+        .par_iter_mut()
+        .zip(trial.state.par_iter_mut())
+        .zip(trial.gradient.par_iter_mut().zip(trial.tangent.par_iter_mut()))
+        .enumerate()
+        .filter_map(|(p, ((stress, state), (grad, tangent)))| {
+            let l = transfer::gradient(&shapes[p], du);
+            *grad = l;
+            let (strain_increment, spin) = transfer::strain_and_spin(&l);
+            let rotated = transfer::rotate_stress(&particles.stress[p], spin);
+            let material = &materials[particles.material[p] as usize];
+            let kappa = strength_kappa.map(|k| k[p]);
+            match material.update(&rotated, &strain_increment, &particles.state[p], kappa) {
+                Ok(update) => {
+                    *stress = update.stress;
+                    *state = update.state;
+                    *tangent = update.tangent;
+                    None
+                }
+                Err(e) => Some((p, e)),
+            }
+        })
+        .collect();
+    match failures.into_iter().min_by_key(|(p, _)| *p) {
+        Some(first) => Err(first),
+        None => Ok(()),
+    }
+}

@@ -1,0 +1,107 @@
+//! Monitored quantities: one column of `curve.csv` each (scene `[[monitor]]`).
+
+use crate::bc::nodes_on_line;
+use crate::constitutive::{deviatoric_stress, mean_stress};
+use crate::scene::{GridLine, MonitorKind, MonitorSpec, StressQuantity, VectorComponent};
+use crate::simulation::Simulation;
+
+/// A monitor with its target resolved against the seeded model.
+#[derive(Clone, Debug)]
+pub struct Monitor {
+    /// Column name.
+    pub name: String,
+    /// The scene entry.
+    pub spec: MonitorSpec,
+    target: Target,
+}
+
+#[derive(Clone, Debug)]
+enum Target {
+    Particle(usize),
+    Nodes(Vec<usize>),
+    Rigid(usize),
+    Global,
+}
+
+impl Monitor {
+    /// Resolve `spec`: the material point initially nearest `point`, the grid
+    /// nodes of `line`, or the rigid body named `rigid`.
+    pub fn resolve(spec: &MonitorSpec, sim: &Simulation) -> Self {
+        let target = match spec.kind {
+            MonitorKind::PointDisplacement | MonitorKind::PointVelocity | MonitorKind::PointStress => {
+                let x = spec.point.unwrap_or_default();
+                let p = sim
+                    .particles
+                    .position0
+                    .iter()
+                    .enumerate()
+                    .map(|(p, y)| (p, (y[0] - x[0]).powi(2) + (y[1] - x[1]).powi(2)))
+                    .min_by(|a, b| a.1.total_cmp(&b.1))
+                    .map(|(p, _)| p)
+                    .unwrap_or(0);
+                Target::Particle(p)
+            }
+            MonitorKind::Reaction => {
+                let line = spec.line.as_deref().and_then(|l| GridLine::parse(l).ok());
+                Target::Nodes(line.map(|l| nodes_on_line(&sim.grid, l)).unwrap_or_default())
+            }
+            MonitorKind::RigidForce => {
+                let name = spec.rigid.clone().unwrap_or_default();
+                Target::Rigid(sim.driven.names.iter().position(|n| *n == name).unwrap_or(0))
+            }
+            _ => Target::Global,
+        };
+        Self { name: spec.name.clone(), spec: spec.clone(), target }
+    }
+
+    /// Index of the monitored material point, if the monitor follows one.
+    pub fn particle(&self) -> Option<usize> {
+        match self.target {
+            Target::Particle(p) => Some(p),
+            _ => None,
+        }
+    }
+
+    /// Current value (scale · raw + offset).
+    pub fn value(&self, sim: &Simulation) -> f64 {
+        let component = self.spec.component.unwrap_or(VectorComponent::Y);
+        let pick = |v: [f64; 2]| match component {
+            VectorComponent::X => v[0],
+            VectorComponent::Y => v[1],
+            VectorComponent::Norm => (v[0] * v[0] + v[1] * v[1]).sqrt(),
+        };
+        let p = &sim.particles;
+        let raw = match (&self.target, self.spec.kind) {
+            (Target::Particle(i), MonitorKind::PointDisplacement) => pick(p.displacement(*i)),
+            (Target::Particle(i), MonitorKind::PointVelocity) => pick(p.velocity[*i]),
+            (Target::Particle(i), MonitorKind::PointStress) => {
+                let s = &p.stress[*i];
+                match self.spec.quantity.unwrap_or(StressQuantity::Q) {
+                    StressQuantity::Sxx => s[0],
+                    StressQuantity::Syy => s[1],
+                    StressQuantity::Szz => s[2],
+                    StressQuantity::Sxy => s[3],
+                    StressQuantity::P => mean_stress(s),
+                    StressQuantity::Q => deviatoric_stress(s),
+                }
+            }
+            (Target::Nodes(nodes), _) => {
+                let mut sum = [0.0; 2];
+                for &n in nodes {
+                    if let Some(r) = sim.reaction.get(n) {
+                        sum[0] += r[0];
+                        sum[1] += r[1];
+                    }
+                }
+                pick(sum)
+            }
+            (Target::Rigid(r), _) => pick(sim.driven.force_on_soil(*r, p, sim.time)),
+            (_, MonitorKind::KineticEnergy) => sim.kinetic_energy(),
+            (_, MonitorKind::StrainEnergy) => sim.strain_energy(),
+            (_, MonitorKind::MaxPlasticStrain) => p.state.iter().map(|s| s.plastic_strain_eq).fold(0.0, f64::max),
+            (_, MonitorKind::Gravity) => sim.scene.loads.gravity_at(sim.time),
+            _ => f64::NAN,
+        };
+        self.spec.scale * raw + self.spec.offset
+    }
+}
