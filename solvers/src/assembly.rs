@@ -1,0 +1,220 @@
+//! Pattern construction and deterministic scatter of per-cell 8x8 blocks (DESIGN §3
+//! "Linear system": constrained dofs eliminated, blocks summed into CSC).
+
+use std::sync::Arc;
+
+use crate::matrix::{Pattern, SparseMatrix};
+use crate::{SolverError, NO_DOF};
+
+/// Marker for a skipped entry (constrained row or column) in the scatter map.
+const SKIP: u32 = u32::MAX;
+
+/// Sparsity pattern of K (full storage, both triangles, CSC) built once from the element dof
+/// lists, plus, for each element, the 64 value positions its 8x8 block scatters into.
+///
+/// The pattern always contains the whole diagonal (so that [`Assembler::assemble_with_diagonal`]
+/// can add the Newmark mass term `4M/dt^2` of [D17] to any dof). It is fixed while the set of
+/// active cells does not change; build a new `Assembler` when it does. Matrices built by one
+/// `Assembler` share its pattern through an [`Arc`], which lets [`crate::DirectSolver`] reuse the
+/// symbolic factorisation.
+#[derive(Debug, Clone)]
+pub struct Assembler {
+    pattern: Arc<Pattern>,
+    /// For element e, `scatter[e][8a + b]` is the value position of (dof_a, dof_b), or `SKIP`.
+    scatter: Vec<[u32; 64]>,
+    /// Value position of K_ii.
+    diag_pos: Vec<usize>,
+}
+
+impl Assembler {
+    /// Builds the pattern from the element dof lists. Entry `element_dofs[e][a]` is the global dof
+    /// of local dof `a` (node `a / 2`, direction `a % 2` in the engine's convention) or
+    /// [`NO_DOF`] for an eliminated (constrained) dof.
+    ///
+    /// Errors: [`SolverError::EmptySystem`] if `n_dofs == 0`, [`SolverError::DofOutOfRange`],
+    /// [`SolverError::TooManyNonZeros`] above `u32::MAX - 1` non-zeros.
+    pub fn new(n_dofs: usize, element_dofs: &[[u32; 8]]) -> Result<Self, SolverError> {
+        if n_dofs == 0 {
+            return Err(SolverError::EmptySystem);
+        }
+        for (e, dofs) in element_dofs.iter().enumerate() {
+            if let Some(&d) = dofs.iter().find(|&&d| d != NO_DOF && d as usize >= n_dofs) {
+                return Err(SolverError::DofOutOfRange {
+                    element: e,
+                    dof: d,
+                    n_dofs,
+                });
+            }
+        }
+        // Candidate rows per column (with duplicates): diagonal + element couplings.
+        let mut start = vec![0usize; n_dofs + 1];
+        for j in 0..n_dofs {
+            start[j + 1] = 1;
+        }
+        for dofs in element_dofs {
+            let n_valid = dofs.iter().filter(|&&d| d != NO_DOF).count();
+            for &c in dofs.iter().filter(|&&d| d != NO_DOF) {
+                start[c as usize + 1] += n_valid;
+            }
+        }
+        for j in 0..n_dofs {
+            start[j + 1] += start[j];
+        }
+        let mut fill = start.clone();
+        let mut rows = vec![0u32; start[n_dofs]];
+        for (j, f) in fill.iter_mut().take(n_dofs).enumerate() {
+            rows[*f] = j as u32;
+            *f += 1;
+        }
+        for dofs in element_dofs {
+            for &c in dofs.iter().filter(|&&d| d != NO_DOF) {
+                for &r in dofs.iter().filter(|&&d| d != NO_DOF) {
+                    let f = &mut fill[c as usize];
+                    rows[*f] = r;
+                    *f += 1;
+                }
+            }
+        }
+        // Sort and deduplicate each column.
+        let mut col_ptr = Vec::with_capacity(n_dofs + 1);
+        let mut row_idx = Vec::new();
+        col_ptr.push(0usize);
+        for j in 0..n_dofs {
+            let col = &mut rows[start[j]..start[j + 1]];
+            col.sort_unstable();
+            let mut last = None;
+            for &r in col.iter() {
+                if last != Some(r) {
+                    row_idx.push(r as usize);
+                    last = Some(r);
+                }
+            }
+            col_ptr.push(row_idx.len());
+        }
+        drop(rows);
+        let nnz = row_idx.len();
+        if nnz >= SKIP as usize {
+            return Err(SolverError::TooManyNonZeros { nnz });
+        }
+        let pattern = Pattern::new(n_dofs, col_ptr, row_idx);
+        let pos = |r: u32, c: u32| -> u32 {
+            // every coupling was inserted above, so the search always succeeds
+            pattern
+                .position(r as usize, c as usize)
+                .map_or(SKIP, |p| p as u32)
+        };
+        let scatter = element_dofs
+            .iter()
+            .map(|dofs| {
+                let mut s = [SKIP; 64];
+                for a in 0..8 {
+                    for b in 0..8 {
+                        if dofs[a] != NO_DOF && dofs[b] != NO_DOF {
+                            s[8 * a + b] = pos(dofs[a], dofs[b]);
+                        }
+                    }
+                }
+                s
+            })
+            .collect();
+        let diag_pos = (0..n_dofs)
+            .map(|i| pattern.position(i, i).unwrap_or(usize::MAX))
+            .collect();
+        Ok(Self {
+            pattern: Arc::new(pattern),
+            scatter,
+            diag_pos,
+        })
+    }
+
+    /// Number of unknowns (dimension of K).
+    pub fn n_dofs(&self) -> usize {
+        self.pattern.n()
+    }
+
+    /// Number of elements (cells) the pattern was built from.
+    pub fn n_elements(&self) -> usize {
+        self.scatter.len()
+    }
+
+    /// Number of stored entries of K: the distinct (row, col) couplings plus the diagonal.
+    pub fn nnz(&self) -> usize {
+        self.pattern.row_idx().len()
+    }
+
+    /// Values of K = sum over elements of the blocks. `element_blocks[e]` is row-major 8x8:
+    /// `block[8a + b]` couples local dof `a` (row) with `b` (column). Entries whose row or column
+    /// is [`NO_DOF`] are skipped.
+    ///
+    /// Contributions are summed sequentially in element order, so the result is bit-identical
+    /// whatever the thread count of the caller. Errors: [`SolverError::DimensionMismatch`] if the
+    /// number of blocks differs from the number of elements.
+    pub fn assemble(&self, element_blocks: &[[f64; 64]]) -> Result<SparseMatrix, SolverError> {
+        self.assemble_with_diagonal(element_blocks, None)
+    }
+
+    /// Same as [`Assembler::assemble`], then adds `diagonal[i]` to `K_ii` (used for the Newmark
+    /// mass term `4M/dt^2` of [D17], or any other diagonal shift).
+    ///
+    /// Errors: [`SolverError::DimensionMismatch`] for a wrong number of blocks or a diagonal whose
+    /// length is not [`Assembler::n_dofs`].
+    pub fn assemble_with_diagonal(
+        &self,
+        element_blocks: &[[f64; 64]],
+        diagonal: Option<&[f64]>,
+    ) -> Result<SparseMatrix, SolverError> {
+        let mut k = SparseMatrix::from_parts(self.pattern.clone(), vec![0.0; self.nnz()]);
+        self.reassemble(&mut k, element_blocks, diagonal)?;
+        Ok(k)
+    }
+
+    /// Overwrites the values of `k` (which must have been built by this `Assembler`, i.e. share
+    /// its pattern) with a new assembly; avoids reallocating the value array every Newton
+    /// iteration. Same summation order and errors as [`Assembler::assemble_with_diagonal`], plus
+    /// [`SolverError::DimensionMismatch`] if `k` does not share this assembler's pattern.
+    pub fn reassemble(
+        &self,
+        k: &mut SparseMatrix,
+        element_blocks: &[[f64; 64]],
+        diagonal: Option<&[f64]>,
+    ) -> Result<(), SolverError> {
+        if !Arc::ptr_eq(&k.pattern, &self.pattern) {
+            return Err(SolverError::DimensionMismatch {
+                context: "reassemble: matrix does not share the assembler's pattern (nnz)",
+                expected: self.nnz(),
+                found: k.nnz(),
+            });
+        }
+        if element_blocks.len() != self.scatter.len() {
+            return Err(SolverError::DimensionMismatch {
+                context: "element blocks (one per element)",
+                expected: self.scatter.len(),
+                found: element_blocks.len(),
+            });
+        }
+        if let Some(d) = diagonal {
+            if d.len() != self.n_dofs() {
+                return Err(SolverError::DimensionMismatch {
+                    context: "diagonal",
+                    expected: self.n_dofs(),
+                    found: d.len(),
+                });
+            }
+        }
+        let values = &mut k.values;
+        values.fill(0.0);
+        for (map, block) in self.scatter.iter().zip(element_blocks) {
+            for (&p, &v) in map.iter().zip(block.iter()) {
+                if p != SKIP {
+                    values[p as usize] += v;
+                }
+            }
+        }
+        if let Some(d) = diagonal {
+            for (&p, &v) in self.diag_pos.iter().zip(d) {
+                values[p] += v;
+            }
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,474 @@
+//! Sparse direct solver with symbolic-factorisation reuse (DESIGN §3 "Linear system").
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::sparse::linalg::cholesky::{
+    factorize_symbolic_cholesky, simplicial::SimplicialLltRef, supernodal::SupernodalLltRef,
+    SymbolicCholesky, SymbolicCholeskyRaw,
+};
+use faer::sparse::linalg::lu::{factorize_symbolic_lu, LuRef, NumericLu, SymbolicLu};
+use faer::sparse::linalg::LuError;
+use faer::{Conj, MatMut, Par, Side};
+
+use crate::matrix::{Pattern, SparseMatrix};
+use crate::SolverError;
+
+/// Which factorisation [`DirectSolver`] tries (DESIGN §3 "Linear system": LU by default,
+/// Cholesky only for elastic or associated perfectly plastic local scenes).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum SolverPolicy {
+    /// Cholesky when the caller says the matrix is symmetric (SPD expected), else LU.
+    #[default]
+    Auto,
+    /// Always Cholesky (the caller asserts symmetry: only the lower triangle is read), with the
+    /// automatic LU fallback if K is not positive definite.
+    Cholesky,
+    /// Always LU with partial pivoting.
+    Lu,
+}
+
+/// Factorisation actually in use.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FactorKind {
+    /// Sparse LL^T (AMD ordering), lower triangle of K.
+    Cholesky,
+    /// Sparse LU with partial pivoting (COLAMD column ordering).
+    Lu,
+}
+
+/// Tolerances of the singularity checks of [`DirectSolver::factorize`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SolverOptions {
+    /// Cholesky: K is reported singular when `min_i d_i / max_i d_i < pivot_ratio_tol`, with
+    /// `d_i = L_ii^2` the pivots. For SPD K this ratio is `>= 1 / cond_2(K)`, so a smaller ratio
+    /// proves `cond_2(K) > 1 / pivot_ratio_tol`. Default `1e-14`.
+    pub pivot_ratio_tol: f64,
+    /// LU: after each LU factorisation, solve `K x = K p` for a fixed vector `p` and report K
+    /// singular when `max|x - p| / max|p| > probe_tol` (or non-finite). faer's LU does not stop on
+    /// a zero pivot (it produces inf/NaN or huge finite factors), so this probe is what turns a
+    /// singular K into an error. Costs one mat-vec and one solve. Default `true`.
+    pub lu_probe: bool,
+    /// Forward-error threshold of the LU probe. Default `1e-4`.
+    pub probe_tol: f64,
+}
+
+impl Default for SolverOptions {
+    fn default() -> Self {
+        Self {
+            pivot_ratio_tol: 1e-14,
+            lu_probe: true,
+            probe_tol: 1e-4,
+        }
+    }
+}
+
+/// Counters and cumulative wall-clock seconds of a [`DirectSolver`].
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct SolverStats {
+    /// Symbolic factorisations computed (Cholesky and LU together).
+    pub symbolic: usize,
+    /// Numeric factorisations attempted (a failed Cholesky followed by LU counts 2).
+    pub numeric: usize,
+    /// Calls of [`DirectSolver::solve_in_place`] (the LU probe is not counted).
+    pub solves: usize,
+    /// Times Cholesky failed (K not positive definite) and LU was used instead.
+    pub cholesky_fallbacks: usize,
+    /// Cumulative seconds spent in symbolic factorisations.
+    pub symbolic_seconds: f64,
+    /// Cumulative seconds spent in numeric factorisations (including the Cholesky pivot check).
+    pub numeric_seconds: f64,
+    /// Cumulative seconds spent in [`DirectSolver::solve_in_place`].
+    pub solve_seconds: f64,
+    /// Cumulative seconds spent in the LU singularity probe.
+    pub probe_seconds: f64,
+    /// Factorisation of the last successful `factorize` call.
+    pub last_factor: Option<FactorKind>,
+    /// Pivot ratio `min d_i / max d_i` of the last successful Cholesky factorisation.
+    pub last_pivot_ratio: Option<f64>,
+    /// Relative forward error of the last LU probe (a cheap conditioning indicator).
+    pub last_probe_error: Option<f64>,
+}
+
+/// Sparse direct solver (faer, sequential: `Par::Seq`) that caches the symbolic factorisation
+/// keyed on the sparsity pattern and reuses factor storage and workspace between
+/// refactorisations (one per Newton iteration, [D17]).
+pub struct DirectSolver {
+    policy: SolverPolicy,
+    options: SolverOptions,
+    pattern: Option<Arc<Pattern>>,
+    llt_symbolic: Option<SymbolicCholesky<usize>>,
+    llt_values: Vec<f64>,
+    llt_scratch: Option<MemBuffer>,
+    lu_symbolic: Option<SymbolicLu<usize>>,
+    lu_numeric: NumericLu<usize, f64>,
+    lu_scratch: Option<MemBuffer>,
+    current: Option<FactorKind>,
+    stats: SolverStats,
+}
+
+impl std::fmt::Debug for DirectSolver {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("DirectSolver")
+            .field("policy", &self.policy)
+            .field("options", &self.options)
+            .field("n", &self.pattern.as_ref().map(|p| p.n()))
+            .field("current", &self.current)
+            .field("stats", &self.stats)
+            .finish_non_exhaustive()
+    }
+}
+
+/// Index of the first non-finite entry of `v`.
+fn first_non_finite(v: &[f64]) -> Option<usize> {
+    v.iter().position(|x| !x.is_finite())
+}
+
+fn faer_err(e: impl std::fmt::Debug) -> SolverError {
+    SolverError::Faer(format!("{e:?}"))
+}
+
+impl DirectSolver {
+    /// New solver with default [`SolverOptions`].
+    pub fn new(policy: SolverPolicy) -> Self {
+        Self::with_options(policy, SolverOptions::default())
+    }
+
+    /// New solver with explicit singularity-check tolerances.
+    pub fn with_options(policy: SolverPolicy, options: SolverOptions) -> Self {
+        Self {
+            policy,
+            options,
+            pattern: None,
+            llt_symbolic: None,
+            llt_values: Vec::new(),
+            llt_scratch: None,
+            lu_symbolic: None,
+            lu_numeric: NumericLu::new(),
+            lu_scratch: None,
+            current: None,
+            stats: SolverStats::default(),
+        }
+    }
+
+    /// The policy given at construction.
+    pub fn policy(&self) -> SolverPolicy {
+        self.policy
+    }
+
+    /// The singularity-check options.
+    pub fn options(&self) -> &SolverOptions {
+        &self.options
+    }
+
+    /// Factorisation currently held, if the last `factorize` succeeded.
+    pub fn factor_kind(&self) -> Option<FactorKind> {
+        self.current
+    }
+
+    /// Counters and timings.
+    pub fn stats(&self) -> &SolverStats {
+        &self.stats
+    }
+
+    /// Drops the cached symbolic factorisations (the next `factorize` recomputes them).
+    pub fn reset_symbolic(&mut self) {
+        self.pattern = None;
+        self.llt_symbolic = None;
+        self.llt_scratch = None;
+        self.lu_symbolic = None;
+        self.lu_scratch = None;
+        self.lu_numeric = NumericLu::new();
+        self.current = None;
+    }
+
+    /// Numeric factorisation of `k`. The symbolic factorisation is reused when the pattern is the
+    /// same as last time (same [`Arc`] or equal `col_ptr`/`row_idx`), else recomputed.
+    ///
+    /// `symmetric` is the caller's knowledge that K is symmetric (elastic, or associated
+    /// perfectly plastic local: DESIGN §3 "Linear system"); with [`SolverPolicy::Auto`] it selects
+    /// Cholesky. If Cholesky fails because K is not positive definite, LU is used instead and
+    /// [`SolverStats::cholesky_fallbacks`] is incremented (Cholesky is tried again next call).
+    ///
+    /// Errors: [`SolverError::NonFinite`] (NaN/inf in K, checked before factorising),
+    /// [`SolverError::Singular`] (structurally singular LU, Cholesky pivot ratio below
+    /// [`SolverOptions::pivot_ratio_tol`], or the LU probe failing), [`SolverError::Faer`].
+    /// On error no factorisation is held and [`DirectSolver::solve_in_place`] returns
+    /// [`SolverError::NotFactorized`].
+    pub fn factorize(
+        &mut self,
+        k: &SparseMatrix,
+        symmetric: bool,
+    ) -> Result<FactorKind, SolverError> {
+        self.current = None;
+        if k.n() == 0 {
+            return Err(SolverError::EmptySystem);
+        }
+        if let Some(index) = first_non_finite(k.values()) {
+            return Err(SolverError::NonFinite {
+                what: "matrix values",
+                index,
+            });
+        }
+        let same = self.pattern.as_ref().is_some_and(|p| p.same_as(&k.pattern));
+        if !same {
+            self.reset_symbolic();
+            self.pattern = Some(k.pattern.clone());
+        }
+        let try_cholesky = match self.policy {
+            SolverPolicy::Auto => symmetric,
+            SolverPolicy::Cholesky => true,
+            SolverPolicy::Lu => false,
+        };
+        if try_cholesky {
+            match self.factorize_llt(k)? {
+                true => {
+                    self.current = Some(FactorKind::Cholesky);
+                    self.stats.last_factor = self.current;
+                    return Ok(FactorKind::Cholesky);
+                }
+                false => self.stats.cholesky_fallbacks += 1,
+            }
+        }
+        self.factorize_lu(k)?;
+        self.current = Some(FactorKind::Lu);
+        self.stats.last_factor = self.current;
+        Ok(FactorKind::Lu)
+    }
+
+    /// Cholesky attempt: `Ok(true)` success, `Ok(false)` not positive definite (fall back).
+    fn factorize_llt(&mut self, k: &SparseMatrix) -> Result<bool, SolverError> {
+        if self.llt_symbolic.is_none() {
+            let t = Instant::now();
+            let sym = factorize_symbolic_cholesky(
+                k.pattern.symbolic.as_ref(),
+                Side::Lower,
+                Default::default(),
+                Default::default(),
+            )
+            .map_err(faer_err)?;
+            let req = sym.factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default());
+            self.llt_scratch = Some(MemBuffer::try_new(req).map_err(faer_err)?);
+            self.llt_values = vec![0.0; sym.len_val()];
+            self.llt_symbolic = Some(sym);
+            self.stats.symbolic += 1;
+            self.stats.symbolic_seconds += t.elapsed().as_secs_f64();
+        }
+        let (Some(sym), Some(scratch)) = (&self.llt_symbolic, &mut self.llt_scratch) else {
+            unreachable!("symbolic Cholesky computed above");
+        };
+        let t = Instant::now();
+        self.stats.numeric += 1;
+        self.llt_values.fill(0.0);
+        let res = sym.factorize_numeric_llt::<f64>(
+            &mut self.llt_values,
+            k.as_faer(),
+            Side::Lower,
+            Default::default(),
+            Par::Seq,
+            MemStack::new(scratch),
+            Default::default(),
+        );
+        let out = match res {
+            Ok(_) => {
+                let ratio = llt_pivot_ratio(sym, &self.llt_values);
+                self.stats.last_pivot_ratio = Some(ratio);
+                if !(ratio >= self.options.pivot_ratio_tol) {
+                    Err(SolverError::Singular {
+                        factor: FactorKind::Cholesky,
+                        detail: format!(
+                            "pivot ratio min/max = {ratio:.3e} < {:.1e} (condition number > {:.1e})",
+                            self.options.pivot_ratio_tol,
+                            1.0 / self.options.pivot_ratio_tol
+                        ),
+                    })
+                } else {
+                    Ok(true)
+                }
+            }
+            // NonPositivePivot: not (numerically) positive definite
+            Err(_) => Ok(false),
+        };
+        self.stats.numeric_seconds += t.elapsed().as_secs_f64();
+        out
+    }
+
+    fn factorize_lu(&mut self, k: &SparseMatrix) -> Result<(), SolverError> {
+        if self.lu_symbolic.is_none() {
+            let t = Instant::now();
+            let sym = factorize_symbolic_lu(k.pattern.symbolic.as_ref(), Default::default())
+                .map_err(faer_err)?;
+            let req = sym.factorize_numeric_lu_scratch::<f64>(Par::Seq, Default::default());
+            self.lu_scratch = Some(MemBuffer::try_new(req).map_err(faer_err)?);
+            self.lu_symbolic = Some(sym);
+            self.stats.symbolic += 1;
+            self.stats.symbolic_seconds += t.elapsed().as_secs_f64();
+        }
+        let (Some(sym), Some(scratch)) = (&self.lu_symbolic, &mut self.lu_scratch) else {
+            unreachable!("symbolic LU computed above");
+        };
+        let t = Instant::now();
+        self.stats.numeric += 1;
+        let res = sym.factorize_numeric_lu::<f64>(
+            &mut self.lu_numeric,
+            k.as_faer(),
+            Par::Seq,
+            MemStack::new(scratch),
+            Default::default(),
+        );
+        self.stats.numeric_seconds += t.elapsed().as_secs_f64();
+        match res {
+            Ok(_) => {}
+            Err(LuError::SymbolicSingular { index }) => {
+                return Err(SolverError::Singular {
+                    factor: FactorKind::Lu,
+                    detail: format!("no pivot available at elimination step {index}"),
+                })
+            }
+            Err(LuError::Generic(e)) => return Err(faer_err(e)),
+        }
+        if self.options.lu_probe {
+            let t = Instant::now();
+            let n = k.n();
+            let p: Vec<f64> = (0..n)
+                .map(|i| 1.0 + ((i * 7919) % 31) as f64 / 31.0)
+                .collect();
+            let mut x = vec![0.0; n];
+            k.mul_vec(&p, &mut x);
+            self.lu_solve(&mut x);
+            let err = x
+                .iter()
+                .zip(&p)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0f64, |m, d| if d.is_nan() { f64::NAN } else { m.max(d) })
+                / 2.0;
+            self.stats.last_probe_error = Some(err);
+            self.stats.probe_seconds += t.elapsed().as_secs_f64();
+            if !(err <= self.options.probe_tol) {
+                return Err(SolverError::Singular {
+                    factor: FactorKind::Lu,
+                    detail: format!(
+                        "probe solve K x = K p has relative error {err:.3e} > {:.1e}",
+                        self.options.probe_tol
+                    ),
+                });
+            }
+        }
+        Ok(())
+    }
+
+    fn lu_solve(&self, rhs: &mut [f64]) {
+        let sym = self.lu_symbolic.as_ref().expect("LU symbolic present");
+        let n = rhs.len();
+        let mut buf = MemBuffer::new(sym.solve_in_place_scratch::<f64>(1, Par::Seq));
+        LuRef::new_unchecked(sym, &self.lu_numeric).solve_in_place_with_conj(
+            Conj::No,
+            MatMut::from_column_major_slice_mut(rhs, n, 1),
+            Par::Seq,
+            MemStack::new(&mut buf),
+        );
+    }
+
+    fn llt_solve(&self, rhs: &mut [f64]) {
+        let sym = self
+            .llt_symbolic
+            .as_ref()
+            .expect("Cholesky symbolic present");
+        let n = rhs.len();
+        let mut buf = MemBuffer::new(sym.solve_in_place_scratch::<f64>(1, Par::Seq));
+        faer::sparse::linalg::cholesky::LltRef::new(sym, &self.llt_values)
+            .solve_in_place_with_conj(
+                Conj::No,
+                MatMut::from_column_major_slice_mut(rhs, n, 1),
+                Par::Seq,
+                MemStack::new(&mut buf),
+            );
+    }
+
+    /// Solves `K x = rhs` with the current factorisation; `x` overwrites `rhs`.
+    ///
+    /// Errors: [`SolverError::NotFactorized`], [`SolverError::RhsMismatch`],
+    /// [`SolverError::NonFinite`] (NaN/inf in `rhs`), [`SolverError::Singular`] if the solution
+    /// contains NaN/inf (then `rhs` holds garbage).
+    pub fn solve_in_place(&mut self, rhs: &mut [f64]) -> Result<(), SolverError> {
+        let kind = self.current.ok_or(SolverError::NotFactorized)?;
+        let n = self.pattern.as_ref().map_or(0, |p| p.n());
+        if rhs.len() != n {
+            return Err(SolverError::RhsMismatch {
+                expected: n,
+                found: rhs.len(),
+            });
+        }
+        if let Some(index) = first_non_finite(rhs) {
+            return Err(SolverError::NonFinite {
+                what: "right-hand side",
+                index,
+            });
+        }
+        let t = Instant::now();
+        match kind {
+            FactorKind::Cholesky => self.llt_solve(rhs),
+            FactorKind::Lu => self.lu_solve(rhs),
+        }
+        self.stats.solves += 1;
+        self.stats.solve_seconds += t.elapsed().as_secs_f64();
+        if let Some(i) = first_non_finite(rhs) {
+            return Err(SolverError::Singular {
+                factor: kind,
+                detail: format!("solution is not finite (first at dof {i})"),
+            });
+        }
+        Ok(())
+    }
+
+    /// Convenience: factorise `k` and solve one right-hand side, returning the solution.
+    pub fn solve(
+        &mut self,
+        k: &SparseMatrix,
+        symmetric: bool,
+        rhs: &[f64],
+    ) -> Result<Vec<f64>, SolverError> {
+        self.factorize(k, symmetric)?;
+        let mut x = rhs.to_vec();
+        self.solve_in_place(&mut x)?;
+        Ok(x)
+    }
+}
+
+/// `min_i L_ii^2 / max_i L_ii^2` of a Cholesky factor (0 if a pivot is not finite).
+fn llt_pivot_ratio(sym: &SymbolicCholesky<usize>, values: &[f64]) -> f64 {
+    let (mut lo, mut hi) = (f64::INFINITY, 0.0f64);
+    let mut visit = |l: f64| {
+        let d = l * l;
+        if !d.is_finite() {
+            lo = 0.0;
+        }
+        lo = lo.min(d);
+        hi = hi.max(d);
+    };
+    match sym.raw() {
+        SymbolicCholeskyRaw::Simplicial(s) => {
+            // The diagonal is the first stored entry of each column of L.
+            let _ = SimplicialLltRef::new(s, values);
+            let cp = s.col_ptr();
+            for j in 0..s.ncols() {
+                visit(values[cp[j]]);
+            }
+        }
+        SymbolicCholeskyRaw::Supernodal(s) => {
+            let l = SupernodalLltRef::new(s, values);
+            for k in 0..s.n_supernodes() {
+                let m = l.supernode(k).val();
+                for j in 0..m.ncols() {
+                    visit(m[(j, j)]);
+                }
+            }
+        }
+    }
+    if hi > 0.0 {
+        lo / hi
+    } else {
+        0.0
+    }
+}
