@@ -218,7 +218,6 @@ impl Simulation {
         let element_dofs = sg.dofs.element_dofs(&self.grid, &sg.bins);
         let n = sg.dofs.n_free;
         let matrix: SparseMatrix = {
-            let _guard = ();
             let start = std::time::Instant::now();
             let reuse = matches!(&self.assembler, Some((key, a)) if *key == element_dofs && a.n_dofs() == n);
             if !reuse {
@@ -242,7 +241,7 @@ impl Simulation {
                 diag
             });
             let (_, assembler) = self.assembler.as_ref().expect("assembler set above");
-            let m = assembler.assemble_with_diagonal(&blocks, diagonal.as_deref());
+            let m = assembler.assemble_with_diagonal(&blocks, diagonal.as_deref()).map_err(|e| StepFailure::Solver(e.to_string()))?;
             self.profile.add(Stage::Assembly, start.elapsed().as_secs_f64());
             m
         };

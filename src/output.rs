@@ -1,0 +1,160 @@
+//! Run outputs: `curve.csv` (one row per step, flushed as the run goes),
+//! particle snapshots as VTK `.vtu` (ParaView), and `run.json`.
+
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+
+use crate::constitutive::{deviatoric_stress, mean_stress};
+use crate::error::RunError;
+use crate::particles::Particles;
+
+fn io_error(path: &Path, e: impl std::fmt::Display) -> RunError {
+    RunError::Output { path: path.display().to_string(), message: e.to_string() }
+}
+
+/// `curve.csv`: columns `step, time` and one per monitor; every row is flushed.
+pub struct CurveWriter {
+    writer: csv::Writer<File>,
+    path: PathBuf,
+}
+
+impl CurveWriter {
+    /// Create the file and write the header.
+    pub fn create(path: &Path, monitor_names: &[String]) -> Result<Self, RunError> {
+        let mut writer = csv::Writer::from_path(path).map_err(|e| io_error(path, e))?;
+        let mut header = vec!["step".to_string(), "time".to_string()];
+        header.extend(monitor_names.iter().cloned());
+        writer.write_record(&header).map_err(|e| io_error(path, e))?;
+        writer.flush().map_err(|e| io_error(path, e))?;
+        Ok(Self { writer, path: path.to_path_buf() })
+    }
+
+    /// Append one row (values written with full round-trip precision) and flush.
+    pub fn row(&mut self, step: usize, time: f64, values: &[f64]) -> Result<(), RunError> {
+        let mut record = vec![step.to_string(), format!("{time:e}")];
+        record.extend(values.iter().map(|v| format!("{v:e}")));
+        self.writer.write_record(&record).map_err(|e| io_error(&self.path, e))?;
+        self.writer.flush().map_err(|e| io_error(&self.path, e))
+    }
+}
+
+/// Equivalent deviatoric Hencky strain εq = sqrt(⅔ e:e) of a deformation
+/// gradient F (in-plane, row-major, F_zz = 1) (DESIGN D8).
+pub fn deviatoric_hencky_strain(f: &[f64; 4]) -> f64 {
+    // b = F Fᵀ (2×2 symmetric), eigen-decomposition in closed form.
+    let b11 = f[0] * f[0] + f[1] * f[1];
+    let b12 = f[0] * f[2] + f[1] * f[3];
+    let b22 = f[2] * f[2] + f[3] * f[3];
+    let mean = 0.5 * (b11 + b22);
+    let radius = (0.25 * (b11 - b22).powi(2) + b12 * b12).sqrt();
+    let (l1, l2) = (mean + radius, (mean - radius).max(f64::MIN_POSITIVE));
+    // principal Hencky strains ½ ln λ, with ε_zz = 0
+    let e = [0.5 * l1.ln(), 0.5 * l2.ln(), 0.0];
+    let tr = (e[0] + e[1] + e[2]) / 3.0;
+    let dev2: f64 = e.iter().map(|v| (v - tr).powi(2)).sum();
+    (2.0 / 3.0 * dev2).sqrt()
+}
+
+/// Write the material points as a VTK XML unstructured grid of vertices with
+/// displacement, velocity, stress, strain, plastic strain, κ, κ̄, p, q and εq.
+pub fn write_vtu(path: &Path, particles: &Particles) -> Result<(), RunError> {
+    let file = File::create(path).map_err(|e| io_error(path, e))?;
+    let mut w = BufWriter::new(file);
+    write_vtu_body(&mut w, particles).map_err(|e| io_error(path, e))?;
+    w.flush().map_err(|e| io_error(path, e))
+}
+
+fn write_vtu_body(w: &mut impl Write, p: &Particles) -> std::io::Result<()> {
+    let n = p.len();
+    writeln!(w, r#"<?xml version="1.0"?>"#)?;
+    writeln!(w, r#"<VTKFile type="UnstructuredGrid" version="0.1" byte_order="LittleEndian">"#)?;
+    writeln!(w, "<UnstructuredGrid>\n<Piece NumberOfPoints=\"{n}\" NumberOfCells=\"{n}\">")?;
+    writeln!(w, r#"<Points><DataArray type="Float64" NumberOfComponents="3" format="ascii">"#)?;
+    for x in &p.position {
+        writeln!(w, "{:e} {:e} 0", x[0], x[1])?;
+    }
+    writeln!(w, "</DataArray></Points>")?;
+    writeln!(w, "<Cells>")?;
+    write_int_array(w, "connectivity", 0..n)?;
+    write_int_array(w, "offsets", 1..n + 1)?;
+    writeln!(w, r#"<DataArray type="UInt8" Name="types" format="ascii">"#)?;
+    for _ in 0..n {
+        write!(w, "1 ")?;
+    }
+    writeln!(w, "\n</DataArray>\n</Cells>")?;
+    writeln!(w, "<PointData>")?;
+    let vectors: [(&str, Vec<[f64; 2]>); 2] =
+        [("displacement", (0..n).map(|i| p.displacement(i)).collect()), ("velocity", p.velocity.clone())];
+    for (name, data) in vectors {
+        writeln!(w, r#"<DataArray type="Float64" Name="{name}" NumberOfComponents="3" format="ascii">"#)?;
+        for v in data {
+            writeln!(w, "{:e} {:e} 0", v[0], v[1])?;
+        }
+        writeln!(w, "</DataArray>")?;
+    }
+    let tensors: [(&str, Vec<[f64; 4]>); 3] = [
+        ("stress", p.stress.clone()),
+        ("strain", p.strain.clone()),
+        ("plastic_strain", p.state.iter().map(|s| s.plastic_strain).collect()),
+    ];
+    for (name, data) in tensors {
+        writeln!(
+            w,
+            r#"<DataArray type="Float64" Name="{name}" NumberOfComponents="4" ComponentName0="xx" ComponentName1="yy" ComponentName2="zz" ComponentName3="xy" format="ascii">"#
+        )?;
+        for v in data {
+            writeln!(w, "{:e} {:e} {:e} {:e}", v[0], v[1], v[2], v[3])?;
+        }
+        writeln!(w, "</DataArray>")?;
+    }
+    let scalars: [(&str, Vec<f64>); 7] = [
+        ("plastic_strain_eq", p.state.iter().map(|s| s.plastic_strain_eq).collect()),
+        ("plastic_strain_eq_nonlocal", p.state.iter().map(|s| s.plastic_strain_eq_nonlocal).collect()),
+        ("p", p.stress.iter().map(mean_stress).collect()),
+        ("q", p.stress.iter().map(deviatoric_stress).collect()),
+        ("deviatoric_strain", p.def_grad.iter().map(deviatoric_hencky_strain).collect()),
+        ("volume", p.volume.clone()),
+        ("material", p.material.iter().map(|&m| m as f64).collect()),
+    ];
+    for (name, data) in scalars {
+        writeln!(w, r#"<DataArray type="Float64" Name="{name}" format="ascii">"#)?;
+        for v in data {
+            write!(w, "{v:e} ")?;
+        }
+        writeln!(w, "\n</DataArray>")?;
+    }
+    writeln!(w, "</PointData>\n</Piece>\n</UnstructuredGrid>\n</VTKFile>")
+}
+
+fn write_int_array(w: &mut impl Write, name: &str, values: impl Iterator<Item = usize>) -> std::io::Result<()> {
+    writeln!(w, r#"<DataArray type="Int64" Name="{name}" format="ascii">"#)?;
+    for v in values {
+        write!(w, "{v} ")?;
+    }
+    writeln!(w, "\n</DataArray>")
+}
+
+/// Write `value` as pretty JSON to `path`.
+pub fn write_json(path: &Path, value: &serde_json::Value) -> Result<(), RunError> {
+    let text = serde_json::to_string_pretty(value).map_err(|e| io_error(path, e))?;
+    std::fs::write(path, text).map_err(|e| io_error(path, e))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Simple shear-free uniaxial stretch λ: εq = sqrt(⅔ Σ (e_i − ē)²) with e = (ln λ, 0, 0).
+    #[test]
+    fn hencky_deviatoric_strain_of_uniaxial_stretch() {
+        let lambda: f64 = 1.3;
+        let e = lambda.ln();
+        let expected = (2.0 / 3.0 * ((2.0 * e / 3.0).powi(2) + 2.0 * (e / 3.0).powi(2))).sqrt();
+        let got = deviatoric_hencky_strain(&[lambda, 0.0, 0.0, 1.0]);
+        assert!((got - expected).abs() < 1e-14, "{got} vs {expected}");
+        // a rigid rotation has no strain
+        let (c, s) = (0.3f64.cos(), 0.3f64.sin());
+        assert!(deviatoric_hencky_strain(&[c, -s, s, c]).abs() < 1e-7);
+    }
+}

@@ -1,0 +1,159 @@
+//! Running a scene to an output directory: the observer that writes
+//! `curve.csv`, snapshots and `run.json`, and drives the progress bar.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use indicatif::{ProgressBar, ProgressStyle};
+use serde_json::json;
+
+use crate::error::RunError;
+use crate::output::{write_json, write_vtu, CurveWriter};
+use crate::profile::Stage;
+use crate::scene::{AnalysisKind, Scene};
+use crate::simulation::{Observer, Simulation, StepReport};
+
+/// Writes a run's outputs as it goes.
+pub struct OutputObserver {
+    dir: PathBuf,
+    curve: CurveWriter,
+    progress: ProgressBar,
+    last_row_step: usize,
+}
+
+impl OutputObserver {
+    /// Create `dir` and `curve.csv` in it.
+    pub fn new(dir: &Path, sim: &Simulation, show_progress: bool) -> Result<Self, RunError> {
+        std::fs::create_dir_all(dir).map_err(|e| RunError::Output { path: dir.display().to_string(), message: e.to_string() })?;
+        let names: Vec<String> = sim.monitors.iter().map(|m| m.name.clone()).collect();
+        let curve = CurveWriter::create(&dir.join("curve.csv"), &names)?;
+        let progress = if show_progress {
+            let total = match sim.analysis() {
+                AnalysisKind::Explicit => 1000,
+                _ => sim.scene.scene.steps.unwrap_or(0) as u64,
+            };
+            let bar = ProgressBar::new(total);
+            let template = "{bar:30} {pos}/{len} [{elapsed_precise} < {eta_precise}] {msg}";
+            bar.set_style(ProgressStyle::with_template(template).unwrap_or_else(|_| ProgressStyle::default_bar()));
+            bar
+        } else {
+            ProgressBar::hidden()
+        };
+        Ok(Self { dir: dir.to_path_buf(), curve, progress, last_row_step: usize::MAX })
+    }
+
+    fn snapshot_due(sim: &Simulation) -> bool {
+        let o = &sim.scene.output;
+        o.snapshots.contains(&sim.step) || (o.snapshot_every > 0 && sim.step % o.snapshot_every == 0)
+    }
+
+    fn write_snapshot(&self, sim: &Simulation) -> Result<(), RunError> {
+        write_vtu(&self.dir.join(format!("particles_{:06}.vtu", sim.step)), &sim.particles)
+    }
+
+    /// Write the last row if it was skipped by `curve_every` (call at the end or on failure).
+    pub fn finish(&mut self, sim: &Simulation) -> Result<(), RunError> {
+        self.progress.finish_and_clear();
+        if self.last_row_step != sim.step {
+            self.curve.row(sim.step, sim.time, &sim.monitor_values())?;
+            self.last_row_step = sim.step;
+        }
+        Ok(())
+    }
+}
+
+impl Observer for OutputObserver {
+    fn on_start(&mut self, sim: &Simulation) -> Result<(), RunError> {
+        self.curve.row(0, sim.time, &sim.monitor_values())?;
+        self.last_row_step = 0;
+        if Self::snapshot_due(sim) {
+            self.write_snapshot(sim)?;
+        }
+        Ok(())
+    }
+
+    fn on_step(&mut self, sim: &Simulation, report: &StepReport) -> Result<(), RunError> {
+        let start = Instant::now();
+        let every = sim.scene.output.curve_every.max(1);
+        if sim.step % every == 0 || sim.finished() {
+            self.curve.row(sim.step, sim.time, &sim.monitor_values())?;
+            self.last_row_step = sim.step;
+        }
+        if Self::snapshot_due(sim) {
+            self.write_snapshot(sim)?;
+        }
+        sim.profile.add(Stage::Output, start.elapsed().as_secs_f64());
+        match sim.analysis() {
+            AnalysisKind::Explicit => {
+                let end = sim.scene.scene.end_time.unwrap_or(1.0);
+                self.progress.set_position((1000.0 * sim.time / end) as u64);
+                self.progress.set_message(format!("step {} t={:.4e} s dt={:.2e} s", report.step, report.time, report.dt));
+            }
+            _ => {
+                self.progress.set_position(sim.step as u64);
+                self.progress.set_message(format!(
+                    "t={:.4e} Newton {} it{}",
+                    report.time,
+                    report.iterations,
+                    if report.substeps > 1 { format!(" ({} substeps)", report.substeps) } else { String::new() }
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Outcome of a run started by [`run_scene`].
+pub struct RunOutcome {
+    /// The finished (or stopped) simulation.
+    pub simulation: Simulation,
+    /// Wall time, s.
+    pub wall_seconds: f64,
+    /// The error that stopped the run, if any (outputs up to it are kept).
+    pub error: Option<RunError>,
+}
+
+/// Run a validated scene, writing `curve.csv`, snapshots and `run.json` into `out`.
+/// Setup errors (the scene's geometry) are returned as `Err`; a failure during
+/// the run is returned in [`RunOutcome::error`] after `run.json` is written.
+pub fn run_scene(scene: Scene, out: &Path, show_progress: bool) -> Result<RunOutcome, Box<dyn std::error::Error + Send + Sync>> {
+    let start = Instant::now();
+    let mut sim = Simulation::new(scene)?;
+    let mut observer = OutputObserver::new(out, &sim, show_progress)?;
+    let result = sim.run(&mut observer);
+    observer.finish(&sim)?;
+    let wall_seconds = start.elapsed().as_secs_f64();
+    let error = result.err();
+    write_run_json(&out.join("run.json"), &sim, wall_seconds, error.as_ref())?;
+    Ok(RunOutcome { simulation: sim, wall_seconds, error })
+}
+
+/// `run.json`: resolved scene, crate version, solver choices, per-stage profile, status.
+pub fn write_run_json(path: &Path, sim: &Simulation, wall_seconds: f64, error: Option<&RunError>) -> Result<(), RunError> {
+    let materials: Vec<_> = sim
+        .material_names
+        .iter()
+        .zip(&sim.materials)
+        .map(|(name, m)| json!({"name": name, "model": m.name(), "symmetric_tangent": m.has_symmetric_tangent()}))
+        .collect();
+    let value = json!({
+        "mpm_geo_version": env!("CARGO_PKG_VERSION"),
+        "status": if error.is_some() { "failed" } else { "completed" },
+        "error": error.map(|e| e.to_string()),
+        "steps_completed": sim.step,
+        "time": sim.time,
+        "particles": sim.particles.len(),
+        "grid_cells": sim.grid.cells,
+        "wall_seconds": wall_seconds,
+        "rayon_threads": rayon::current_num_threads(),
+        "materials": materials,
+        "solver": {
+            "analysis": sim.analysis(),
+            "linear_solver_policy": sim.scene.solver.linear_solver,
+            "usage": sim.solver_usage,
+        },
+        "profile": sim.profile.totals(),
+        "scene": sim.scene,
+    });
+    write_json(path, &value)
+}
