@@ -13,7 +13,7 @@ const SKIP: u32 = u32::MAX;
 /// lists, plus, for each element, the 64 value positions its 8x8 block scatters into.
 ///
 /// The pattern always contains the whole diagonal (so that [`Assembler::assemble_with_diagonal`]
-/// can add the Newmark mass term `4M/dt^2` of [D17] to any dof). It is fixed while the set of
+/// can add the Newmark mass term `4M/dt^2` of \[D17\] to any dof). It is fixed while the set of
 /// active cells does not change; build a new `Assembler` when it does. Matrices built by one
 /// `Assembler` share its pattern through an [`Arc`], which lets [`crate::DirectSolver`] reuse the
 /// symbolic factorisation.
@@ -154,7 +154,7 @@ impl Assembler {
     }
 
     /// Same as [`Assembler::assemble`], then adds `diagonal[i]` to `K_ii` (used for the Newmark
-    /// mass term `4M/dt^2` of [D17], or any other diagonal shift).
+    /// mass term `4M/dt^2` of \[D17\], or any other diagonal shift).
     ///
     /// Errors: [`SolverError::DimensionMismatch`] for a wrong number of blocks or a diagonal whose
     /// length is not [`Assembler::n_dofs`].

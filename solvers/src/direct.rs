@@ -93,7 +93,7 @@ pub struct SolverStats {
 
 /// Sparse direct solver (faer, sequential: `Par::Seq`) that caches the symbolic factorisation
 /// keyed on the sparsity pattern and reuses factor storage and workspace between
-/// refactorisations (one per Newton iteration, [D17]).
+/// refactorisations (one per Newton iteration, \[D17\]).
 pub struct DirectSolver {
     policy: SolverPolicy,
     options: SolverOptions,
@@ -274,7 +274,7 @@ impl DirectSolver {
             Ok(_) => {
                 let ratio = llt_pivot_ratio(sym, &self.llt_values);
                 self.stats.last_pivot_ratio = Some(ratio);
-                if !(ratio >= self.options.pivot_ratio_tol) {
+                if ratio.is_nan() || ratio < self.options.pivot_ratio_tol {
                     Err(SolverError::Singular {
                         factor: FactorKind::Cholesky,
                         detail: format!(
@@ -345,7 +345,7 @@ impl DirectSolver {
                 / 2.0;
             self.stats.last_probe_error = Some(err);
             self.stats.probe_seconds += t.elapsed().as_secs_f64();
-            if !(err <= self.options.probe_tol) {
+            if err.is_nan() || err > self.options.probe_tol {
                 return Err(SolverError::Singular {
                     factor: FactorKind::Lu,
                     detail: format!(

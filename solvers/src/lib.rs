@@ -1,7 +1,7 @@
-//! Sparse assembly and direct solves for mpm-geo (DESIGN §3 "Linear system", [D17], [D19]).
+//! Sparse assembly and direct solves for mpm-geo (DESIGN §3 "Linear system", \[D17\], \[D19\]).
 //!
-//! Each Newton iteration the engine assembles the tangent `K_T (+ 4M/dt^2)` of [D17] (with the
-//! [D19] background stiffness already summed into the cell blocks) from per-cell 8x8 blocks,
+//! Each Newton iteration the engine assembles the tangent `K_T (+ 4M/dt^2)` of \[D17\] (with the
+//! \[D19\] background stiffness already summed into the cell blocks) from per-cell 8x8 blocks,
 //! eliminates constrained dofs ([`NO_DOF`]), and solves with faer's sparse Cholesky or LU:
 //!
 //! * [`Assembler`] builds the CSC pattern once per set of active cells and scatters blocks

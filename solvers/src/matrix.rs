@@ -55,7 +55,7 @@ impl Pattern {
 ///
 /// The pattern is shared through an [`Arc`] with the [`crate::Assembler`] that built it, so that
 /// [`crate::DirectSolver`] can recognise an unchanged pattern cheaply and reuse its symbolic
-/// factorisation (DESIGN §3 "Linear system", [D17]).
+/// factorisation (DESIGN §3 "Linear system", \[D17\]).
 #[derive(Debug, Clone)]
 pub struct SparseMatrix {
     pub(crate) pattern: Arc<Pattern>,
@@ -192,25 +192,25 @@ impl SparseMatrix {
     /// `|a_ij - a_ji| <= rel_tol * max(|a_ij|, |a_ji|, sqrt(|a_ii| |a_jj|))`.
     ///
     /// The `sqrt(|a_ii a_jj|)` term keeps the test scale-invariant and insensitive to
-    /// round-off in entries that almost cancel. A matrix containing NaN is not symmetric.
+    /// round-off in entries that almost cancel. A matrix containing NaN or inf is not symmetric.
     pub fn is_symmetric(&self, rel_tol: f64) -> bool {
         let n = self.n();
         let (cp, ri) = (self.col_ptr(), self.row_idx());
         let diag: Vec<f64> = (0..n).map(|i| self.get(i, i).abs()).collect();
         for j in 0..n {
-            for p in cp[j]..cp[j + 1] {
-                let i = ri[p];
+            for (&i, &aij) in ri[cp[j]..cp[j + 1]]
+                .iter()
+                .zip(&self.values[cp[j]..cp[j + 1]])
+            {
+                if !aij.is_finite() {
+                    return false;
+                }
                 if i == j {
-                    if self.values[p].is_nan() {
-                        return false;
-                    }
                     continue;
                 }
-                let aij = self.values[p];
                 let aji = self.get(j, i);
                 let scale = aij.abs().max(aji.abs()).max((diag[i] * diag[j]).sqrt());
-                // written so that NaN fails the test
-                if !((aij - aji).abs() <= rel_tol * scale) {
+                if aji.is_nan() || (aij - aji).abs() > rel_tol * scale {
                     return false;
                 }
             }

@@ -1,1 +1,542 @@
+//! Numerical tests of assembly and direct solves (run in release: faer is slow in debug).
 
+use crate::*;
+
+/// xorshift64* pseudo-random generator (deterministic, no dependency).
+struct Rng(u64);
+impl Rng {
+    fn next_u64(&mut self) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
+    }
+    /// uniform in [-1, 1)
+    fn uniform(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+    }
+    fn below(&mut self, n: usize) -> usize {
+        (self.next_u64() % n as u64) as usize
+    }
+}
+
+/// 8x8 plane-strain stiffness (row-major) of a square bilinear cell of side `h`, 2x2 Gauss.
+/// Local nodes counter-clockwise from the lower-left corner, dofs (ux, uy) per node.
+fn q4_stiffness(e: f64, nu: f64, h: f64) -> [f64; 64] {
+    let c = e / ((1.0 + nu) * (1.0 - 2.0 * nu));
+    let d = [
+        [c * (1.0 - nu), c * nu, 0.0],
+        [c * nu, c * (1.0 - nu), 0.0],
+        [0.0, 0.0, c * (1.0 - 2.0 * nu) / 2.0],
+    ];
+    let xi_n = [-1.0, 1.0, 1.0, -1.0];
+    let eta_n = [-1.0, -1.0, 1.0, 1.0];
+    let g = 1.0 / 3.0f64.sqrt();
+    let det_j = h * h / 4.0;
+    let mut k = [0.0; 64];
+    for &xi in &[-g, g] {
+        for &eta in &[-g, g] {
+            let mut b = [[0.0; 8]; 3];
+            for a in 0..4 {
+                let dx = 0.25 * xi_n[a] * (1.0 + eta * eta_n[a]) * 2.0 / h;
+                let dy = 0.25 * eta_n[a] * (1.0 + xi * xi_n[a]) * 2.0 / h;
+                b[0][2 * a] = dx;
+                b[1][2 * a + 1] = dy;
+                b[2][2 * a] = dy;
+                b[2][2 * a + 1] = dx;
+            }
+            for r in 0..8 {
+                for s in 0..8 {
+                    let mut v = 0.0;
+                    for i in 0..3 {
+                        for j in 0..3 {
+                            v += b[i][r] * d[i][j] * b[j][s];
+                        }
+                    }
+                    k[8 * r + s] += v * det_j; // Gauss weights are 1
+                }
+            }
+        }
+    }
+    k
+}
+
+/// Element dof lists of an `nx x ny` cell grid; with `fix_bottom` the nodes of row 0 are fully
+/// constrained (NO_DOF). Returns (n_dofs, element dofs).
+fn grid_dofs(nx: usize, ny: usize, fix_bottom: bool) -> (usize, Vec<[u32; 8]>) {
+    let mut node_dof = vec![NO_DOF; (nx + 1) * (ny + 1)];
+    let mut n = 0u32;
+    for j in 0..=ny {
+        for i in 0..=nx {
+            if !(fix_bottom && j == 0) {
+                node_dof[j * (nx + 1) + i] = n;
+                n += 2;
+            }
+        }
+    }
+    let mut elems = Vec::new();
+    for j in 0..ny {
+        for i in 0..nx {
+            let nodes = [
+                j * (nx + 1) + i,
+                j * (nx + 1) + i + 1,
+                (j + 1) * (nx + 1) + i + 1,
+                (j + 1) * (nx + 1) + i,
+            ];
+            let mut d = [NO_DOF; 8];
+            for (a, &nd) in nodes.iter().enumerate() {
+                if node_dof[nd] != NO_DOF {
+                    d[2 * a] = node_dof[nd];
+                    d[2 * a + 1] = node_dof[nd] + 1;
+                }
+            }
+            elems.push(d);
+        }
+    }
+    (n as usize, elems)
+}
+
+fn norm(v: &[f64]) -> f64 {
+    v.iter().map(|x| x * x).sum::<f64>().sqrt()
+}
+
+/// ||b - K x|| / ||b||
+fn rel_residual(k: &SparseMatrix, x: &[f64], b: &[f64]) -> f64 {
+    let mut kx = vec![0.0; k.n()];
+    k.mul_vec(x, &mut kx);
+    let r: Vec<f64> = kx.iter().zip(b).map(|(a, c)| c - a).collect();
+    norm(&r) / norm(b)
+}
+
+fn rel_diff(a: &[f64], b: &[f64]) -> f64 {
+    let d: Vec<f64> = a.iter().zip(b).map(|(x, y)| x - y).collect();
+    norm(&d) / norm(b)
+}
+
+/// Elastic grid stiffness (E = 3e4 kPa, nu = 0.25, h = 0.5 m), bottom edge fixed.
+fn elastic_system(nx: usize, ny: usize) -> (Assembler, Vec<[f64; 64]>, SparseMatrix) {
+    let (n, elems) = grid_dofs(nx, ny, true);
+    let asm = Assembler::new(n, &elems).unwrap();
+    let blocks = vec![q4_stiffness(3e4, 0.25, 0.5); elems.len()];
+    let k = asm.assemble(&blocks).unwrap();
+    (asm, blocks, k)
+}
+
+fn random_rhs(n: usize, seed: u64) -> Vec<f64> {
+    let mut rng = Rng(seed);
+    (0..n).map(|_| rng.uniform()).collect()
+}
+
+#[test]
+fn assembly_equals_dense_sum_and_nnz_counts_couplings() {
+    let mut rng = Rng(0x1234_5678);
+    let n = 40;
+    let n_el = 30;
+    let mut elems = Vec::new();
+    for _ in 0..n_el {
+        let mut d = [NO_DOF; 8];
+        for a in 0..8 {
+            if rng.below(5) != 0 {
+                // distinct dofs within an element
+                loop {
+                    let c = rng.below(n) as u32;
+                    if !d.contains(&c) {
+                        d[a] = c;
+                        break;
+                    }
+                }
+            }
+        }
+        elems.push(d);
+    }
+    let blocks: Vec<[f64; 64]> = (0..n_el)
+        .map(|_| std::array::from_fn(|_| rng.uniform()))
+        .collect();
+    let diag: Vec<f64> = (0..n).map(|_| rng.uniform()).collect();
+    let asm = Assembler::new(n, &elems).unwrap();
+    let k = asm.assemble_with_diagonal(&blocks, Some(&diag)).unwrap();
+
+    let mut dense = vec![0.0; n * n];
+    let mut coupled = std::collections::BTreeSet::new();
+    for (d, blk) in elems.iter().zip(&blocks) {
+        for a in 0..8 {
+            for b in 0..8 {
+                if d[a] != NO_DOF && d[b] != NO_DOF {
+                    let (r, c) = (d[a] as usize, d[b] as usize);
+                    dense[r * n + c] += blk[8 * a + b];
+                    coupled.insert((r, c));
+                }
+            }
+        }
+    }
+    for i in 0..n {
+        dense[i * n + i] += diag[i];
+        coupled.insert((i, i)); // the pattern always holds the full diagonal
+    }
+    let scale = dense.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    for r in 0..n {
+        for c in 0..n {
+            let err = (k.get(r, c) - dense[r * n + c]).abs();
+            assert!(err <= 1e-14 * scale, "({r},{c}): error {err:e}");
+        }
+    }
+    assert_eq!(k.nnz(), coupled.len());
+    assert_eq!(asm.nnz(), coupled.len());
+    // every stored entry is a coupling (or diagonal)
+    for c in 0..n {
+        for p in k.col_ptr()[c]..k.col_ptr()[c + 1] {
+            assert!(coupled.contains(&(k.row_idx()[p], c)));
+        }
+    }
+    // deterministic: a second assembly is bit-identical
+    let k2 = asm.assemble_with_diagonal(&blocks, Some(&diag)).unwrap();
+    assert_eq!(k.values(), k2.values());
+    // in-place reassembly into the same matrix gives the same bits
+    let mut k3 = asm.assemble(&blocks).unwrap();
+    asm.reassemble(&mut k3, &blocks, Some(&diag)).unwrap();
+    assert_eq!(k.values(), k3.values());
+}
+
+#[test]
+fn grid_nnz_is_number_of_distinct_couplings() {
+    // Q4 grid, bottom fixed: each free node couples with its (up to 9) neighbouring free
+    // nodes, 2 x 2 dofs each.
+    let (nx, ny) = (5, 4);
+    let (_, _, k) = elastic_system(nx, ny);
+    let mut expected = 0;
+    for j in 1..=ny {
+        for i in 0..=nx {
+            let nx_count = 1 + (i > 0) as usize + (i < nx) as usize;
+            let ny_count = 1 + (j > 1) as usize + (j < ny) as usize;
+            expected += 4 * nx_count * ny_count;
+        }
+    }
+    assert_eq!(k.nnz(), expected);
+}
+
+#[test]
+fn assembler_rejects_bad_input() {
+    assert_eq!(
+        Assembler::new(0, &[]).unwrap_err(),
+        SolverError::EmptySystem
+    );
+    let e = Assembler::new(4, &[[0, 1, 2, 3, 4, NO_DOF, NO_DOF, NO_DOF]]).unwrap_err();
+    assert!(matches!(e, SolverError::DofOutOfRange { dof: 4, .. }));
+    let asm = Assembler::new(4, &[[0, 1, 2, 3, NO_DOF, NO_DOF, NO_DOF, NO_DOF]]).unwrap();
+    assert!(matches!(
+        asm.assemble(&[]),
+        Err(SolverError::DimensionMismatch { .. })
+    ));
+    assert!(matches!(
+        asm.assemble_with_diagonal(&[[1.0; 64]], Some(&[1.0; 3])),
+        Err(SolverError::DimensionMismatch { .. })
+    ));
+}
+
+#[test]
+fn from_triplets_sums_duplicates_and_checks_range() {
+    let k = SparseMatrix::from_triplets(3, &[(0, 0, 1.0), (2, 1, 2.0), (0, 0, 0.5), (1, 2, -1.0)])
+        .unwrap();
+    assert_eq!(k.nnz(), 3);
+    assert_eq!(k.get(0, 0), 1.5);
+    assert_eq!(k.get(2, 1), 2.0);
+    assert_eq!(k.get(1, 1), 0.0);
+    assert!(matches!(
+        SparseMatrix::from_triplets(3, &[(3, 0, 1.0)]),
+        Err(SolverError::IndexOutOfRange { .. })
+    ));
+    assert_eq!(
+        SparseMatrix::from_triplets(0, &[]).unwrap_err(),
+        SolverError::EmptySystem
+    );
+}
+
+#[test]
+fn spd_cholesky_and_lu_agree() {
+    // small grid (simplicial path likely) and a larger one (supernodal path likely)
+    for &(nx, ny) in &[(6, 4), (60, 40)] {
+        let (_, _, k) = elastic_system(nx, ny);
+        assert!(k.is_symmetric(1e-14));
+        let b = random_rhs(k.n(), 7);
+        let mut chol = DirectSolver::new(SolverPolicy::Cholesky);
+        let mut lu = DirectSolver::new(SolverPolicy::Lu);
+        assert_eq!(chol.factorize(&k, true).unwrap(), FactorKind::Cholesky);
+        assert_eq!(lu.factorize(&k, true).unwrap(), FactorKind::Lu);
+        let mut xc = b.clone();
+        chol.solve_in_place(&mut xc).unwrap();
+        let mut xl = b.clone();
+        lu.solve_in_place(&mut xl).unwrap();
+        let (rc, rl) = (rel_residual(&k, &xc, &b), rel_residual(&k, &xl, &b));
+        assert!(rc <= 1e-12, "Cholesky residual {rc:e} ({nx}x{ny})");
+        assert!(rl <= 1e-12, "LU residual {rl:e} ({nx}x{ny})");
+        let d = rel_diff(&xc, &xl);
+        assert!(d <= 1e-10, "Cholesky vs LU differ by {d:e} ({nx}x{ny})");
+        assert_eq!(chol.stats().cholesky_fallbacks, 0);
+        // Auto + symmetric picks Cholesky; Auto + unsymmetric picks LU
+        let mut auto = DirectSolver::new(SolverPolicy::Auto);
+        assert_eq!(auto.factorize(&k, true).unwrap(), FactorKind::Cholesky);
+        assert_eq!(auto.factorize(&k, false).unwrap(), FactorKind::Lu);
+    }
+}
+
+#[test]
+fn unsymmetric_system_by_lu() {
+    let (asm, mut blocks, _) = elastic_system(40, 25);
+    let mut rng = Rng(99);
+    let scale = blocks[0][0];
+    for blk in blocks.iter_mut() {
+        for a in 0..8 {
+            for b in (a + 1)..8 {
+                blk[8 * a + b] += 0.2 * scale * rng.uniform();
+            }
+        }
+    }
+    let k = asm.assemble(&blocks).unwrap();
+    assert!(!k.is_symmetric(1e-3));
+    let b = random_rhs(k.n(), 3);
+    let mut s = DirectSolver::new(SolverPolicy::Auto);
+    assert_eq!(s.factorize(&k, false).unwrap(), FactorKind::Lu);
+    let mut x = b.clone();
+    s.solve_in_place(&mut x).unwrap();
+    let r = rel_residual(&k, &x, &b);
+    assert!(r <= 1e-12, "LU residual {r:e}");
+}
+
+#[test]
+fn auto_falls_back_to_lu_on_indefinite_symmetric() {
+    let (asm, blocks, k0) = elastic_system(30, 20);
+    // K - sigma I with sigma between eigenvalues: symmetric, indefinite, nonsingular.
+    let sigma = 0.37 * k0.get(0, 0);
+    let shift = vec![-sigma; asm.n_dofs()];
+    let k = asm.assemble_with_diagonal(&blocks, Some(&shift)).unwrap();
+    assert!(k.is_symmetric(1e-14));
+    let b = random_rhs(k.n(), 11);
+    let mut s = DirectSolver::new(SolverPolicy::Auto);
+    assert_eq!(s.factorize(&k, true).unwrap(), FactorKind::Lu);
+    let mut x = b.clone();
+    s.solve_in_place(&mut x).unwrap();
+    let r = rel_residual(&k, &x, &b);
+    assert!(r <= 1e-12, "residual after fallback {r:e}");
+    assert_eq!(s.stats().cholesky_fallbacks, 1);
+    assert_eq!(s.stats().last_factor, Some(FactorKind::Lu));
+}
+
+#[test]
+fn refactorisation_reuses_symbolic() {
+    for policy in [SolverPolicy::Cholesky, SolverPolicy::Lu] {
+        let (asm, blocks, k1) = elastic_system(30, 20);
+        let mut s = DirectSolver::new(policy);
+        s.factorize(&k1, true).unwrap();
+        // new values, same pattern (a stiffer, slightly different tangent plus a mass term)
+        let mut rng = Rng(5);
+        let blocks2: Vec<[f64; 64]> = blocks
+            .iter()
+            .map(|b| {
+                let f = 1.0 + 0.5 * rng.uniform().abs();
+                b.map(|v| v * f)
+            })
+            .collect();
+        let mass: Vec<f64> = (0..asm.n_dofs()).map(|i| 10.0 + (i % 3) as f64).collect();
+        let k2 = asm.assemble_with_diagonal(&blocks2, Some(&mass)).unwrap();
+        let b = random_rhs(k2.n(), 21);
+        s.factorize(&k2, true).unwrap();
+        let mut x = b.clone();
+        s.solve_in_place(&mut x).unwrap();
+        assert_eq!(s.stats().symbolic, 1, "{policy:?}");
+        assert_eq!(s.stats().numeric, 2, "{policy:?}");
+
+        let mut fresh = DirectSolver::new(policy);
+        let xf = fresh.solve(&k2, true, &b).unwrap();
+        let d = rel_diff(&x, &xf);
+        assert!(d <= 1e-13, "{policy:?}: reused vs fresh differ by {d:e}");
+
+        // an equal pattern from another Assembler (different Arc) is still recognised
+        let (_, _, k3) = elastic_system(30, 20);
+        assert!(!k3.shares_pattern_with(&k1));
+        s.factorize(&k3, true).unwrap();
+        assert_eq!(s.stats().symbolic, 1, "{policy:?}");
+        // a changed pattern triggers a new symbolic factorisation
+        let (_, _, k4) = elastic_system(31, 20);
+        s.factorize(&k4, true).unwrap();
+        assert_eq!(s.stats().symbolic, 2, "{policy:?}");
+        assert_eq!(s.stats().numeric, 4, "{policy:?}");
+    }
+}
+
+#[test]
+fn singular_systems_are_errors() {
+    // floating body: no constraints, rigid-body modes in the null space
+    let (n, elems) = grid_dofs(8, 6, false);
+    let asm = Assembler::new(n, &elems).unwrap();
+    let k = asm
+        .assemble(&vec![q4_stiffness(3e4, 0.25, 0.5); elems.len()])
+        .unwrap();
+    for policy in [SolverPolicy::Auto, SolverPolicy::Cholesky, SolverPolicy::Lu] {
+        for symmetric in [true, false] {
+            let mut s = DirectSolver::new(policy);
+            let e = s.factorize(&k, symmetric).unwrap_err();
+            assert!(
+                matches!(e, SolverError::Singular { .. }),
+                "{policy:?}/{symmetric}: {e}"
+            );
+            let mut x = vec![1.0; n];
+            assert_eq!(s.solve_in_place(&mut x), Err(SolverError::NotFactorized));
+        }
+    }
+    // zero column block: an element whose block is all zero and whose dofs no other
+    // element touches
+    let (n, mut elems) = grid_dofs(6, 4, true);
+    elems.push([
+        n as u32,
+        n as u32 + 1,
+        NO_DOF,
+        NO_DOF,
+        NO_DOF,
+        NO_DOF,
+        NO_DOF,
+        NO_DOF,
+    ]);
+    let asm = Assembler::new(n + 2, &elems).unwrap();
+    let mut blocks = vec![q4_stiffness(3e4, 0.25, 0.5); elems.len()];
+    *blocks.last_mut().unwrap() = [0.0; 64];
+    let k = asm.assemble(&blocks).unwrap();
+    for policy in [SolverPolicy::Auto, SolverPolicy::Lu] {
+        let mut s = DirectSolver::new(policy);
+        let e = s.factorize(&k, true).unwrap_err();
+        assert!(matches!(e, SolverError::Singular { .. }), "{policy:?}: {e}");
+    }
+    // a structurally empty column (from_triplets without the diagonal)
+    let k = SparseMatrix::from_triplets(3, &[(0, 0, 1.0), (1, 1, 1.0), (2, 1, 1.0)]).unwrap();
+    for symmetric in [true, false] {
+        let e = DirectSolver::new(SolverPolicy::Auto)
+            .factorize(&k, symmetric)
+            .unwrap_err();
+        assert!(matches!(e, SolverError::Singular { .. }), "{e}");
+    }
+}
+
+#[test]
+fn non_finite_input_is_an_error() {
+    let (_, _, mut k) = elastic_system(6, 4);
+    let mut s = DirectSolver::new(SolverPolicy::Auto);
+    s.factorize(&k, true).unwrap();
+    let mut rhs = vec![0.0; k.n()];
+    rhs[3] = f64::NAN;
+    assert!(matches!(
+        s.solve_in_place(&mut rhs),
+        Err(SolverError::NonFinite { index: 3, .. })
+    ));
+    let mut short = vec![0.0; 2];
+    assert!(matches!(
+        s.solve_in_place(&mut short),
+        Err(SolverError::RhsMismatch { .. })
+    ));
+    k.values_mut()[10] = f64::NAN;
+    assert!(matches!(
+        s.factorize(&k, true),
+        Err(SolverError::NonFinite { index: 10, .. })
+    ));
+    assert!(!k.is_symmetric(1.0));
+}
+
+#[test]
+fn is_symmetric_detects_small_asymmetry() {
+    let (_, _, mut k) = elastic_system(10, 8);
+    assert!(k.is_symmetric(1e-14));
+    // perturb one off-diagonal entry by 1e-6 relative
+    // the largest off-diagonal entry of column 7
+    let c = 7;
+    let p = (k.col_ptr()[c]..k.col_ptr()[c + 1])
+        .filter(|&p| k.row_idx()[p] != c)
+        .max_by(|&a, &b| k.values()[a].abs().total_cmp(&k.values()[b].abs()))
+        .unwrap();
+    assert!(k.values()[p].abs() > 0.0);
+    k.values_mut()[p] *= 1.0 + 1e-6;
+    assert!(!k.is_symmetric(1e-8));
+    assert!(!k.is_symmetric(1e-7));
+    assert!(k.is_symmetric(1e-5));
+}
+
+#[test]
+fn weak_regularised_cells_are_not_flagged_singular() {
+    // [D19]-like: the upper half of the grid holds only the background stiffness
+    // eps_bg * K_el (eps_bg = 1e-6); a few cells are 1e4 times stiffer (penalty-like).
+    let (nx, ny) = (40, 30);
+    let (n, elems) = grid_dofs(nx, ny, true);
+    let asm = Assembler::new(n, &elems).unwrap();
+    let kel = q4_stiffness(3e4, 0.25, 0.5);
+    let blocks: Vec<[f64; 64]> = (0..elems.len())
+        .map(|e| {
+            let (i, j) = (e % nx, e / nx);
+            let f = if j >= ny / 2 {
+                1e-6
+            } else if j == 0 && i % 10 == 0 {
+                1e4
+            } else {
+                1.0
+            };
+            kel.map(|v| v * f)
+        })
+        .collect();
+    let k = asm.assemble(&blocks).unwrap();
+    let b = random_rhs(n, 17);
+    for policy in [SolverPolicy::Cholesky, SolverPolicy::Lu] {
+        let mut s = DirectSolver::new(policy);
+        let x = s.solve(&k, true, &b).unwrap();
+        let r = rel_residual(&k, &x, &b);
+        assert!(r <= 1e-10, "{policy:?}: residual {r:e}");
+        let st = s.stats();
+        assert!(st.last_pivot_ratio.is_none_or(|p| p > 1e-13), "{st:?}");
+        assert!(st.last_probe_error.is_none_or(|e| e < 1e-6), "{st:?}");
+    }
+}
+
+/// Timings on a ~90k-dof Q4 grid (run: cargo test --release -p mpm-solvers -- --ignored
+/// --nocapture timing_90k).
+#[test]
+#[ignore]
+fn timing_90k() {
+    use std::time::Instant;
+    fn median(mut v: Vec<f64>) -> f64 {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    }
+    let (nx, ny) = (200, 225);
+    let (n, elems) = grid_dofs(nx, ny, true);
+    let t = Instant::now();
+    let asm = Assembler::new(n, &elems).unwrap();
+    println!(
+        "n = {n}, nnz = {}, Assembler::new {:.1} ms",
+        asm.nnz(),
+        t.elapsed().as_secs_f64() * 1e3
+    );
+    let blocks = vec![q4_stiffness(3e4, 0.25, 0.5); elems.len()];
+    let mut k = asm.assemble(&blocks).unwrap();
+    let reps = 5;
+    let mut ta = vec![];
+    for _ in 0..reps {
+        let t = Instant::now();
+        asm.reassemble(&mut k, &blocks, None).unwrap();
+        ta.push(t.elapsed().as_secs_f64() * 1e3);
+    }
+    println!("reassemble median {:.1} ms", median(ta));
+    let b = random_rhs(n, 1);
+    for policy in [SolverPolicy::Cholesky, SolverPolicy::Lu] {
+        let mut s = DirectSolver::new(policy);
+        let (mut tn, mut ts) = (vec![], vec![]);
+        for _ in 0..reps {
+            let st0 = s.stats().clone();
+            s.factorize(&k, true).unwrap();
+            let st1 = s.stats().clone();
+            tn.push((st1.numeric_seconds - st0.numeric_seconds) * 1e3);
+            let mut x = b.clone();
+            s.solve_in_place(&mut x).unwrap();
+            ts.push((s.stats().solve_seconds - st1.solve_seconds) * 1e3);
+        }
+        let st = s.stats();
+        println!(
+            "{policy:?}: symbolic {:.1} ms, numeric median {:.1} ms, solve median {:.1} ms, probe total {:.1} ms/{} (symbolic count {})",
+            st.symbolic_seconds * 1e3, median(tn), median(ts), st.probe_seconds * 1e3, reps, st.symbolic
+        );
+    }
+}
