@@ -966,13 +966,13 @@ pub fn apply_override(table: &mut toml::Table, assignment: &str) -> Result<(), S
         .ok()
         .and_then(|mut t| t.remove("v"))
         .unwrap_or_else(|| toml::Value::String(raw.to_string()));
-    let mut current: &mut toml::Value = table
-        .get_mut(keys[0])
-        .ok_or_else(|| err(format!("the scene has no key `{}`", keys[0])))?;
     if keys.len() == 1 {
-        *current = value;
+        table.insert(keys[0].to_string(), value);
         return Ok(());
     }
+    // Missing intermediate tables are created (optional sections such as
+    // `[solver]`); a misspelt key is then refused by `deny_unknown_fields`.
+    let mut current: &mut toml::Value = table.entry(keys[0]).or_insert_with(|| toml::Value::Table(toml::Table::new()));
     for (depth, key) in keys.iter().enumerate().skip(1) {
         let last = depth == keys.len() - 1;
         current = match current {
@@ -981,7 +981,7 @@ pub fn apply_override(table: &mut toml::Table, assignment: &str) -> Result<(), S
                     t.insert((*key).to_string(), value);
                     return Ok(());
                 }
-                t.get_mut(*key).ok_or_else(|| err(format!("the scene has no key `{}`", keys[..=depth].join("."))))?
+                t.entry(*key).or_insert_with(|| toml::Value::Table(toml::Table::new()))
             }
             toml::Value::Array(a) => {
                 let index: usize = key.parse().map_err(|_| err(format!("`{key}` must be an array index")))?;

@@ -88,8 +88,7 @@ impl Simulation {
             Err(StepFailure::LeftGrid(particle, position)) => {
                 Err(RunError::ParticleLeftGrid { step: self.step + 1, time: t + dt, particle, position })
             }
-            Err(failure) if depth < self.scene.solver.max_halvings => {
-                let _ = failure;
+            Err(_) if depth < self.scene.solver.max_halvings => {
                 self.solver_usage.halvings += 1;
                 self.advance_implicit(t, 0.5 * dt, depth + 1, report)?;
                 self.advance_implicit(t + 0.5 * dt, 0.5 * dt, depth + 1, report)
@@ -213,38 +212,41 @@ impl Simulation {
         self.scene.materials.values().map(|m| m.youngs_modulus()).fold(0.0, f64::max)
     }
 
-    /// Assemble K_T (+ 4M/Δt² when dynamic) and factorise it (DESIGN D17, D19).
-    fn factorise_tangent(&mut self, sg: &StepGrid, trial: &TrialStresses, dt: f64) -> Result<(), StepFailure> {
+    /// Assemble K_T (+ 4M/Δt² when dynamic) from the cell blocks (DESIGN D17, D19, D41).
+    fn assemble_tangent(&mut self, sg: &StepGrid, trial: &TrialStresses, dt: f64) -> Result<SparseMatrix, StepFailure> {
+        let start = std::time::Instant::now();
         let element_dofs = sg.dofs.element_dofs(&self.grid, &sg.bins);
         let n = sg.dofs.n_free;
-        let matrix: SparseMatrix = {
-            let start = std::time::Instant::now();
-            let reuse = matches!(&self.assembler, Some((key, a)) if *key == element_dofs && a.n_dofs() == n);
-            if !reuse {
-                let assembler = Assembler::new(n, &element_dofs).map_err(|e| StepFailure::Solver(e.to_string()))?;
-                self.assembler = Some((element_dofs, assembler));
+        let reuse = matches!(&self.assembler, Some((key, a)) if *key == element_dofs && a.n_dofs() == n);
+        if !reuse {
+            let assembler = Assembler::new(n, &element_dofs).map_err(|e| StepFailure::Solver(e.to_string()))?;
+            self.assembler = Some((element_dofs, assembler));
+        }
+        let mut blocks = transfer::cell_stiffness_blocks(&sg.bins, &sg.shapes, &self.particles.volume, &trial.tangent);
+        for block in blocks.iter_mut() {
+            for (b, bg) in block.iter_mut().zip(self.background_block.iter()) {
+                *b += bg;
             }
-            let mut blocks = transfer::cell_stiffness_blocks(&sg.bins, &sg.shapes, &self.particles.volume, &trial.tangent);
-            for block in blocks.iter_mut() {
-                for (b, bg) in block.iter_mut().zip(self.background_block.iter()) {
-                    *b += bg;
+        }
+        self.driven.add_stiffness(&sg.shapes, &sg.bins, &mut blocks);
+        let diagonal = self.dynamic().then(|| {
+            let mut diag = vec![0.0; n];
+            for (d, &index) in sg.dofs.index.iter().enumerate() {
+                if index != NONE {
+                    diag[index as usize] = 4.0 / (dt * dt) * sg.mass[d / 2];
                 }
             }
-            self.driven.add_stiffness(&sg.shapes, &sg.bins, &mut blocks);
-            let diagonal = self.dynamic().then(|| {
-                let mut diag = vec![0.0; n];
-                for (d, &index) in sg.dofs.index.iter().enumerate() {
-                    if index != NONE {
-                        diag[index as usize] = 4.0 / (dt * dt) * sg.mass[d / 2];
-                    }
-                }
-                diag
-            });
-            let (_, assembler) = self.assembler.as_ref().expect("assembler set above");
-            let m = assembler.assemble_with_diagonal(&blocks, diagonal.as_deref()).map_err(|e| StepFailure::Solver(e.to_string()))?;
-            self.profile.add(Stage::Assembly, start.elapsed().as_secs_f64());
-            m
-        };
+            diag
+        });
+        let Some((_, assembler)) = self.assembler.as_ref() else { unreachable!("assembler set above") };
+        let matrix = assembler.assemble_with_diagonal(&blocks, diagonal.as_deref()).map_err(|e| StepFailure::Solver(e.to_string()))?;
+        self.profile.add(Stage::Assembly, start.elapsed().as_secs_f64());
+        Ok(matrix)
+    }
+
+    /// Assemble and factorise the tangent; Cholesky when every material's tangent is symmetric.
+    fn factorise_tangent(&mut self, sg: &StepGrid, trial: &TrialStresses, dt: f64) -> Result<(), StepFailure> {
+        let matrix = self.assemble_tangent(sg, trial, dt)?;
         let symmetric = self.symmetric_tangent;
         let kind = self
             .profile
@@ -254,8 +256,57 @@ impl Simulation {
             FactorKind::Cholesky => self.solver_usage.cholesky += 1,
             FactorKind::Lu => self.solver_usage.lu += 1,
         }
-        self.solver_usage.max_unknowns = self.solver_usage.max_unknowns.max(n);
+        self.solver_usage.max_unknowns = self.solver_usage.max_unknowns.max(matrix.n());
         Ok(())
+    }
+
+    /// The next step's linearisation at a given free-dof displacement increment
+    /// (verification access, e.g. finite-difference checks of the tangent):
+    /// returns the residual R = f_ext + f_pen − f_int − M a at the free dofs and
+    /// the assembled tangent (DESIGN D16–D17, incl. the [D19] term), without
+    /// changing the state. `free_increment` has one entry per free dof; its
+    /// length must equal the number of unknowns (see [`Simulation::unknowns`]).
+    pub fn linearize(&mut self, free_increment: &[f64]) -> Result<(Vec<f64>, SparseMatrix), RunError> {
+        let (t, dt) = (self.time, self.implicit_dt());
+        let sg = self.prepare_step(t, dt).map_err(|f| self.failure_to_error(f, t + dt, 0))?;
+        if free_increment.len() != sg.dofs.n_free {
+            return Err(RunError::Solver {
+                step: self.step + 1,
+                time: t + dt,
+                message: format!("linearize: {} values given for {} unknowns", free_increment.len(), sg.dofs.n_free),
+            });
+        }
+        let du = self.initial_increment(&sg, t, dt, free_increment);
+        let mut trial = TrialStresses::default();
+        evaluate_stresses(&self.particles, &self.materials, &sg.shapes, &du, None, &mut trial)
+            .map_err(|(p, e)| self.failure_to_error(StepFailure::Constitutive(p, e), t + dt, 0))?;
+        let res = self.residual(&sg, &trial, &du, t + dt, dt);
+        let matrix = self.assemble_tangent(&sg, &trial, dt).map_err(|f| self.failure_to_error(f, t + dt, 0))?;
+        Ok((gather_free(&sg.dofs, &res.residual), matrix))
+    }
+
+    /// Number of unknowns of the next implicit step.
+    pub fn unknowns(&self) -> Result<usize, RunError> {
+        let shapes = transfer::shapes_at(&self.grid, &self.particles.position)
+            .map_err(|o| RunError::ParticleLeftGrid { step: self.step + 1, time: self.time, particle: o.particle, position: o.position })?;
+        let bins = ParticleBins::new(&self.grid, &shapes);
+        Ok(DofMap::new(&bins, &self.constraints).n_free)
+    }
+
+    /// Δu of the step: prescribed nodal increments u(t + dt) − u(t) at prescribed
+    /// dofs of active nodes, `free` at the free dofs, zero elsewhere.
+    fn initial_increment(&self, sg: &StepGrid, t: f64, dt: f64, free: &[f64]) -> Vec<[f64; 2]> {
+        let mut du = vec![[0.0; 2]; self.grid.node_count()];
+        for (d, c) in self.constraints.dof.iter().enumerate() {
+            if matches!(c, DofConstraint::Prescribed { .. }) && sg.bins.node_active[d / 2] {
+                du[d / 2][d % 2] = self.constraints.prescribed_value(&self.grid, d, t + dt) - self.constraints.prescribed_value(&self.grid, d, t);
+            }
+            let index = sg.dofs.index[d];
+            if index != NONE {
+                du[d / 2][d % 2] = free[index as usize];
+            }
+        }
+        du
     }
 
     /// Newton–Raphson for one (sub-)step from `t` to `t + dt`; commits the
@@ -263,14 +314,8 @@ impl Simulation {
     fn try_implicit(&mut self, t: f64, dt: f64) -> Result<usize, StepFailure> {
         let t1 = t + dt;
         let sg = self.prepare_step(t, dt)?;
-        let n_nodes = self.grid.node_count();
         // Δu⁰: prescribed nodal increments (validation scenes), zero elsewhere.
-        let mut du = vec![[0.0; 2]; n_nodes];
-        for (d, c) in self.constraints.dof.iter().enumerate() {
-            if matches!(c, DofConstraint::Prescribed { .. }) && sg.bins.node_active[d / 2] {
-                du[d / 2][d % 2] = self.constraints.prescribed_value(&self.grid, d, t1) - self.constraints.prescribed_value(&self.grid, d, t);
-            }
-        }
+        let mut du = self.initial_increment(&sg, t, dt, &vec![0.0; sg.dofs.n_free]);
         let settings = self.scene.solver.clone();
         let mut trial = TrialStresses::default();
         let mut history = Vec::new();
@@ -291,7 +336,7 @@ impl Simulation {
             // DESIGN D18, energy norm: work of the new residual on the last correction.
             let energy_ok = iteration == 0 || dot(&last_correction, &free_residual).abs() <= settings.tolerance_energy * energy0;
             if force_ok && energy_ok {
-                self.commit_implicit(&sg, &trial, &du, &res, t1, dt)?;
+                self.commit_implicit(&sg, &trial, &du, &res, dt)?;
                 return Ok(iteration);
             }
             if iteration == settings.max_iterations {
@@ -328,7 +373,7 @@ impl Simulation {
 
     /// Accept the converged iterate: velocities/accelerations (dynamic), then
     /// positions, deformation gradients, volumes, stresses (DESIGN D14–D15).
-    fn commit_implicit(&mut self, sg: &StepGrid, trial: &TrialStresses, du: &[[f64; 2]], res: &Residual, t1: f64, dt: f64) -> Result<(), StepFailure> {
+    fn commit_implicit(&mut self, sg: &StepGrid, trial: &TrialStresses, du: &[[f64; 2]], res: &Residual, dt: f64) -> Result<(), StepFailure> {
         let start = std::time::Instant::now();
         let dynamic = self.dynamic();
         let n = self.particles.len();
@@ -369,7 +414,6 @@ impl Simulation {
         }
         self.traction.advect(&sg.traction_shapes, du);
         self.last_increment = du.to_vec();
-        let _ = t1;
         self.profile.add(Stage::G2P, start.elapsed().as_secs_f64());
         Ok(())
     }
