@@ -7,5 +7,6 @@
 
 pub mod constitutive;
 pub mod grid;
+pub mod nonlocal;
 pub mod particles;
 pub mod shape;
