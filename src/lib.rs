@@ -7,6 +7,7 @@
 
 pub mod constitutive;
 pub mod grid;
+pub mod nonlocal;
 pub mod particles;
 pub mod shape;
 pub mod transfer;
