@@ -49,7 +49,10 @@ impl Constraints {
         for p in &scene.bc.prescribed {
             if let Ok(line) = GridLine::parse(&p.line) {
                 for n in nodes_on_line(grid, line) {
-                    dof[2 * n + p.dof.index()] = DofConstraint::Prescribed { rate: p.rate, gradient: p.gradient };
+                    dof[2 * n + p.dof.index()] = DofConstraint::Prescribed {
+                        rate: p.rate,
+                        gradient: p.gradient,
+                    };
                 }
             }
         }
@@ -146,8 +149,12 @@ impl TractionPoints {
         let h = scene.grid.cell_size;
         let gauss = 0.5 / 3f64.sqrt();
         for spec in &scene.bc.pressure {
-            let Some(b) = scene.body_index(spec.body.as_deref()) else { continue };
-            let Some([lo, hi]) = scene.body[b].rectangle else { continue };
+            let Some(b) = scene.body_index(spec.body.as_deref()) else {
+                continue;
+            };
+            let Some([lo, hi]) = scene.body[b].rectangle else {
+                continue;
+            };
             // start and end of the side, counter-clockwise
             let (start, end) = match spec.side {
                 Side::Bottom => (lo, [hi[0], lo[1]]),
@@ -162,7 +169,8 @@ impl TractionPoints {
             for s in 0..segments {
                 for g in [0.5 - gauss, 0.5 + gauss] {
                     let d = (s as f64 + g) * seg;
-                    tp.position.push([start[0] + d * dir[0], start[1] + d * dir[1]]);
+                    tp.position
+                        .push([start[0] + d * dir[0], start[1] + d * dir[1]]);
                     tp.tangent.push([0.5 * seg * dir[0], 0.5 * seg * dir[1]]);
                     tp.pressure.push(spec.p);
                 }
@@ -189,14 +197,22 @@ impl TractionPoints {
     }
 
     /// Shape functions at each point, looked up at x_s − 1e−9·h·n_s so that a point
-    /// on a grid line belongs to the body's cell. `None` if a point left the grid.
-    pub fn shapes(&self, grid: &Grid) -> Option<Vec<ShapeAt>> {
+    /// on a grid line belongs to the body's cell. Errs with the first point that left the grid.
+    pub fn shapes(&self, grid: &Grid) -> Result<Vec<ShapeAt>, transfer::OutsideGrid> {
         (0..self.len())
             .map(|s| {
                 let (n, _) = self.normal_and_length(s);
                 let x = self.position[s];
-                let probe = [x[0] - 1e-9 * grid.cell_size * n[0], x[1] - 1e-9 * grid.cell_size * n[1]];
-                grid.locate(probe).map(|(ci, cj)| grid.shape_in_cell(ci, cj, x))
+                let probe = [
+                    x[0] - 1e-9 * grid.cell_size * n[0],
+                    x[1] - 1e-9 * grid.cell_size * n[1],
+                ];
+                grid.locate(probe)
+                    .map(|(ci, cj)| grid.shape_in_cell(ci, cj, x))
+                    .ok_or(transfer::OutsideGrid {
+                        particle: s,
+                        position: x,
+                    })
             })
             .collect()
     }
@@ -223,7 +239,10 @@ impl TractionPoints {
             let t = self.tangent[s];
             self.position[s][0] += u[0];
             self.position[s][1] += u[1];
-            self.tangent[s] = [t[0] + l[0] * t[0] + l[1] * t[1], t[1] + l[2] * t[0] + l[3] * t[1]];
+            self.tangent[s] = [
+                t[0] + l[0] * t[0] + l[1] * t[1],
+                t[1] + l[2] * t[0] + l[3] * t[1],
+            ];
         }
     }
 }
@@ -247,7 +266,12 @@ impl DrivenPoints {
     /// Select, for every `[[bc.rigid]]`, the material points of the top row of its
     /// body whose x lies in the footprint (DESIGN §8.0). Returns the index of the
     /// rigid entry that selects no point as an error.
-    pub fn from_scene(scene: &Scene, particles: &Particles, penalty_factor: f64, youngs_modulus: &[f64]) -> Result<Self, usize> {
+    pub fn from_scene(
+        scene: &Scene,
+        particles: &Particles,
+        penalty_factor: f64,
+        youngs_modulus: &[f64],
+    ) -> Result<Self, usize> {
         let mut d = DrivenPoints::default();
         let h = scene.grid.cell_size;
         for (r, spec) in scene.bc.rigid.iter().enumerate() {
@@ -256,13 +280,17 @@ impl DrivenPoints {
                 let x = particles.position[p][0];
                 particles.body[p] == body && x >= spec.footprint[0] && x <= spec.footprint[1]
             };
-            let top = (0..particles.len()).filter(|&p| in_footprint(p)).map(|p| particles.position[p][1]).fold(f64::NEG_INFINITY, f64::max);
+            let top = (0..particles.len())
+                .filter(|&p| in_footprint(p))
+                .map(|p| particles.position[p][1])
+                .fold(f64::NEG_INFINITY, f64::max);
             let before = d.particle.len();
             for p in 0..particles.len() {
                 if in_footprint(p) && particles.position[p][1] >= top - 0.25 * h {
                     d.particle.push(p);
                     d.rigid.push(r);
-                    d.stiffness.push(penalty_factor * youngs_modulus[particles.material[p] as usize]);
+                    d.stiffness
+                        .push(penalty_factor * youngs_modulus[particles.material[p] as usize]);
                 }
             }
             if d.particle.len() == before {
@@ -293,7 +321,14 @@ impl DrivenPoints {
 
     /// Penalty forces f_i^pen = Σ k_p N_ip (X̄_p(t) − x_p − Σ_j N_jp Δu_j) added into `force`
     /// (DESIGN D40); `du` is the current nodal displacement increment (zeros for explicit).
-    pub fn add_forces(&self, particles: &Particles, shapes: &[ShapeAt], du: &[[f64; 2]], t: f64, force: &mut [[f64; 2]]) {
+    pub fn add_forces(
+        &self,
+        particles: &Particles,
+        shapes: &[ShapeAt],
+        du: &[[f64; 2]],
+        t: f64,
+        force: &mut [[f64; 2]],
+    ) {
         for k in 0..self.len() {
             let p = self.particle[k];
             let gap = self.gap(k, particles, &shapes[p], du, t);
@@ -307,11 +342,21 @@ impl DrivenPoints {
     }
 
     /// Gap X̄_p(t) − (x_p + Σ_j N_jp Δu_j) of driven point `k`.
-    pub fn gap(&self, k: usize, particles: &Particles, shape: &ShapeAt, du: &[[f64; 2]], t: f64) -> [f64; 2] {
+    pub fn gap(
+        &self,
+        k: usize,
+        particles: &Particles,
+        shape: &ShapeAt,
+        du: &[[f64; 2]],
+        t: f64,
+    ) -> [f64; 2] {
         let p = self.particle[k];
         let anchor = self.anchor(k, particles, t);
         let u = transfer::interpolate(shape, du);
-        [anchor[0] - particles.position[p][0] - u[0], anchor[1] - particles.position[p][1] - u[1]]
+        [
+            anchor[0] - particles.position[p][0] - u[0],
+            anchor[1] - particles.position[p][1] - u[1],
+        ]
     }
 
     /// Add K_pen = Σ k_p N_p N_pᵀ ⊗ I₂ (DESIGN D41) into the cell blocks (indexed by cell slot).

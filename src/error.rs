@@ -18,6 +18,18 @@ pub enum RunError {
         /// Where it went, m.
         position: [f64; 2],
     },
+    /// A traction (pressure) point left the background grid.
+    #[error("step {step} (t = {time:.6e} s): traction point {point} left the grid at ({:.6}, {:.6}) m", position[0], position[1])]
+    TractionPointLeftGrid {
+        /// Step being computed.
+        step: usize,
+        /// Time, s.
+        time: f64,
+        /// Traction point index.
+        point: usize,
+        /// Where it went, m.
+        position: [f64; 2],
+    },
     /// Newton–Raphson failed even after the allowed step halvings.
     #[error("step {step} (t = {time:.6e} s): Newton did not converge after {halvings} step halvings: {cause}; residual history {history:?}")]
     NewtonFailed {

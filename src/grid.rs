@@ -54,7 +54,10 @@ impl Grid {
     pub fn node_position(&self, node: usize) -> [f64; 2] {
         let nx = self.cells[0] + 1;
         let (i, j) = (node % nx, node / nx);
-        [self.origin[0] + i as f64 * self.cell_size, self.origin[1] + j as f64 * self.cell_size]
+        [
+            self.origin[0] + i as f64 * self.cell_size,
+            self.origin[1] + j as f64 * self.cell_size,
+        ]
     }
 
     /// Grid indices `(i, j)` of node `node`.
@@ -67,7 +70,12 @@ impl Grid {
     pub fn cell_nodes(&self, ci: usize, cj: usize) -> [u32; 4] {
         let nx = self.cells[0] + 1;
         let n0 = cj * nx + ci;
-        [n0 as u32, (n0 + 1) as u32, (n0 + 1 + nx) as u32, (n0 + nx) as u32]
+        [
+            n0 as u32,
+            (n0 + 1) as u32,
+            (n0 + 1 + nx) as u32,
+            (n0 + nx) as u32,
+        ]
     }
 
     /// Whether `x` lies inside the grid (boundary included).
@@ -124,7 +132,11 @@ mod tests {
     use super::*;
 
     fn grid() -> Grid {
-        Grid { origin: [1.0, -2.0], cell_size: 0.5, cells: [4, 3] }
+        Grid {
+            origin: [1.0, -2.0],
+            cell_size: 0.5,
+            cells: [4, 3],
+        }
     }
 
     /// Interpolating node coordinates reproduces the point (linear completeness).
@@ -139,7 +151,10 @@ mod tests {
                 y[0] += s.n[a] * xn[0];
                 y[1] += s.n[a] * xn[1];
             }
-            assert!((y[0] - x[0]).abs() < 1e-13 && (y[1] - x[1]).abs() < 1e-13, "{x:?} -> {y:?}");
+            assert!(
+                (y[0] - x[0]).abs() < 1e-13 && (y[1] - x[1]).abs() < 1e-13,
+                "{x:?} -> {y:?}"
+            );
         }
     }
 

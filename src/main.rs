@@ -61,12 +61,20 @@ fn main() -> ExitCode {
             },
             Err(e) => fail(2, &e.to_string()),
         },
-        Command::Run { scene, out, overrides, quiet } => {
+        Command::Run {
+            scene,
+            out,
+            overrides,
+            quiet,
+        } => {
             let loaded = match Scene::load(&scene, &overrides) {
                 Ok(s) => s,
                 Err(e) => return fail(2, &e.to_string()),
             };
-            let stem = scene.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "run".into());
+            let stem = scene
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_else(|| "run".into());
             let out = out.unwrap_or_else(|| PathBuf::from("out").join(stem));
             match run_scene(loaded, &out, !quiet) {
                 Err(e) => fail(2, &e.to_string()),
@@ -83,7 +91,13 @@ fn main() -> ExitCode {
                         sim.solver_usage.halvings
                     );
                     match outcome.error {
-                        Some(e) => fail(1, &format!("run stopped: {e}\noutputs up to the last completed step are in {}", out.display())),
+                        Some(e) => fail(
+                            1,
+                            &format!(
+                                "run stopped: {e}\noutputs up to the last completed step are in {}",
+                                out.display()
+                            ),
+                        ),
                         None => {
                             eprintln!("outputs in {}", out.display());
                             ExitCode::SUCCESS

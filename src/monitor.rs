@@ -28,7 +28,9 @@ impl Monitor {
     /// nodes of `line`, or the rigid body named `rigid`.
     pub fn resolve(spec: &MonitorSpec, sim: &Simulation) -> Self {
         let target = match spec.kind {
-            MonitorKind::PointDisplacement | MonitorKind::PointVelocity | MonitorKind::PointStress => {
+            MonitorKind::PointDisplacement
+            | MonitorKind::PointVelocity
+            | MonitorKind::PointStress => {
                 let x = spec.point.unwrap_or_default();
                 let p = sim
                     .particles
@@ -43,15 +45,28 @@ impl Monitor {
             }
             MonitorKind::Reaction => {
                 let line = spec.line.as_deref().and_then(|l| GridLine::parse(l).ok());
-                Target::Nodes(line.map(|l| nodes_on_line(&sim.grid, l)).unwrap_or_default())
+                Target::Nodes(
+                    line.map(|l| nodes_on_line(&sim.grid, l))
+                        .unwrap_or_default(),
+                )
             }
             MonitorKind::RigidForce => {
                 let name = spec.rigid.clone().unwrap_or_default();
-                Target::Rigid(sim.driven.names.iter().position(|n| *n == name).unwrap_or(0))
+                Target::Rigid(
+                    sim.driven
+                        .names
+                        .iter()
+                        .position(|n| *n == name)
+                        .unwrap_or(0),
+                )
             }
             _ => Target::Global,
         };
-        Self { name: spec.name.clone(), spec: spec.clone(), target }
+        Self {
+            name: spec.name.clone(),
+            spec: spec.clone(),
+            target,
+        }
     }
 
     /// Index of the monitored material point, if the monitor follows one.
@@ -98,7 +113,11 @@ impl Monitor {
             (Target::Rigid(r), _) => pick(sim.driven.force_on_soil(*r, p, sim.time)),
             (_, MonitorKind::KineticEnergy) => sim.kinetic_energy(),
             (_, MonitorKind::StrainEnergy) => sim.strain_energy(),
-            (_, MonitorKind::MaxPlasticStrain) => p.state.iter().map(|s| s.plastic_strain_eq).fold(0.0, f64::max),
+            (_, MonitorKind::MaxPlasticStrain) => p
+                .state
+                .iter()
+                .map(|s| s.plastic_strain_eq)
+                .fold(0.0, f64::max),
             (_, MonitorKind::Gravity) => sim.scene.loads.gravity_at(sim.time),
             _ => f64::NAN,
         };

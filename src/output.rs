@@ -10,7 +10,10 @@ use crate::error::RunError;
 use crate::particles::Particles;
 
 fn io_error(path: &Path, e: impl std::fmt::Display) -> RunError {
-    RunError::Output { path: path.display().to_string(), message: e.to_string() }
+    RunError::Output {
+        path: path.display().to_string(),
+        message: e.to_string(),
+    }
 }
 
 /// `curve.csv`: columns `step, time` and one per monitor; every row is flushed.
@@ -25,16 +28,23 @@ impl CurveWriter {
         let mut writer = csv::Writer::from_path(path).map_err(|e| io_error(path, e))?;
         let mut header = vec!["step".to_string(), "time".to_string()];
         header.extend(monitor_names.iter().cloned());
-        writer.write_record(&header).map_err(|e| io_error(path, e))?;
+        writer
+            .write_record(&header)
+            .map_err(|e| io_error(path, e))?;
         writer.flush().map_err(|e| io_error(path, e))?;
-        Ok(Self { writer, path: path.to_path_buf() })
+        Ok(Self {
+            writer,
+            path: path.to_path_buf(),
+        })
     }
 
     /// Append one row (values written with full round-trip precision) and flush.
     pub fn row(&mut self, step: usize, time: f64, values: &[f64]) -> Result<(), RunError> {
         let mut record = vec![step.to_string(), format!("{time:e}")];
         record.extend(values.iter().map(|v| format!("{v:e}")));
-        self.writer.write_record(&record).map_err(|e| io_error(&self.path, e))?;
+        self.writer
+            .write_record(&record)
+            .map_err(|e| io_error(&self.path, e))?;
         self.writer.flush().map_err(|e| io_error(&self.path, e))
     }
 }
@@ -68,9 +78,18 @@ pub fn write_vtu(path: &Path, particles: &Particles) -> Result<(), RunError> {
 fn write_vtu_body(w: &mut impl Write, p: &Particles) -> std::io::Result<()> {
     let n = p.len();
     writeln!(w, r#"<?xml version="1.0"?>"#)?;
-    writeln!(w, r#"<VTKFile type="UnstructuredGrid" version="0.1" byte_order="LittleEndian">"#)?;
-    writeln!(w, "<UnstructuredGrid>\n<Piece NumberOfPoints=\"{n}\" NumberOfCells=\"{n}\">")?;
-    writeln!(w, r#"<Points><DataArray type="Float64" NumberOfComponents="3" format="ascii">"#)?;
+    writeln!(
+        w,
+        r#"<VTKFile type="UnstructuredGrid" version="0.1" byte_order="LittleEndian">"#
+    )?;
+    writeln!(
+        w,
+        "<UnstructuredGrid>\n<Piece NumberOfPoints=\"{n}\" NumberOfCells=\"{n}\">"
+    )?;
+    writeln!(
+        w,
+        r#"<Points><DataArray type="Float64" NumberOfComponents="3" format="ascii">"#
+    )?;
     for x in &p.position {
         writeln!(w, "{:e} {:e} 0", x[0], x[1])?;
     }
@@ -84,10 +103,15 @@ fn write_vtu_body(w: &mut impl Write, p: &Particles) -> std::io::Result<()> {
     }
     writeln!(w, "\n</DataArray>\n</Cells>")?;
     writeln!(w, "<PointData>")?;
-    let vectors: [(&str, Vec<[f64; 2]>); 2] =
-        [("displacement", (0..n).map(|i| p.displacement(i)).collect()), ("velocity", p.velocity.clone())];
+    let vectors: [(&str, Vec<[f64; 2]>); 2] = [
+        ("displacement", (0..n).map(|i| p.displacement(i)).collect()),
+        ("velocity", p.velocity.clone()),
+    ];
     for (name, data) in vectors {
-        writeln!(w, r#"<DataArray type="Float64" Name="{name}" NumberOfComponents="3" format="ascii">"#)?;
+        writeln!(
+            w,
+            r#"<DataArray type="Float64" Name="{name}" NumberOfComponents="3" format="ascii">"#
+        )?;
         for v in data {
             writeln!(w, "{:e} {:e} 0", v[0], v[1])?;
         }
@@ -96,7 +120,10 @@ fn write_vtu_body(w: &mut impl Write, p: &Particles) -> std::io::Result<()> {
     let tensors: [(&str, Vec<[f64; 4]>); 3] = [
         ("stress", p.stress.clone()),
         ("strain", p.strain.clone()),
-        ("plastic_strain", p.state.iter().map(|s| s.plastic_strain).collect()),
+        (
+            "plastic_strain",
+            p.state.iter().map(|s| s.plastic_strain).collect(),
+        ),
     ];
     for (name, data) in tensors {
         writeln!(
@@ -109,16 +136,31 @@ fn write_vtu_body(w: &mut impl Write, p: &Particles) -> std::io::Result<()> {
         writeln!(w, "</DataArray>")?;
     }
     let scalars: [(&str, Vec<f64>); 7] = [
-        ("plastic_strain_eq", p.state.iter().map(|s| s.plastic_strain_eq).collect()),
-        ("plastic_strain_eq_nonlocal", p.state.iter().map(|s| s.plastic_strain_eq_nonlocal).collect()),
+        (
+            "plastic_strain_eq",
+            p.state.iter().map(|s| s.plastic_strain_eq).collect(),
+        ),
+        (
+            "plastic_strain_eq_nonlocal",
+            p.state
+                .iter()
+                .map(|s| s.plastic_strain_eq_nonlocal)
+                .collect(),
+        ),
         ("p", p.stress.iter().map(mean_stress).collect()),
         ("q", p.stress.iter().map(deviatoric_stress).collect()),
-        ("deviatoric_strain", p.def_grad.iter().map(deviatoric_hencky_strain).collect()),
+        (
+            "deviatoric_strain",
+            p.def_grad.iter().map(deviatoric_hencky_strain).collect(),
+        ),
         ("volume", p.volume.clone()),
         ("material", p.material.iter().map(|&m| m as f64).collect()),
     ];
     for (name, data) in scalars {
-        writeln!(w, r#"<DataArray type="Float64" Name="{name}" format="ascii">"#)?;
+        writeln!(
+            w,
+            r#"<DataArray type="Float64" Name="{name}" format="ascii">"#
+        )?;
         for v in data {
             write!(w, "{v:e} ")?;
         }
@@ -127,8 +169,15 @@ fn write_vtu_body(w: &mut impl Write, p: &Particles) -> std::io::Result<()> {
     writeln!(w, "</PointData>\n</Piece>\n</UnstructuredGrid>\n</VTKFile>")
 }
 
-fn write_int_array(w: &mut impl Write, name: &str, values: impl Iterator<Item = usize>) -> std::io::Result<()> {
-    writeln!(w, r#"<DataArray type="Int64" Name="{name}" format="ascii">"#)?;
+fn write_int_array(
+    w: &mut impl Write,
+    name: &str,
+    values: impl Iterator<Item = usize>,
+) -> std::io::Result<()> {
+    writeln!(
+        w,
+        r#"<DataArray type="Int64" Name="{name}" format="ascii">"#
+    )?;
     for v in values {
         write!(w, "{v} ")?;
     }

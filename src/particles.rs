@@ -46,7 +46,15 @@ impl Particles {
     }
 
     /// Append one material point at rest with the given mass, volume, initial stress and material.
-    pub fn push(&mut self, position: [f64; 2], mass: f64, volume: f64, stress: Voigt, material: u16, body: u16) {
+    pub fn push(
+        &mut self,
+        position: [f64; 2],
+        mass: f64,
+        volume: f64,
+        stress: Voigt,
+        material: u16,
+        body: u16,
+    ) {
         self.position.push(position);
         self.position0.push(position);
         self.mass.push(mass);
@@ -63,7 +71,10 @@ impl Particles {
 
     /// Displacement x_p − x_p(0) of point `p`, m.
     pub fn displacement(&self, p: usize) -> [f64; 2] {
-        [self.position[p][0] - self.position0[p][0], self.position[p][1] - self.position0[p][1]]
+        [
+            self.position[p][0] - self.position0[p][0],
+            self.position[p][1] - self.position0[p][1],
+        ]
     }
 
     /// Total mass Σ m_p.

@@ -30,8 +30,16 @@ pub enum Stage {
 
 impl Stage {
     /// All stages in report order.
-    pub const ALL: [Stage; 8] =
-        [Stage::Setup, Stage::P2G, Stage::StressUpdate, Stage::Assembly, Stage::Factorisation, Stage::Solve, Stage::G2P, Stage::Output];
+    pub const ALL: [Stage; 8] = [
+        Stage::Setup,
+        Stage::P2G,
+        Stage::StressUpdate,
+        Stage::Assembly,
+        Stage::Factorisation,
+        Stage::Solve,
+        Stage::G2P,
+        Stage::Output,
+    ];
 
     /// Report name.
     pub fn name(self) -> &'static str {
@@ -87,17 +95,31 @@ impl Profile {
             .iter()
             .map(|&st| {
                 let (calls, seconds) = self.entries[st as usize].get();
-                StageTotal { stage: st.name(), calls, seconds }
+                StageTotal {
+                    stage: st.name(),
+                    calls,
+                    seconds,
+                }
             })
             .collect()
     }
 
     /// A plain-text table of the totals.
     pub fn table(&self, wall_seconds: f64) -> String {
-        let mut out = format!("{:<15} {:>10} {:>12} {:>8}\n", "stage", "calls", "seconds", "share");
+        let mut out = format!(
+            "{:<15} {:>10} {:>12} {:>8}\n",
+            "stage", "calls", "seconds", "share"
+        );
         for t in self.totals() {
-            let share = if wall_seconds > 0.0 { 100.0 * t.seconds / wall_seconds } else { 0.0 };
-            out += &format!("{:<15} {:>10} {:>12.4} {:>7.1}%\n", t.stage, t.calls, t.seconds, share);
+            let share = if wall_seconds > 0.0 {
+                100.0 * t.seconds / wall_seconds
+            } else {
+                0.0
+            };
+            out += &format!(
+                "{:<15} {:>10} {:>12.4} {:>7.1}%\n",
+                t.stage, t.calls, t.seconds, share
+            );
         }
         out += &format!("{:<15} {:>10} {:>12.4}\n", "wall", "", wall_seconds);
         out

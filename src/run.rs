@@ -24,7 +24,10 @@ pub struct OutputObserver {
 impl OutputObserver {
     /// Create `dir` and `curve.csv` in it.
     pub fn new(dir: &Path, sim: &Simulation, show_progress: bool) -> Result<Self, RunError> {
-        std::fs::create_dir_all(dir).map_err(|e| RunError::Output { path: dir.display().to_string(), message: e.to_string() })?;
+        std::fs::create_dir_all(dir).map_err(|e| RunError::Output {
+            path: dir.display().to_string(),
+            message: e.to_string(),
+        })?;
         let names: Vec<String> = sim.monitors.iter().map(|m| m.name.clone()).collect();
         let curve = CurveWriter::create(&dir.join("curve.csv"), &names)?;
         let progress = if show_progress {
@@ -34,21 +37,33 @@ impl OutputObserver {
             };
             let bar = ProgressBar::new(total);
             let template = "{bar:30} {pos}/{len} [{elapsed_precise} < {eta_precise}] {msg}";
-            bar.set_style(ProgressStyle::with_template(template).unwrap_or_else(|_| ProgressStyle::default_bar()));
+            bar.set_style(
+                ProgressStyle::with_template(template)
+                    .unwrap_or_else(|_| ProgressStyle::default_bar()),
+            );
             bar
         } else {
             ProgressBar::hidden()
         };
-        Ok(Self { dir: dir.to_path_buf(), curve, progress, last_row_step: usize::MAX })
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            curve,
+            progress,
+            last_row_step: usize::MAX,
+        })
     }
 
     fn snapshot_due(sim: &Simulation) -> bool {
         let o = &sim.scene.output;
-        o.snapshots.contains(&sim.step) || (o.snapshot_every > 0 && sim.step % o.snapshot_every == 0)
+        o.snapshots.contains(&sim.step)
+            || (o.snapshot_every > 0 && sim.step.is_multiple_of(o.snapshot_every))
     }
 
     fn write_snapshot(&self, sim: &Simulation) -> Result<(), RunError> {
-        write_vtu(&self.dir.join(format!("particles_{:06}.vtu", sim.step)), &sim.particles)
+        write_vtu(
+            &self.dir.join(format!("particles_{:06}.vtu", sim.step)),
+            &sim.particles,
+        )
     }
 
     /// Write the last row if it was skipped by `curve_every` (call at the end or on failure).
@@ -75,19 +90,23 @@ impl Observer for OutputObserver {
     fn on_step(&mut self, sim: &Simulation, report: &StepReport) -> Result<(), RunError> {
         let start = Instant::now();
         let every = sim.scene.output.curve_every.max(1);
-        if sim.step % every == 0 || sim.finished() {
+        if sim.step.is_multiple_of(every) || sim.finished() {
             self.curve.row(sim.step, sim.time, &sim.monitor_values())?;
             self.last_row_step = sim.step;
         }
         if Self::snapshot_due(sim) {
             self.write_snapshot(sim)?;
         }
-        sim.profile.add(Stage::Output, start.elapsed().as_secs_f64());
+        sim.profile
+            .add(Stage::Output, start.elapsed().as_secs_f64());
         match sim.analysis() {
             AnalysisKind::Explicit => {
                 let end = sim.scene.scene.end_time.unwrap_or(1.0);
                 self.progress.set_position((1000.0 * sim.time / end) as u64);
-                self.progress.set_message(format!("step {} t={:.4e} s dt={:.2e} s", report.step, report.time, report.dt));
+                self.progress.set_message(format!(
+                    "step {} t={:.4e} s dt={:.2e} s",
+                    report.step, report.time, report.dt
+                ));
             }
             _ => {
                 self.progress.set_position(sim.step as u64);
@@ -95,7 +114,11 @@ impl Observer for OutputObserver {
                     "t={:.4e} Newton {} it{}",
                     report.time,
                     report.iterations,
-                    if report.substeps > 1 { format!(" ({} substeps)", report.substeps) } else { String::new() }
+                    if report.substeps > 1 {
+                        format!(" ({} substeps)", report.substeps)
+                    } else {
+                        String::new()
+                    }
                 ));
             }
         }
@@ -116,7 +139,11 @@ pub struct RunOutcome {
 /// Run a validated scene, writing `curve.csv`, snapshots and `run.json` into `out`.
 /// Setup errors (the scene's geometry) are returned as `Err`; a failure during
 /// the run is returned in [`RunOutcome::error`] after `run.json` is written.
-pub fn run_scene(scene: Scene, out: &Path, show_progress: bool) -> Result<RunOutcome, Box<dyn std::error::Error + Send + Sync>> {
+pub fn run_scene(
+    scene: Scene,
+    out: &Path,
+    show_progress: bool,
+) -> Result<RunOutcome, Box<dyn std::error::Error + Send + Sync>> {
     let start = Instant::now();
     let mut sim = Simulation::new(scene)?;
     let mut observer = OutputObserver::new(out, &sim, show_progress)?;
@@ -125,11 +152,20 @@ pub fn run_scene(scene: Scene, out: &Path, show_progress: bool) -> Result<RunOut
     let wall_seconds = start.elapsed().as_secs_f64();
     let error = result.err();
     write_run_json(&out.join("run.json"), &sim, wall_seconds, error.as_ref())?;
-    Ok(RunOutcome { simulation: sim, wall_seconds, error })
+    Ok(RunOutcome {
+        simulation: sim,
+        wall_seconds,
+        error,
+    })
 }
 
 /// `run.json`: resolved scene, crate version, solver choices, per-stage profile, status.
-pub fn write_run_json(path: &Path, sim: &Simulation, wall_seconds: f64, error: Option<&RunError>) -> Result<(), RunError> {
+pub fn write_run_json(
+    path: &Path,
+    sim: &Simulation,
+    wall_seconds: f64,
+    error: Option<&RunError>,
+) -> Result<(), RunError> {
     let materials: Vec<_> = sim
         .material_names
         .iter()

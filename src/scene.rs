@@ -65,7 +65,11 @@ pub enum SceneError {
 }
 
 fn list(errors: &[FieldError]) -> String {
-    errors.iter().map(|e| format!("  - {e}")).collect::<Vec<_>>().join("\n")
+    errors
+        .iter()
+        .map(|e| format!("  - {e}"))
+        .collect::<Vec<_>>()
+        .join("\n")
 }
 
 /// A complete scene.
@@ -263,9 +267,24 @@ impl MaterialSpec {
     fn validate(&self, prefix: &str, errors: &mut Vec<FieldError>) {
         match self {
             MaterialSpec::LinearElastic(e) => {
-                check(errors, format!("{prefix}.E"), e.youngs_modulus > 0.0, format!("must be > 0 kPa (got {})", e.youngs_modulus));
-                check(errors, format!("{prefix}.nu"), e.nu > -1.0 && e.nu < 0.5, format!("must lie in (-1, 0.5) (got {})", e.nu));
-                check(errors, format!("{prefix}.density"), e.density > 0.0, format!("must be > 0 t/m³ (got {})", e.density));
+                check(
+                    errors,
+                    format!("{prefix}.E"),
+                    e.youngs_modulus > 0.0,
+                    format!("must be > 0 kPa (got {})", e.youngs_modulus),
+                );
+                check(
+                    errors,
+                    format!("{prefix}.nu"),
+                    e.nu > -1.0 && e.nu < 0.5,
+                    format!("must lie in (-1, 0.5) (got {})", e.nu),
+                );
+                check(
+                    errors,
+                    format!("{prefix}.density"),
+                    e.density > 0.0,
+                    format!("must be > 0 t/m³ (got {})", e.density),
+                );
             }
         }
     }
@@ -399,13 +418,18 @@ pub struct GridLine {
 impl GridLine {
     /// Parse `"x=0.03"` / `"y = 0"`.
     pub fn parse(text: &str) -> Result<Self, String> {
-        let (lhs, rhs) = text.split_once('=').ok_or_else(|| format!("`{text}` is not of the form `x=<value>` or `y=<value>`"))?;
+        let (lhs, rhs) = text
+            .split_once('=')
+            .ok_or_else(|| format!("`{text}` is not of the form `x=<value>` or `y=<value>`"))?;
         let axis = match lhs.trim() {
             "x" => 0,
             "y" => 1,
             other => return Err(format!("axis `{other}` must be `x` or `y`")),
         };
-        let value: f64 = rhs.trim().parse().map_err(|_| format!("`{}` is not a number", rhs.trim()))?;
+        let value: f64 = rhs
+            .trim()
+            .parse()
+            .map_err(|_| format!("`{}` is not a number", rhs.trim()))?;
         if !value.is_finite() {
             return Err("the coordinate must be finite".into());
         }
@@ -535,7 +559,11 @@ pub struct OutputSpec {
 
 impl Default for OutputSpec {
     fn default() -> Self {
-        Self { curve_every: 1, snapshots: Vec::new(), snapshot_every: 0 }
+        Self {
+            curve_every: 1,
+            snapshots: Vec::new(),
+            snapshot_every: 0,
+        }
     }
 }
 
@@ -628,9 +656,17 @@ fn one() -> f64 {
     1.0
 }
 
-fn check(errors: &mut Vec<FieldError>, field: impl Into<String>, ok: bool, message: impl Into<String>) {
+fn check(
+    errors: &mut Vec<FieldError>,
+    field: impl Into<String>,
+    ok: bool,
+    message: impl Into<String>,
+) {
     if !ok {
-        errors.push(FieldError { field: field.into(), message: message.into() });
+        errors.push(FieldError {
+            field: field.into(),
+            message: message.into(),
+        });
     }
 }
 
@@ -664,25 +700,42 @@ pub fn polygon_contains(polygon: &[[f64; 2]], x: [f64; 2]) -> bool {
 impl Scene {
     /// Read, apply `overrides` (`key.path=value`), parse and validate a scene file.
     pub fn load(path: &Path, overrides: &[String]) -> Result<Scene, SceneError> {
-        let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io { path: path.display().to_string(), source })?;
+        let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io {
+            path: path.display().to_string(),
+            source,
+        })?;
         Self::from_str_with_overrides(&text, &path.display().to_string(), overrides)
     }
 
     /// Parse and validate scene text (`origin` names it in messages).
-    pub fn from_str_with_overrides(text: &str, origin: &str, overrides: &[String]) -> Result<Scene, SceneError> {
+    pub fn from_str_with_overrides(
+        text: &str,
+        origin: &str,
+        overrides: &[String],
+    ) -> Result<Scene, SceneError> {
         let mut table: toml::Table =
-            text.parse().map_err(|e: toml::de::Error| SceneError::Parse { path: origin.to_string(), message: e.to_string() })?;
+            text.parse()
+                .map_err(|e: toml::de::Error| SceneError::Parse {
+                    path: origin.to_string(),
+                    message: e.to_string(),
+                })?;
         for assignment in overrides {
             apply_override(&mut table, assignment)?;
         }
         let scene: Scene = toml::Value::Table(table)
             .try_into()
-            .map_err(|e: toml::de::Error| SceneError::Parse { path: origin.to_string(), message: e.to_string() })?;
+            .map_err(|e: toml::de::Error| SceneError::Parse {
+                path: origin.to_string(),
+                message: e.to_string(),
+            })?;
         let errors = scene.validate();
         if errors.is_empty() {
             Ok(scene)
         } else {
-            Err(SceneError::Invalid { path: origin.to_string(), errors })
+            Err(SceneError::Invalid {
+                path: origin.to_string(),
+                errors,
+            })
         }
     }
 
@@ -698,7 +751,11 @@ impl Scene {
     pub fn body_index(&self, name: Option<&str>) -> Option<usize> {
         match name {
             None => (!self.body.is_empty()).then_some(0),
-            Some(n) => self.body.iter().enumerate().position(|(i, b)| b.name_or_default(i) == n),
+            Some(n) => self
+                .body
+                .iter()
+                .enumerate()
+                .position(|(i, b)| b.name_or_default(i) == n),
         }
     }
 
@@ -710,7 +767,12 @@ impl Scene {
         for (name, m) in &self.materials {
             m.validate(&format!("materials.{name}"), &mut e);
         }
-        check(&mut e, "materials", !self.materials.is_empty(), "at least one material is required");
+        check(
+            &mut e,
+            "materials",
+            !self.materials.is_empty(),
+            "at least one material is required",
+        );
         self.validate_solver(&mut e);
         self.validate_bodies(&mut e, grid_ok);
         self.validate_loads(&mut e);
@@ -724,18 +786,43 @@ impl Scene {
     fn validate_analysis(&self, e: &mut Vec<FieldError>) {
         let a = &self.scene;
         if let Some(dt) = a.dt {
-            check(e, "scene.dt", dt > 0.0 && dt.is_finite(), format!("must be > 0 s (got {dt})"));
+            check(
+                e,
+                "scene.dt",
+                dt > 0.0 && dt.is_finite(),
+                format!("must be > 0 s (got {dt})"),
+            );
         }
         match a.analysis {
             AnalysisKind::Explicit => {
-                check(e, "scene.end_time", a.end_time.is_some_and(|t| t > 0.0 && t.is_finite()), "explicit runs need end_time > 0 s");
+                check(
+                    e,
+                    "scene.end_time",
+                    a.end_time.is_some_and(|t| t > 0.0 && t.is_finite()),
+                    "explicit runs need end_time > 0 s",
+                );
             }
             AnalysisKind::ImplicitDynamic => {
-                check(e, "scene.steps", a.steps.is_some_and(|n| n >= 1), "implicit runs need steps >= 1");
-                check(e, "scene.dt", a.dt.is_some(), "implicit dynamic runs need a time step dt > 0 s");
+                check(
+                    e,
+                    "scene.steps",
+                    a.steps.is_some_and(|n| n >= 1),
+                    "implicit runs need steps >= 1",
+                );
+                check(
+                    e,
+                    "scene.dt",
+                    a.dt.is_some(),
+                    "implicit dynamic runs need a time step dt > 0 s",
+                );
             }
             AnalysisKind::QuasiStatic => {
-                check(e, "scene.steps", a.steps.is_some_and(|n| n >= 1), "implicit runs need steps >= 1");
+                check(
+                    e,
+                    "scene.steps",
+                    a.steps.is_some_and(|n| n >= 1),
+                    "implicit runs need steps >= 1",
+                );
             }
         }
     }
@@ -743,39 +830,107 @@ impl Scene {
     fn validate_grid(&self, e: &mut Vec<FieldError>) -> bool {
         let g = &self.grid;
         let before = e.len();
-        check(e, "grid.cell_size", g.cell_size > 0.0 && g.cell_size.is_finite(), format!("must be > 0 m (got {})", g.cell_size));
-        check(e, "grid.origin", g.origin.iter().all(|v| v.is_finite()), "must be finite");
+        check(
+            e,
+            "grid.cell_size",
+            g.cell_size > 0.0 && g.cell_size.is_finite(),
+            format!("must be > 0 m (got {})", g.cell_size),
+        );
+        check(
+            e,
+            "grid.origin",
+            g.origin.iter().all(|v| v.is_finite()),
+            "must be finite",
+        );
         for (c, axis) in ["x", "y"].iter().enumerate() {
-            check(e, format!("grid.size[{c}]"), g.size[c] > 0.0 && g.size[c].is_finite(), format!("{axis}-size must be > 0 m (got {})", g.size[c]));
+            check(
+                e,
+                format!("grid.size[{c}]"),
+                g.size[c] > 0.0 && g.size[c].is_finite(),
+                format!("{axis}-size must be > 0 m (got {})", g.size[c]),
+            );
         }
-        check(e, "grid.points_per_cell", (1..=4).contains(&g.points_per_cell), format!("must be 1, 2, 3 or 4 (got {})", g.points_per_cell));
+        check(
+            e,
+            "grid.points_per_cell",
+            (1..=4).contains(&g.points_per_cell),
+            format!("must be 1, 2, 3 or 4 (got {})", g.points_per_cell),
+        );
         if e.len() == before {
             for (c, axis) in ["x", "y"].iter().enumerate() {
                 check(
                     e,
                     format!("grid.size[{c}]"),
                     whole_cells(g.size[c], g.cell_size).is_some(),
-                    format!("the {axis}-size {} m is not a whole number of cells of size {} m", g.size[c], g.cell_size),
+                    format!(
+                        "the {axis}-size {} m is not a whole number of cells of size {} m",
+                        g.size[c], g.cell_size
+                    ),
                 );
             }
             let cells = [g.size[0] / g.cell_size, g.size[1] / g.cell_size];
-            check(e, "grid.cell_size", cells[0] * cells[1] <= 5.0e7, "the grid would have more than 5e7 cells");
+            check(
+                e,
+                "grid.cell_size",
+                cells[0] * cells[1] <= 5.0e7,
+                "the grid would have more than 5e7 cells",
+            );
         }
         e.len() == before
     }
 
     fn validate_solver(&self, e: &mut Vec<FieldError>) {
         let s = &self.solver;
-        check(e, "solver.tolerance_force", s.tolerance_force > 0.0 && s.tolerance_force < 1.0, "must lie in (0, 1)");
-        check(e, "solver.tolerance_energy", s.tolerance_energy > 0.0 && s.tolerance_energy < 1.0, "must lie in (0, 1)");
-        check(e, "solver.max_iterations", s.max_iterations >= 1, "must be >= 1");
-        check(e, "solver.max_halvings", s.max_halvings <= 10, "must be <= 10");
-        check(e, "solver.background_stiffness", s.background_stiffness >= 0.0 && s.background_stiffness < 1.0, "must lie in [0, 1)");
+        check(
+            e,
+            "solver.tolerance_force",
+            s.tolerance_force > 0.0 && s.tolerance_force < 1.0,
+            "must lie in (0, 1)",
+        );
+        check(
+            e,
+            "solver.tolerance_energy",
+            s.tolerance_energy > 0.0 && s.tolerance_energy < 1.0,
+            "must lie in (0, 1)",
+        );
+        check(
+            e,
+            "solver.max_iterations",
+            s.max_iterations >= 1,
+            "must be >= 1",
+        );
+        check(
+            e,
+            "solver.max_halvings",
+            s.max_halvings <= 10,
+            "must be <= 10",
+        );
+        check(
+            e,
+            "solver.background_stiffness",
+            s.background_stiffness >= 0.0 && s.background_stiffness < 1.0,
+            "must lie in [0, 1)",
+        );
         if let Some(b) = s.penalty_factor {
-            check(e, "solver.penalty_factor", b > 0.0 && b.is_finite(), format!("must be > 0 (got {b})"));
+            check(
+                e,
+                "solver.penalty_factor",
+                b > 0.0 && b.is_finite(),
+                format!("must be > 0 (got {b})"),
+            );
         }
-        check(e, "solver.cfl", s.cfl > 0.0 && s.cfl <= 1.0, format!("must lie in (0, 1] (got {})", s.cfl));
-        check(e, "solver.damping", s.damping >= 0.0 && s.damping < 1.0, format!("must lie in [0, 1) (got {})", s.damping));
+        check(
+            e,
+            "solver.cfl",
+            s.cfl > 0.0 && s.cfl <= 1.0,
+            format!("must lie in (0, 1] (got {})", s.cfl),
+        );
+        check(
+            e,
+            "solver.damping",
+            s.damping >= 0.0 && s.damping < 1.0,
+            format!("must lie in [0, 1) (got {})", s.damping),
+        );
         if self.scene.analysis == AnalysisKind::Explicit {
             if let Some(dt) = self.scene.dt {
                 if let Some(limit) = self.critical_time_step() {
@@ -804,52 +959,130 @@ impl Scene {
     }
 
     fn validate_bodies(&self, e: &mut Vec<FieldError>, grid_ok: bool) {
-        check(e, "body", !self.body.is_empty(), "at least one [[body]] is required");
+        check(
+            e,
+            "body",
+            !self.body.is_empty(),
+            "at least one [[body]] is required",
+        );
         let lo = self.grid.origin;
         let hi = [lo[0] + self.grid.size[0], lo[1] + self.grid.size[1]];
         let tol = 1e-9 * self.grid.cell_size.abs();
         for (i, b) in self.body.iter().enumerate() {
             let f = format!("body[{i}]");
-            check(e, format!("{f}.material"), self.materials.contains_key(&b.material), format!("unknown material `{}`", b.material));
+            check(
+                e,
+                format!("{f}.material"),
+                self.materials.contains_key(&b.material),
+                format!("unknown material `{}`", b.material),
+            );
             match (&b.rectangle, &b.polygon) {
-                (Some(_), Some(_)) => e.push(FieldError { field: f.clone(), message: "give either `box` or `polygon`, not both".into() }),
-                (None, None) => e.push(FieldError { field: f.clone(), message: "needs a `box` or a `polygon`".into() }),
+                (Some(_), Some(_)) => e.push(FieldError {
+                    field: f.clone(),
+                    message: "give either `box` or `polygon`, not both".into(),
+                }),
+                (None, None) => e.push(FieldError {
+                    field: f.clone(),
+                    message: "needs a `box` or a `polygon`".into(),
+                }),
                 (Some([a, c]), None) => {
-                    check(e, format!("{f}.box"), a[0] < c[0] && a[1] < c[1], "must be [[x_min, y_min], [x_max, y_max]] with min < max");
+                    check(
+                        e,
+                        format!("{f}.box"),
+                        a[0] < c[0] && a[1] < c[1],
+                        "must be [[x_min, y_min], [x_max, y_max]] with min < max",
+                    );
                 }
                 (None, Some(p)) => {
-                    check(e, format!("{f}.polygon"), p.len() >= 3, "needs at least 3 vertices");
+                    check(
+                        e,
+                        format!("{f}.polygon"),
+                        p.len() >= 3,
+                        "needs at least 3 vertices",
+                    );
                 }
             }
             let outline = b.outline();
             if grid_ok && !outline.is_empty() {
-                let inside = outline.iter().all(|p| p[0] >= lo[0] - tol && p[1] >= lo[1] - tol && p[0] <= hi[0] + tol && p[1] <= hi[1] + tol);
-                let key = if b.rectangle.is_some() { "box" } else { "polygon" };
+                let inside = outline.iter().all(|p| {
+                    p[0] >= lo[0] - tol
+                        && p[1] >= lo[1] - tol
+                        && p[0] <= hi[0] + tol
+                        && p[1] <= hi[1] + tol
+                });
+                let key = if b.rectangle.is_some() {
+                    "box"
+                } else {
+                    "polygon"
+                };
                 check(
                     e,
                     format!("{f}.{key}"),
                     inside,
-                    format!("the body lies (partly) outside the grid [{}, {}] × [{}, {}] m", lo[0], hi[0], lo[1], hi[1]),
+                    format!(
+                        "the body lies (partly) outside the grid [{}, {}] × [{}, {}] m",
+                        lo[0], hi[0], lo[1], hi[1]
+                    ),
                 );
             }
             if let Some(k0) = &b.k0 {
                 check(e, format!("{f}.k0.k0"), k0.k0 >= 0.0, "must be >= 0");
-                check(e, format!("{f}.k0.unit_weight"), k0.unit_weight >= 0.0, "must be >= 0 kN/m³");
+                check(
+                    e,
+                    format!("{f}.k0.unit_weight"),
+                    k0.unit_weight >= 0.0,
+                    "must be >= 0 kN/m³",
+                );
             }
             if let Some(s) = b.stress0 {
-                check(e, format!("{f}.stress0"), s.iter().all(|v| v.is_finite()), "must be finite");
+                check(
+                    e,
+                    format!("{f}.stress0"),
+                    s.iter().all(|v| v.is_finite()),
+                    "must be finite",
+                );
             }
-            let names: Vec<String> = self.body.iter().enumerate().map(|(j, b)| b.name_or_default(j)).collect();
-            check(e, format!("{f}.name"), names.iter().filter(|n| **n == names[i]).count() == 1, "body names must be unique");
+            let names: Vec<String> = self
+                .body
+                .iter()
+                .enumerate()
+                .map(|(j, b)| b.name_or_default(j))
+                .collect();
+            check(
+                e,
+                format!("{f}.name"),
+                names.iter().filter(|n| **n == names[i]).count() == 1,
+                "body names must be unique",
+            );
         }
     }
 
     fn validate_loads(&self, e: &mut Vec<FieldError>) {
-        check(e, "loads.gravity", self.loads.gravity.is_finite(), "must be finite");
+        check(
+            e,
+            "loads.gravity",
+            self.loads.gravity.is_finite(),
+            "must be finite",
+        );
         if let Some(r) = &self.loads.gravity_ramp {
-            check(e, "loads.gravity_ramp.interval", r.interval > 0.0, "must be > 0 s");
-            check(e, "loads.gravity_ramp.increment", r.increment.is_finite(), "must be finite");
-            check(e, "loads.gravity_ramp.max", r.max.is_finite(), "must be finite");
+            check(
+                e,
+                "loads.gravity_ramp.interval",
+                r.interval > 0.0,
+                "must be > 0 s",
+            );
+            check(
+                e,
+                "loads.gravity_ramp.increment",
+                r.increment.is_finite(),
+                "must be finite",
+            );
+            check(
+                e,
+                "loads.gravity_ramp.max",
+                r.max.is_finite(),
+                "must be finite",
+            );
         }
     }
 
@@ -863,7 +1096,9 @@ impl Scene {
             Ok(line) => {
                 let h = self.grid.cell_size;
                 let offset = (line.value - self.grid.origin[line.axis]) / h;
-                let on_line = (offset - offset.round()).abs() < 1e-6 && offset.round() >= 0.0 && offset.round() <= self.grid_cells()[line.axis] as f64;
+                let on_line = (offset - offset.round()).abs() < 1e-6
+                    && offset.round() >= 0.0
+                    && offset.round() <= self.grid_cells()[line.axis] as f64;
                 check(e, field, on_line, format!("`{text}` selects no grid node: it must be a grid line inside the grid (cell size {h} m)"));
                 on_line.then_some(line)
             }
@@ -873,27 +1108,53 @@ impl Scene {
     fn validate_bc(&self, e: &mut Vec<FieldError>) {
         for (i, f) in self.bc.fixed.iter().enumerate() {
             self.check_line(e, format!("bc.fixed[{i}].line"), &f.line);
-            check(e, format!("bc.fixed[{i}].dofs"), !f.dofs.is_empty(), "must list at least one of \"x\", \"y\"");
+            check(
+                e,
+                format!("bc.fixed[{i}].dofs"),
+                !f.dofs.is_empty(),
+                "must list at least one of \"x\", \"y\"",
+            );
         }
         for (i, p) in self.bc.prescribed.iter().enumerate() {
             self.check_line(e, format!("bc.prescribed[{i}].line"), &p.line);
-            check(e, format!("bc.prescribed[{i}].rate"), p.rate.is_finite() && p.gradient.iter().all(|g| g.is_finite()), "must be finite");
+            check(
+                e,
+                format!("bc.prescribed[{i}].rate"),
+                p.rate.is_finite() && p.gradient.iter().all(|g| g.is_finite()),
+                "must be finite",
+            );
         }
         for (i, p) in self.bc.pressure.iter().enumerate() {
             let f = format!("bc.pressure[{i}]");
             match self.body_index(p.body.as_deref()) {
-                None => e.push(FieldError { field: format!("{f}.body"), message: format!("no body named `{}`", p.body.clone().unwrap_or_default()) }),
-                Some(b) => check(e, format!("{f}.body"), self.body[b].rectangle.is_some(), "pressure is supported on sides of `box` bodies only"),
+                None => e.push(FieldError {
+                    field: format!("{f}.body"),
+                    message: format!("no body named `{}`", p.body.clone().unwrap_or_default()),
+                }),
+                Some(b) => check(
+                    e,
+                    format!("{f}.body"),
+                    self.body[b].rectangle.is_some(),
+                    "pressure is supported on sides of `box` bodies only",
+                ),
             }
             check(e, format!("{f}.p"), p.p.is_finite(), "must be finite");
         }
         let mut names = Vec::new();
         for (i, r) in self.bc.rigid.iter().enumerate() {
             let f = format!("bc.rigid[{i}]");
-            check(e, format!("{f}.name"), !names.contains(&&r.name), format!("duplicate rigid body name `{}`", r.name));
+            check(
+                e,
+                format!("{f}.name"),
+                !names.contains(&&r.name),
+                format!("duplicate rigid body name `{}`", r.name),
+            );
             names.push(&r.name);
             match self.body_index(r.body.as_deref()) {
-                None => e.push(FieldError { field: format!("{f}.body"), message: format!("no body named `{}`", r.body.clone().unwrap_or_default()) }),
+                None => e.push(FieldError {
+                    field: format!("{f}.body"),
+                    message: format!("no body named `{}`", r.body.clone().unwrap_or_default()),
+                }),
                 Some(b) => {
                     let bounds = self.body[b].bounds();
                     let fp = r.footprint;
@@ -905,7 +1166,12 @@ impl Scene {
                     );
                 }
             }
-            check(e, format!("{f}.velocity"), r.velocity.iter().all(|v| v.is_finite()), "must be finite");
+            check(
+                e,
+                format!("{f}.velocity"),
+                r.velocity.iter().all(|v| v.is_finite()),
+                "must be finite",
+            );
         }
     }
 
@@ -915,13 +1181,33 @@ impl Scene {
         let mut seen = Vec::new();
         for (i, m) in self.monitor.iter().enumerate() {
             let f = format!("monitor[{i}]");
-            check(e, format!("{f}.name"), !m.name.is_empty() && !seen.contains(&&m.name), "must be a non-empty, unique column name");
-            check(e, format!("{f}.name"), !matches!(m.name.as_str(), "step" | "time"), "`step` and `time` are reserved column names");
+            check(
+                e,
+                format!("{f}.name"),
+                !m.name.is_empty() && !seen.contains(&&m.name),
+                "must be a non-empty, unique column name",
+            );
+            check(
+                e,
+                format!("{f}.name"),
+                !matches!(m.name.as_str(), "step" | "time"),
+                "`step` and `time` are reserved column names",
+            );
             seen.push(&m.name);
-            check(e, format!("{f}.scale"), m.scale.is_finite() && m.offset.is_finite(), "scale and offset must be finite");
+            check(
+                e,
+                format!("{f}.scale"),
+                m.scale.is_finite() && m.offset.is_finite(),
+                "scale and offset must be finite",
+            );
             match m.kind {
-                MonitorKind::PointDisplacement | MonitorKind::PointVelocity | MonitorKind::PointStress => match m.point {
-                    None => e.push(FieldError { field: format!("{f}.point"), message: "this monitor kind needs `point = [x, y]`".into() }),
+                MonitorKind::PointDisplacement
+                | MonitorKind::PointVelocity
+                | MonitorKind::PointStress => match m.point {
+                    None => e.push(FieldError {
+                        field: format!("{f}.point"),
+                        message: "this monitor kind needs `point = [x, y]`".into(),
+                    }),
                     Some(p) => check(
                         e,
                         format!("{f}.point"),
@@ -930,7 +1216,11 @@ impl Scene {
                     ),
                 },
                 MonitorKind::Reaction => match &m.line {
-                    None => e.push(FieldError { field: format!("{f}.line"), message: "`reaction` needs `line = \"x=<value>\"` or `\"y=<value>\"`".into() }),
+                    None => e.push(FieldError {
+                        field: format!("{f}.line"),
+                        message: "`reaction` needs `line = \"x=<value>\"` or `\"y=<value>\"`"
+                            .into(),
+                    }),
                     Some(l) => {
                         if grid_ok {
                             self.check_line(e, format!("{f}.line"), l);
@@ -938,13 +1228,26 @@ impl Scene {
                     }
                 },
                 MonitorKind::RigidForce => {
-                    let ok = m.rigid.as_ref().is_some_and(|r| self.bc.rigid.iter().any(|b| &b.name == r));
-                    check(e, format!("{f}.rigid"), ok, "must name a [[bc.rigid]] entry");
+                    let ok = m
+                        .rigid
+                        .as_ref()
+                        .is_some_and(|r| self.bc.rigid.iter().any(|b| &b.name == r));
+                    check(
+                        e,
+                        format!("{f}.rigid"),
+                        ok,
+                        "must name a [[bc.rigid]] entry",
+                    );
                 }
                 _ => {}
             }
             if m.kind == MonitorKind::PointStress {
-                check(e, format!("{f}.quantity"), m.quantity.is_some(), "`point_stress` needs `quantity` (sxx, syy, szz, sxy, p or q)");
+                check(
+                    e,
+                    format!("{f}.quantity"),
+                    m.quantity.is_some(),
+                    "`point_stress` needs `quantity` (sxx, syy, szz, sxy, p or q)",
+                );
             }
         }
     }
@@ -954,8 +1257,13 @@ impl Scene {
 /// numbers index arrays (`body.0.box`). The value is parsed as TOML (numbers,
 /// booleans, arrays, strings in quotes) and taken as a bare string otherwise.
 pub fn apply_override(table: &mut toml::Table, assignment: &str) -> Result<(), SceneError> {
-    let err = |message: String| SceneError::Override { assignment: assignment.to_string(), message };
-    let (path, raw) = assignment.split_once('=').ok_or_else(|| err("expected KEY=VALUE".into()))?;
+    let err = |message: String| SceneError::Override {
+        assignment: assignment.to_string(),
+        message,
+    };
+    let (path, raw) = assignment
+        .split_once('=')
+        .ok_or_else(|| err("expected KEY=VALUE".into()))?;
     let keys: Vec<&str> = path.trim().split('.').collect();
     if keys.iter().any(|k| k.is_empty()) {
         return Err(err("empty key segment".into()));
@@ -972,7 +1280,9 @@ pub fn apply_override(table: &mut toml::Table, assignment: &str) -> Result<(), S
     }
     // Missing intermediate tables are created (optional sections such as
     // `[solver]`); a misspelt key is then refused by `deny_unknown_fields`.
-    let mut current: &mut toml::Value = table.entry(keys[0]).or_insert_with(|| toml::Value::Table(toml::Table::new()));
+    let mut current: &mut toml::Value = table
+        .entry(keys[0])
+        .or_insert_with(|| toml::Value::Table(toml::Table::new()));
     for (depth, key) in keys.iter().enumerate().skip(1) {
         let last = depth == keys.len() - 1;
         current = match current {
@@ -981,19 +1291,29 @@ pub fn apply_override(table: &mut toml::Table, assignment: &str) -> Result<(), S
                     t.insert((*key).to_string(), value);
                     return Ok(());
                 }
-                t.entry(*key).or_insert_with(|| toml::Value::Table(toml::Table::new()))
+                t.entry(*key)
+                    .or_insert_with(|| toml::Value::Table(toml::Table::new()))
             }
             toml::Value::Array(a) => {
-                let index: usize = key.parse().map_err(|_| err(format!("`{key}` must be an array index")))?;
+                let index: usize = key
+                    .parse()
+                    .map_err(|_| err(format!("`{key}` must be an array index")))?;
                 let len = a.len();
-                let slot = a.get_mut(index).ok_or_else(|| err(format!("index {index} out of range (length {len})")))?;
+                let slot = a
+                    .get_mut(index)
+                    .ok_or_else(|| err(format!("index {index} out of range (length {len})")))?;
                 if last {
                     *slot = value;
                     return Ok(());
                 }
                 slot
             }
-            _ => return Err(err(format!("`{}` is not a table or array", keys[..depth].join(".")))),
+            _ => {
+                return Err(err(format!(
+                    "`{}` is not a table or array",
+                    keys[..depth].join(".")
+                )))
+            }
         };
     }
     Ok(())
@@ -1030,27 +1350,54 @@ mod tests {
 
     #[test]
     fn overrides_change_values_and_reject_unknown_paths() {
-        let s = Scene::from_str_with_overrides(MINIMAL, "t", &["grid.cell_size=0.25".into(), "body.0.box=[[0.0,0.0],[0.5,0.5]]".into()]).unwrap();
+        let s = Scene::from_str_with_overrides(
+            MINIMAL,
+            "t",
+            &[
+                "grid.cell_size=0.25".into(),
+                "body.0.box=[[0.0,0.0],[0.5,0.5]]".into(),
+            ],
+        )
+        .unwrap();
         assert_eq!(s.grid.cell_size, 0.25);
         assert_eq!(s.body[0].rectangle, Some([[0.0, 0.0], [0.5, 0.5]]));
-        let e = Scene::from_str_with_overrides(MINIMAL, "t", &["gird.cell_size=0.25".into()]).unwrap_err();
+        let e = Scene::from_str_with_overrides(MINIMAL, "t", &["gird.cell_size=0.25".into()])
+            .unwrap_err();
         assert!(e.to_string().contains("gird"), "{e}");
         // a new key inside a known table is refused by deny_unknown_fields
-        let e = Scene::from_str_with_overrides(MINIMAL, "t", &["grid.cel_size=0.25".into()]).unwrap_err();
+        let e = Scene::from_str_with_overrides(MINIMAL, "t", &["grid.cel_size=0.25".into()])
+            .unwrap_err();
         assert!(e.to_string().contains("cel_size"), "{e}");
     }
 
     #[test]
     fn invalid_values_are_all_reported_with_field_names() {
-        let bad = MINIMAL.replace("nu = 0.3", "nu = 0.5").replace("cell_size = 0.5", "cell_size = 0.3");
-        let e = Scene::from_str_with_overrides(&bad, "t", &[]).unwrap_err().to_string();
-        assert!(e.contains("materials.soil.nu") && e.contains("(-1, 0.5)"), "{e}");
-        assert!(e.contains("grid.size[0]") && e.contains("whole number of cells"), "{e}");
+        let bad = MINIMAL
+            .replace("nu = 0.3", "nu = 0.5")
+            .replace("cell_size = 0.5", "cell_size = 0.3");
+        let e = Scene::from_str_with_overrides(&bad, "t", &[])
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("materials.soil.nu") && e.contains("(-1, 0.5)"),
+            "{e}"
+        );
+        assert!(
+            e.contains("grid.size[0]") && e.contains("whole number of cells"),
+            "{e}"
+        );
     }
 
     #[test]
     fn gravity_ramp_steps_like_the_vertical_cut() {
-        let l = LoadSpec { gravity: 0.0, gravity_ramp: Some(GravityRamp { increment: 0.981, interval: 0.001, max: 588.6 }) };
+        let l = LoadSpec {
+            gravity: 0.0,
+            gravity_ramp: Some(GravityRamp {
+                increment: 0.981,
+                interval: 0.001,
+                max: 588.6,
+            }),
+        };
         assert!((l.gravity_at(0.001) - 0.981).abs() < 1e-12);
         assert!((l.gravity_at(0.0015) - 2.0 * 0.981).abs() < 1e-12);
         assert!((l.gravity_at(0.8) - 588.6).abs() < 1e-12);

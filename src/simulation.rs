@@ -13,7 +13,10 @@ use crate::grid::Grid;
 use crate::monitor::Monitor;
 use crate::particles::Particles;
 use crate::profile::Profile;
-use crate::scene::{AnalysisKind, FieldError, LinearSolverChoice, MaterialSpec, PointLayout, Scene, SceneError, VelocityProfile};
+use crate::scene::{
+    AnalysisKind, FieldError, LinearSolverChoice, MaterialSpec, PointLayout, Scene, SceneError,
+    VelocityProfile,
+};
 use crate::transfer;
 
 /// What one completed step did.
@@ -139,20 +142,40 @@ impl Simulation {
     /// once points are seeded (a body with no point, a platen touching none) are
     /// reported as field errors.
     pub fn new(scene: Scene) -> Result<Self, SceneError> {
-        let grid = Grid { origin: scene.grid.origin, cell_size: scene.grid.cell_size, cells: scene.grid_cells() };
+        let grid = Grid {
+            origin: scene.grid.origin,
+            cell_size: scene.grid.cell_size,
+            cells: scene.grid_cells(),
+        };
         let material_names: Vec<String> = scene.materials.keys().cloned().collect();
-        let materials: Vec<Arc<dyn ConstitutiveModel>> = scene.materials.values().map(build_material).collect();
+        let materials: Vec<Arc<dyn ConstitutiveModel>> =
+            scene.materials.values().map(build_material).collect();
         let mut errors = Vec::new();
         let particles = seed_particles(&scene, &grid, &material_names, &mut errors);
-        let youngs: Vec<f64> = scene.materials.values().map(|m| m.youngs_modulus()).collect();
+        let youngs: Vec<f64> = scene
+            .materials
+            .values()
+            .map(|m| m.youngs_modulus())
+            .collect();
         let explicit = scene.scene.analysis == AnalysisKind::Explicit;
-        let penalty_factor = scene.solver.penalty_factor.unwrap_or(if explicit { 10.0 } else { 1e3 });
-        let driven = DrivenPoints::from_scene(&scene, &particles, penalty_factor, &youngs).unwrap_or_else(|r| {
-            errors.push(FieldError { field: format!("bc.rigid[{r}].footprint"), message: "selects no material point of the body's top row".into() });
-            DrivenPoints::default()
-        });
+        let penalty_factor =
+            scene
+                .solver
+                .penalty_factor
+                .unwrap_or(if explicit { 10.0 } else { 1e3 });
+        let driven = DrivenPoints::from_scene(&scene, &particles, penalty_factor, &youngs)
+            .unwrap_or_else(|r| {
+                errors.push(FieldError {
+                    field: format!("bc.rigid[{r}].footprint"),
+                    message: "selects no material point of the body's top row".into(),
+                });
+                DrivenPoints::default()
+            });
         if !errors.is_empty() {
-            return Err(SceneError::Invalid { path: scene.scene.name.clone(), errors });
+            return Err(SceneError::Invalid {
+                path: scene.scene.name.clone(),
+                errors,
+            });
         }
         let constraints = Constraints::from_scene(&scene, &grid);
         let traction = TractionPoints::from_scene(&scene);
@@ -185,7 +208,12 @@ impl Simulation {
             symmetric_tangent,
             scene,
         };
-        sim.monitors = sim.scene.monitor.iter().map(|m| Monitor::resolve(m, &sim)).collect();
+        sim.monitors = sim
+            .scene
+            .monitor
+            .iter()
+            .map(|m| Monitor::resolve(m, &sim))
+            .collect();
         Ok(sim)
     }
 
@@ -197,7 +225,9 @@ impl Simulation {
     /// Whether the run has reached its last step / end time.
     pub fn finished(&self) -> bool {
         match self.analysis() {
-            AnalysisKind::Explicit => self.time >= self.scene.scene.end_time.unwrap_or(0.0) * (1.0 - 1e-12),
+            AnalysisKind::Explicit => {
+                self.time >= self.scene.scene.end_time.unwrap_or(0.0) * (1.0 - 1e-12)
+            }
             _ => self.step >= self.scene.scene.steps.unwrap_or(0),
         }
     }
@@ -234,13 +264,19 @@ impl Simulation {
     /// Σ ½ m_p |v_p|², kJ per metre run.
     pub fn kinetic_energy(&self) -> f64 {
         let p = &self.particles;
-        (0..p.len()).map(|i| 0.5 * p.mass[i] * (p.velocity[i][0].powi(2) + p.velocity[i][1].powi(2))).sum()
+        (0..p.len())
+            .map(|i| 0.5 * p.mass[i] * (p.velocity[i][0].powi(2) + p.velocity[i][1].powi(2)))
+            .sum()
     }
 
     /// Elastic strain energy Σ ½ V_p σ_pᵀ C σ_p, kJ per metre run (C = D⁻¹ of the
     /// particle's material).
     pub fn strain_energy(&self) -> f64 {
-        let compliances: Vec<Mat4> = self.materials.iter().map(|m| invert4(&m.elastic_stiffness())).collect();
+        let compliances: Vec<Mat4> = self
+            .materials
+            .iter()
+            .map(|m| invert4(&m.elastic_stiffness()))
+            .collect();
         let p = &self.particles;
         (0..p.len())
             .map(|i| {
@@ -269,30 +305,50 @@ pub fn invert4(m: &Mat4) -> Mat4 {
 /// material's E and its ν (DESIGN D19).
 fn background_block(scene: &Scene, grid: &Grid) -> [f64; 64] {
     let mut block = [0.0; 64];
-    let reference = scene.materials.values().max_by(|a, b| a.youngs_modulus().total_cmp(&b.youngs_modulus()));
-    let Some(reference) = reference else { return block };
+    let reference = scene
+        .materials
+        .values()
+        .max_by(|a, b| a.youngs_modulus().total_cmp(&b.youngs_modulus()));
+    let Some(reference) = reference else {
+        return block;
+    };
     let d = LinearElastic::new(reference.youngs_modulus(), reference.poisson_ratio()).stiffness();
     let h = grid.cell_size;
     let g = 0.5 / 3f64.sqrt();
     for (gx, gy) in [(-g, -g), (g, -g), (g, g), (-g, g)] {
-        let x = [grid.origin[0] + (0.5 + gx) * h, grid.origin[1] + (0.5 + gy) * h];
+        let x = [
+            grid.origin[0] + (0.5 + gx) * h,
+            grid.origin[1] + (0.5 + gy) * h,
+        ];
         let shape = grid.shape_in_cell(0, 0, x);
         transfer::add_particle_stiffness(&mut block, &shape, 0.25 * h * h, &d);
     }
-    block.iter_mut().for_each(|v| *v *= scene.solver.background_stiffness);
+    block
+        .iter_mut()
+        .for_each(|v| *v *= scene.solver.background_stiffness);
     block
 }
 
 /// Fill every body with n×n points per grid cell (DESIGN §2): Gauss–Legendre
 /// positions with volumes h² w_i w_j / 4, or sub-cell centres with h²/n².
 /// A position belongs to the first body whose outline contains it.
-fn seed_particles(scene: &Scene, grid: &Grid, material_names: &[String], errors: &mut Vec<FieldError>) -> Particles {
+fn seed_particles(
+    scene: &Scene,
+    grid: &Grid,
+    material_names: &[String],
+    errors: &mut Vec<FieldError>,
+) -> Particles {
     let mut particles = Particles::default();
     let n = scene.grid.points_per_cell;
     let h = grid.cell_size;
     let (abscissae, weights) = match scene.grid.point_layout {
         PointLayout::Gauss => gauss_rule(n),
-        PointLayout::Uniform => ((0..n).map(|k| -1.0 + (2 * k + 1) as f64 / n as f64).collect(), vec![2.0 / n as f64; n]),
+        PointLayout::Uniform => (
+            (0..n)
+                .map(|k| -1.0 + (2 * k + 1) as f64 / n as f64)
+                .collect(),
+            vec![2.0 / n as f64; n],
+        ),
     };
     let outlines: Vec<Vec<[f64; 2]>> = scene.body.iter().map(|b| b.outline()).collect();
     let mut counts = vec![0usize; scene.body.len()];
@@ -303,13 +359,28 @@ fn seed_particles(scene: &Scene, grid: &Grid, material_names: &[String], errors:
             for (&eta, &wy) in abscissae.iter().zip(&weights) {
                 for (&xi, &wx) in abscissae.iter().zip(&weights) {
                     let x = [xc + 0.5 * h * xi, yc + 0.5 * h * eta];
-                    let Some(b) = outlines.iter().position(|o| crate::scene::polygon_contains(o, x)) else { continue };
+                    let Some(b) = outlines
+                        .iter()
+                        .position(|o| crate::scene::polygon_contains(o, x))
+                    else {
+                        continue;
+                    };
                     let body = &scene.body[b];
-                    let material = material_names.iter().position(|m| *m == body.material).unwrap_or(0);
+                    let material = material_names
+                        .iter()
+                        .position(|m| *m == body.material)
+                        .unwrap_or(0);
                     let volume = 0.25 * h * h * wx * wy;
                     let density = scene.materials[&body.material].density();
                     let stress = initial_stress(body, x);
-                    particles.push(x, density * volume, volume, stress, material as u16, b as u16);
+                    particles.push(
+                        x,
+                        density * volume,
+                        volume,
+                        stress,
+                        material as u16,
+                        b as u16,
+                    );
                     let p = particles.len() - 1;
                     particles.velocity[p] = initial_velocity(body, x);
                     counts[b] += 1;
@@ -319,7 +390,11 @@ fn seed_particles(scene: &Scene, grid: &Grid, material_names: &[String], errors:
     }
     for (b, &count) in counts.iter().enumerate() {
         if count == 0 {
-            let key = if scene.body[b].rectangle.is_some() { "box" } else { "polygon" };
+            let key = if scene.body[b].rectangle.is_some() {
+                "box"
+            } else {
+                "polygon"
+            };
             errors.push(FieldError {
                 field: format!("body[{b}].{key}"),
                 message: "contains no material point position (is it smaller than a cell, or covered by an earlier body?)".into(),

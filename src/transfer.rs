@@ -29,7 +29,12 @@ pub fn shapes_at(grid: &Grid, positions: &[[f64; 2]]) -> Result<Vec<ShapeAt>, Ou
     positions
         .par_iter()
         .enumerate()
-        .map(|(p, &x)| grid.shape_at(x).ok_or(OutsideGrid { particle: p, position: x }))
+        .map(|(p, &x)| {
+            grid.shape_at(x).ok_or(OutsideGrid {
+                particle: p,
+                position: x,
+            })
+        })
         .collect()
 }
 
@@ -82,7 +87,13 @@ impl ParticleBins {
                 }
             }
         }
-        Self { cell_start, order, active_cells, cell_slot, node_active }
+        Self {
+            cell_start,
+            order,
+            active_cells,
+            cell_slot,
+            node_active,
+        }
     }
 
     /// Particles in cell `cell`, in index order.
@@ -94,7 +105,11 @@ impl ParticleBins {
 /// Sum particle contributions into grid nodes: `contribution(p)` returns the
 /// contributions of particle `p` to the four nodes of its cell (local order).
 /// Returns one `[f64; K]` per grid node (zero at inactive nodes). Deterministic.
-pub fn scatter<const K: usize, F>(grid: &Grid, bins: &ParticleBins, contribution: F) -> Vec<[f64; K]>
+pub fn scatter<const K: usize, F>(
+    grid: &Grid,
+    bins: &ParticleBins,
+    contribution: F,
+) -> Vec<[f64; K]>
 where
     F: Fn(usize) -> [[f64; K]; 4] + Sync,
 {
@@ -120,7 +135,11 @@ where
 /// Add per-active-cell nodal contributions into node values, each node
 /// summing its (up to four) cells in the fixed order lower-left, lower-right,
 /// upper-left, upper-right.
-fn gather_cells_to_nodes<const K: usize>(grid: &Grid, bins: &ParticleBins, cell_sums: &[[[f64; K]; 4]]) -> Vec<[f64; K]> {
+fn gather_cells_to_nodes<const K: usize>(
+    grid: &Grid,
+    bins: &ParticleBins,
+    cell_sums: &[[[f64; K]; 4]],
+) -> Vec<[f64; K]> {
     let (ncx, ncy) = (grid.cells[0] as isize, grid.cells[1] as isize);
     let nx = grid.cells[0] + 1;
     (0..grid.node_count())
@@ -164,7 +183,13 @@ pub fn nodal_mass(grid: &Grid, bins: &ParticleBins, shapes: &[ShapeAt], mass: &[
 
 /// Mass-weighted nodal sum Σ_p N_ip m_p q_p of a particle vector field (momentum
 /// when `q = v`, DESIGN D10). Divide by the nodal mass to get the nodal field.
-pub fn nodal_mass_weighted(grid: &Grid, bins: &ParticleBins, shapes: &[ShapeAt], mass: &[f64], field: &[[f64; 2]]) -> Vec<[f64; 2]> {
+pub fn nodal_mass_weighted(
+    grid: &Grid,
+    bins: &ParticleBins,
+    shapes: &[ShapeAt],
+    mass: &[f64],
+    field: &[[f64; 2]],
+) -> Vec<[f64; 2]> {
     scatter::<2, _>(grid, bins, |p| {
         let s = &shapes[p];
         let (m, q) = (mass[p], field[p]);
@@ -177,7 +202,13 @@ pub fn nodal_mass_weighted(grid: &Grid, bins: &ParticleBins, shapes: &[ShapeAt],
 }
 
 /// Body force f_i = Σ_p N_ip m_p b (DESIGN D10), for a uniform acceleration `b` (m/s²).
-pub fn body_force(grid: &Grid, bins: &ParticleBins, shapes: &[ShapeAt], mass: &[f64], b: [f64; 2]) -> Vec<[f64; 2]> {
+pub fn body_force(
+    grid: &Grid,
+    bins: &ParticleBins,
+    shapes: &[ShapeAt],
+    mass: &[f64],
+    b: [f64; 2],
+) -> Vec<[f64; 2]> {
     scatter::<2, _>(grid, bins, |p| {
         let s = &shapes[p];
         let m = mass[p];
@@ -190,14 +221,23 @@ pub fn body_force(grid: &Grid, bins: &ParticleBins, shapes: &[ShapeAt], mass: &[
 }
 
 /// Internal force f_i^int = Σ_p V_p B_ipᵀ σ_p (DESIGN D11), kN per metre run.
-pub fn internal_force(grid: &Grid, bins: &ParticleBins, shapes: &[ShapeAt], volume: &[f64], stress: &[Voigt]) -> Vec<[f64; 2]> {
+pub fn internal_force(
+    grid: &Grid,
+    bins: &ParticleBins,
+    shapes: &[ShapeAt],
+    volume: &[f64],
+    stress: &[Voigt],
+) -> Vec<[f64; 2]> {
     scatter::<2, _>(grid, bins, |p| {
         let s = &shapes[p];
         let (v, sig) = (volume[p], &stress[p]);
         let mut c = [[0.0; 2]; 4];
         for a in 0..4 {
             let [dx, dy] = s.dn[a];
-            c[a] = [v * (dx * sig[0] + dy * sig[3]), v * (dy * sig[1] + dx * sig[3])];
+            c[a] = [
+                v * (dx * sig[0] + dy * sig[3]),
+                v * (dy * sig[1] + dx * sig[3]),
+            ];
         }
         c
     })
@@ -242,7 +282,12 @@ pub fn strain_and_spin(l: &[f64; 4]) -> (Voigt, f64) {
 #[inline]
 pub fn rotate_stress(stress: &Voigt, spin: f64) -> Voigt {
     let [sxx, syy, szz, sxy] = *stress;
-    [sxx + 2.0 * spin * sxy, syy - 2.0 * spin * sxy, szz, sxy + spin * (syy - sxx)]
+    [
+        sxx + 2.0 * spin * sxy,
+        syy - 2.0 * spin * sxy,
+        szz,
+        sxy + spin * (syy - sxx),
+    ]
 }
 
 /// Stiffness contribution V_p B_pᵀ D B_p of one particle to its cell's 8×8 block
@@ -254,7 +299,10 @@ pub fn add_particle_stiffness(block: &mut [f64; 64], shape: &ShapeAt, volume: f6
     for b in 0..4 {
         let [dx, dy] = shape.dn[b];
         for r in 0..4 {
-            db[b][r] = [tangent[r][0] * dx + tangent[r][3] * dy, tangent[r][1] * dy + tangent[r][3] * dx];
+            db[b][r] = [
+                tangent[r][0] * dx + tangent[r][3] * dy,
+                tangent[r][1] * dy + tangent[r][3] * dx,
+            ];
         }
     }
     for a in 0..4 {
@@ -273,7 +321,12 @@ pub fn add_particle_stiffness(block: &mut [f64; 64], shape: &ShapeAt, volume: f6
 
 /// Per-active-cell stiffness blocks Σ_{p ∈ cell} V_p B_pᵀ D_p B_p, in the order of
 /// `bins.active_cells` (deterministic: particles summed in index order).
-pub fn cell_stiffness_blocks(bins: &ParticleBins, shapes: &[ShapeAt], volume: &[f64], tangent: &[Mat4]) -> Vec<[f64; 64]> {
+pub fn cell_stiffness_blocks(
+    bins: &ParticleBins,
+    shapes: &[ShapeAt],
+    volume: &[f64],
+    tangent: &[Mat4],
+) -> Vec<[f64; 64]> {
     bins.active_cells
         .par_iter()
         .map(|&c| {
@@ -291,16 +344,26 @@ pub fn cell_stiffness_blocks(bins: &ParticleBins, shapes: &[ShapeAt], volume: &[
 mod tests {
     use super::*;
 
-    fn setup() -> (Grid, Vec<[f64; 2]>, Vec<f64>, Vec<[f64; 2]>) {
-        let grid = Grid { origin: [0.0, 0.0], cell_size: 0.25, cells: [6, 5] };
+    type Cloud = (Grid, Vec<[f64; 2]>, Vec<f64>, Vec<[f64; 2]>);
+
+    fn setup() -> Cloud {
+        let grid = Grid {
+            origin: [0.0, 0.0],
+            cell_size: 0.25,
+            cells: [6, 5],
+        };
         // pseudo-random points (deterministic LCG) inside part of the grid
         let mut seed = 12345u64;
         let mut rnd = || {
-            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
             (seed >> 11) as f64 / (1u64 << 53) as f64
         };
         let n = 400;
-        let pos: Vec<[f64; 2]> = (0..n).map(|_| [0.1 + 1.2 * rnd(), 0.05 + 1.1 * rnd()]).collect();
+        let pos: Vec<[f64; 2]> = (0..n)
+            .map(|_| [0.1 + 1.2 * rnd(), 0.05 + 1.1 * rnd()])
+            .collect();
         let mass: Vec<f64> = (0..n).map(|_| 0.5 + rnd()).collect();
         let vel: Vec<[f64; 2]> = (0..n).map(|_| [rnd() - 0.5, 2.0 * rnd() - 1.0]).collect();
         (grid, pos, mass, vel)
@@ -318,22 +381,39 @@ mod tests {
         let p_nodes = nodal_mass_weighted(&grid, &bins, &shapes, &mass, &vel);
         let total_mass: f64 = mass.iter().sum();
         let grid_mass: f64 = m_nodes.iter().sum();
-        assert!((grid_mass - total_mass).abs() <= 1e-13 * total_mass, "mass {grid_mass} vs {total_mass}");
+        assert!(
+            (grid_mass - total_mass).abs() <= 1e-13 * total_mass,
+            "mass {grid_mass} vs {total_mass}"
+        );
         for c in 0..2 {
             let mp: f64 = (0..pos.len()).map(|p| mass[p] * vel[p][c]).sum();
             let mg: f64 = p_nodes.iter().map(|v| v[c]).sum();
-            assert!((mp - mg).abs() <= 1e-13 * total_mass, "momentum {c}: {mp} vs {mg}");
+            assert!(
+                (mp - mg).abs() <= 1e-13 * total_mass,
+                "momentum {c}: {mp} vs {mg}"
+            );
         }
         // G2P of nodal velocity, then momentum of the particles
         let v_nodes: Vec<[f64; 2]> = p_nodes
             .iter()
             .zip(&m_nodes)
-            .map(|(p, &m)| if m > 0.0 { [p[0] / m, p[1] / m] } else { [0.0; 2] })
+            .map(|(p, &m)| {
+                if m > 0.0 {
+                    [p[0] / m, p[1] / m]
+                } else {
+                    [0.0; 2]
+                }
+            })
             .collect();
         for c in 0..2 {
             let grid_momentum: f64 = p_nodes.iter().map(|v| v[c]).sum();
-            let back: f64 = (0..pos.len()).map(|p| mass[p] * interpolate(&shapes[p], &v_nodes)[c]).sum();
-            assert!((grid_momentum - back).abs() <= 1e-12 * total_mass, "G2P momentum {c}");
+            let back: f64 = (0..pos.len())
+                .map(|p| mass[p] * interpolate(&shapes[p], &v_nodes)[c])
+                .sum();
+            assert!(
+                (grid_momentum - back).abs() <= 1e-12 * total_mass,
+                "G2P momentum {c}"
+            );
         }
     }
 
@@ -346,7 +426,9 @@ mod tests {
         let bins = ParticleBins::new(&grid, &shapes);
         let stress = vec![[-3.0, 5.0, 1.0, 2.0]; pos.len()];
         let f = internal_force(&grid, &bins, &shapes, &mass, &stress);
-        let (fx, fy) = f.iter().fold((0.0, 0.0), |acc, v| (acc.0 + v[0], acc.1 + v[1]));
+        let (fx, fy) = f
+            .iter()
+            .fold((0.0, 0.0), |acc, v| (acc.0 + v[0], acc.1 + v[1]));
         assert!(fx.abs() < 1e-12 && fy.abs() < 1e-12);
         let d = crate::constitutive::LinearElastic::new(1000.0, 0.3).stiffness();
         let blocks = cell_stiffness_blocks(&bins, &shapes, &mass, &vec![d; pos.len()]);
@@ -363,7 +445,11 @@ mod tests {
     /// of the stress D·Δε those displacements produce (K u = f_int(u), linear elasticity).
     #[test]
     fn stiffness_block_matches_internal_force_of_linear_field() {
-        let grid = Grid { origin: [0.0, 0.0], cell_size: 1.0, cells: [1, 1] };
+        let grid = Grid {
+            origin: [0.0, 0.0],
+            cell_size: 1.0,
+            cells: [1, 1],
+        };
         let pos = vec![[0.2, 0.3], [0.7, 0.1], [0.6, 0.9], [0.1, 0.8], [0.5, 0.5]];
         let vol = vec![0.2, 0.3, 0.1, 0.25, 0.15];
         let shapes = shapes_at(&grid, &pos).unwrap();
@@ -382,9 +468,20 @@ mod tests {
         let nodes = grid.cell_nodes(0, 0);
         for a in 0..4 {
             for c in 0..2 {
-                let ku: f64 = (0..4).map(|b| (0..2).map(|e| blocks[0][(2 * a + c) * 8 + 2 * b + e] * u[nodes[b] as usize][e]).sum::<f64>()).sum();
+                let ku: f64 = (0..4)
+                    .map(|b| {
+                        (0..2)
+                            .map(|e| {
+                                blocks[0][(2 * a + c) * 8 + 2 * b + e] * u[nodes[b] as usize][e]
+                            })
+                            .sum::<f64>()
+                    })
+                    .sum();
                 let fi = f[nodes[a] as usize][c];
-                assert!((ku - fi).abs() < 1e-12 * fi.abs().max(1.0), "node {a} comp {c}: {ku} vs {fi}");
+                assert!(
+                    (ku - fi).abs() < 1e-12 * fi.abs().max(1.0),
+                    "node {a} comp {c}: {ku} vs {fi}"
+                );
             }
         }
     }

@@ -8,8 +8,12 @@ mod common;
 use std::process::Command;
 
 fn mpm_geo(args: &[&str]) -> (i32, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_mpm-geo")).args(args).output().expect("binary runs");
-    let text = String::from_utf8_lossy(&out.stderr).into_owned() + &String::from_utf8_lossy(&out.stdout);
+    let out = Command::new(env!("CARGO_BIN_EXE_mpm-geo"))
+        .args(args)
+        .output()
+        .expect("binary runs");
+    let text =
+        String::from_utf8_lossy(&out.stderr).into_owned() + &String::from_utf8_lossy(&out.stdout);
     (out.status.code().unwrap_or(-1), text)
 }
 
@@ -35,13 +39,18 @@ fn valid_scene_passes_check() {
 #[test]
 fn unknown_key_is_refused_naming_it() {
     // a misspelt key inside a known table
-    check_refused(&["--set", "grid.cel_size=0.1"], &["cel_size", "unknown field"]);
+    check_refused(
+        &["--set", "grid.cel_size=0.1"],
+        &["cel_size", "unknown field"],
+    );
 }
 
 #[test]
 fn unknown_key_in_file_is_refused_naming_it() {
     let dir = tempfile::tempdir().unwrap();
-    let text = std::fs::read_to_string(common::validation("elastic/oedometer.toml")).unwrap().replace("density = 2.0", "density = 2.0\ndensty = 2.0");
+    let text = std::fs::read_to_string(common::validation("elastic/oedometer.toml"))
+        .unwrap()
+        .replace("density = 2.0", "density = 2.0\ndensty = 2.0");
     let path = dir.path().join("typo.toml");
     std::fs::write(&path, text).unwrap();
     let (code, msg) = mpm_geo(&["check", path.to_str().unwrap()]);
@@ -51,21 +60,39 @@ fn unknown_key_in_file_is_refused_naming_it() {
 
 #[test]
 fn poisson_ratio_of_one_half_is_refused() {
-    check_refused(&["--set", "materials.soil.nu=0.5"], &["materials.soil.nu", "(-1, 0.5)"]);
+    check_refused(
+        &["--set", "materials.soil.nu=0.5"],
+        &["materials.soil.nu", "(-1, 0.5)"],
+    );
 }
 
 #[test]
 fn body_outside_the_grid_is_refused() {
-    check_refused(&["--set", "body.0.box=[[0.0, 0.0], [0.3, 1.0]]"], &["body[0].box", "outside the grid"]);
+    check_refused(
+        &["--set", "body.0.box=[[0.0, 0.0], [0.3, 1.0]]"],
+        &["body[0].box", "outside the grid"],
+    );
 }
 
 #[test]
 fn other_out_of_range_values_are_refused() {
-    check_refused(&["--set", "materials.soil.E=-5"], &["materials.soil.E", "> 0"]);
-    check_refused(&["--set", "grid.cell_size=0.3"], &["grid.size", "whole number of cells"]);
+    check_refused(
+        &["--set", "materials.soil.E=-5"],
+        &["materials.soil.E", "> 0"],
+    );
+    check_refused(
+        &["--set", "grid.cell_size=0.3"],
+        &["grid.size", "whole number of cells"],
+    );
     check_refused(&["--set", "solver.cfl=1.5"], &["solver.cfl", "(0, 1]"]);
-    check_refused(&["--set", "bc.fixed.0.line=\"x=0.05\""], &["bc.fixed[0].line", "selects no grid node"]);
-    check_refused(&["--set", "materials.soil.density=0"], &["materials.soil.density"]);
+    check_refused(
+        &["--set", "bc.fixed.0.line=\"x=0.05\""],
+        &["bc.fixed[0].line", "selects no grid node"],
+    );
+    check_refused(
+        &["--set", "materials.soil.density=0"],
+        &["materials.soil.density"],
+    );
 }
 
 #[test]
@@ -73,11 +100,25 @@ fn particle_leaving_the_grid_stops_the_run_and_keeps_the_curve() {
     let dir = tempfile::tempdir().unwrap();
     let scene = common::validation("failures/falls_out_of_grid.toml");
     let out = dir.path().join("out");
-    let (code, text) = mpm_geo(&["run", scene.to_str().unwrap(), "--out", out.to_str().unwrap(), "--quiet"]);
+    let (code, text) = mpm_geo(&[
+        "run",
+        scene.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--quiet",
+    ]);
     assert_eq!(code, 1, "{text}");
-    assert!(text.contains("left the grid") && text.contains("material point"), "{text}");
+    assert!(
+        text.contains("left the grid") && text.contains("material point"),
+        "{text}"
+    );
     // the failing step number from the message, e.g. "step 812 (t = ...)"
-    let step: usize = text.split("step ").nth(1).and_then(|s| s.split_whitespace().next()).and_then(|s| s.parse().ok()).expect("step in message");
+    let step: usize = text
+        .split("step ")
+        .nth(1)
+        .and_then(|s| s.split_whitespace().next())
+        .and_then(|s| s.parse().ok())
+        .expect("step in message");
     let curve = std::fs::read_to_string(out.join("curve.csv")).unwrap();
     let rows: Vec<&str> = curve.lines().skip(1).collect();
     assert_eq!(rows.len(), step, "rows for steps 0..{} expected", step - 1);
@@ -91,9 +132,18 @@ fn singular_system_stops_the_run_with_a_solver_error() {
     let dir = tempfile::tempdir().unwrap();
     let scene = common::validation("failures/floating_body.toml");
     let out = dir.path().join("out");
-    let (code, text) = mpm_geo(&["run", scene.to_str().unwrap(), "--out", out.to_str().unwrap(), "--quiet"]);
+    let (code, text) = mpm_geo(&[
+        "run",
+        scene.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--quiet",
+    ]);
     assert_eq!(code, 1, "{text}");
-    assert!(text.contains("step 1") && text.contains("linear solver"), "{text}");
+    assert!(
+        text.contains("step 1") && text.contains("linear solver"),
+        "{text}"
+    );
     let curve = std::fs::read_to_string(out.join("curve.csv")).unwrap();
     assert_eq!(curve.lines().count(), 2, "header + step 0: {curve}");
 }

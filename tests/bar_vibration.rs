@@ -26,12 +26,19 @@ fn period_from_crossings(history: &[(f64, Vec<f64>)], col: usize) -> f64 {
             crossings.push(t0 + (t1 - t0) * u0 / (u0 - u1));
         }
     }
-    assert!(crossings.len() >= 4, "too few zero crossings: {}", crossings.len());
+    assert!(
+        crossings.len() >= 4,
+        "too few zero crossings: {}",
+        crossings.len()
+    );
     2.0 * (crossings[crossings.len() - 1] - crossings[0]) / (crossings.len() - 1) as f64
 }
 
 fn energies(sim: &mpm_geo::simulation::Simulation, history: &[(f64, Vec<f64>)]) -> Vec<f64> {
-    let (k, s) = (common::column(sim, "kinetic_energy"), common::column(sim, "strain_energy"));
+    let (k, s) = (
+        common::column(sim, "kinetic_energy"),
+        common::column(sim, "strain_energy"),
+    );
     history.iter().map(|(_, v)| v[k] + v[s]).collect()
 }
 
@@ -40,7 +47,10 @@ fn newmark_period_and_energy_conservation() {
     let mut sim = common::simulation("elastic/bar_implicit.toml", &[]);
     let history = common::run_history(&mut sim);
     let period = period_from_crossings(&history, common::column(&sim, "top_uy"));
-    println!("Newmark: period {period:.6e} s (exact {PERIOD:e}), rel. error {:.3e}", period / PERIOD - 1.0);
+    println!(
+        "Newmark: period {period:.6e} s (exact {PERIOD:e}), rel. error {:.3e}",
+        period / PERIOD - 1.0
+    );
     assert!((period / PERIOD - 1.0).abs() <= 0.01);
     let e = energies(&sim, &history);
     let drift = e.iter().map(|v| (v / e[0] - 1.0).abs()).fold(0.0, f64::max);
@@ -63,7 +73,10 @@ fn explicit_period_and_energy(cfl: f64) -> (f64, f64) {
 fn explicit_period_at_cfl_half_and_stability_at_cfl_09() {
     for cfl in [0.5, 0.9] {
         let (period, drift) = explicit_period_and_energy(cfl);
-        assert!((period / PERIOD - 1.0).abs() <= 0.01, "CFL {cfl}: period {period}");
+        assert!(
+            (period / PERIOD - 1.0).abs() <= 0.01,
+            "CFL {cfl}: period {period}"
+        );
         assert!(drift <= 0.05, "CFL {cfl}: energy changed by {drift:e}");
     }
 }
@@ -72,9 +85,18 @@ fn explicit_period_at_cfl_half_and_stability_at_cfl_09() {
 fn explicit_time_step_above_the_limit_is_refused_before_the_run() {
     // h / c = 0.05 / 100 = 5e-4 s
     let overrides = vec!["scene.dt=6.0e-4".to_string()];
-    let err = mpm_geo::scene::Scene::load(&common::validation("elastic/bar_explicit.toml"), &overrides).unwrap_err();
-    let SceneError::Invalid { errors, .. } = &err else { panic!("expected a validation error, got {err}") };
-    assert!(errors.iter().any(|e| e.field == "scene.dt" && e.message.contains("stability limit")), "{err}");
+    let err =
+        mpm_geo::scene::Scene::load(&common::validation("elastic/bar_explicit.toml"), &overrides)
+            .unwrap_err();
+    let SceneError::Invalid { errors, .. } = &err else {
+        panic!("expected a validation error, got {err}")
+    };
+    assert!(
+        errors
+            .iter()
+            .any(|e| e.field == "scene.dt" && e.message.contains("stability limit")),
+        "{err}"
+    );
 }
 
 #[test]
@@ -94,11 +116,17 @@ fn explicit_time_step_above_the_moving_limit_is_detected_during_the_run() {
 
 #[test]
 fn implicit_and_explicit_histories_agree() {
-    let mut implicit = common::simulation("elastic/bar_implicit.toml", &["scene.steps=400", "scene.dt=2.0e-4"]);
+    let mut implicit = common::simulation(
+        "elastic/bar_implicit.toml",
+        &["scene.steps=400", "scene.dt=2.0e-4"],
+    );
     let mut explicit = common::simulation("elastic/bar_explicit.toml", &["scene.end_time=0.08"]);
     let hi = common::run_history(&mut implicit);
     let he = common::run_history(&mut explicit);
-    let (ci, ce) = (common::column(&implicit, "top_uy"), common::column(&explicit, "top_uy"));
+    let (ci, ce) = (
+        common::column(&implicit, "top_uy"),
+        common::column(&explicit, "top_uy"),
+    );
     let amplitude = hi.iter().map(|(_, v)| v[ci].abs()).fold(0.0, f64::max);
     let mut worst = 0.0f64;
     for (t, v) in &hi {
@@ -108,6 +136,9 @@ fn implicit_and_explicit_histories_agree() {
         let ue = he[k - 1].1[ce] * (1.0 - s) + he[k].1[ce] * s;
         worst = worst.max((v[ci] - ue).abs());
     }
-    println!("implicit vs explicit: max |Δu_top| = {worst:.3e} m, amplitude {amplitude:.3e} m ({:.2} %)", 100.0 * worst / amplitude);
+    println!(
+        "implicit vs explicit: max |Δu_top| = {worst:.3e} m, amplitude {amplitude:.3e} m ({:.2} %)",
+        100.0 * worst / amplitude
+    );
     assert!(worst <= 0.02 * amplitude);
 }

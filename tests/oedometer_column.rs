@@ -54,9 +54,15 @@ fn column_errors(cell_size: f64, layout: &str, shift: [f64; 2]) -> (f64, f64) {
 fn gauss_points_give_exact_nodal_settlements_and_cell_stresses() {
     let h = 0.1;
     let (nodal, stress) = column_errors(h, "gauss", [0.0, 0.0]);
-    assert!(nodal <= 1e-6, "nodal settlement error {nodal:e} (relative to the top settlement)");
+    assert!(
+        nodal <= 1e-6,
+        "nodal settlement error {nodal:e} (relative to the top settlement)"
+    );
     let bound = RHO * G * h / (2.0 * 3f64.sqrt());
-    assert!(stress <= bound * (1.0 + 1e-9), "stress error {stress} > ρgh/(2√3) = {bound}");
+    assert!(
+        stress <= bound * (1.0 + 1e-9),
+        "stress error {stress} > ρgh/(2√3) = {bound}"
+    );
 }
 
 #[test]
@@ -65,7 +71,10 @@ fn base_reaction_equals_the_weight() {
     sim.step_once().unwrap();
     let reaction = sim.monitor_values()[common::column(&sim, "base_reaction")];
     let weight = RHO * G * H * 0.2;
-    assert!((reaction - weight).abs() <= 1e-8 * weight, "reaction {reaction} vs weight {weight}");
+    assert!(
+        (reaction - weight).abs() <= 1e-8 * weight,
+        "reaction {reaction} vs weight {weight}"
+    );
 }
 
 /// Points moved off the Gauss positions (each point shifted by (0.1 h, 0.2 h)
@@ -77,10 +86,16 @@ fn base_reaction_equals_the_weight() {
 #[test]
 fn points_off_gauss_positions_converge_under_refinement() {
     let sizes = [1.0 / 4.0, 1.0 / 8.0, 1.0 / 16.0, 1.0 / 32.0];
-    let errors: Vec<f64> = sizes.iter().map(|&h| column_errors(h, "gauss", [0.1, 0.2]).0).collect();
+    let errors: Vec<f64> = sizes
+        .iter()
+        .map(|&h| column_errors(h, "gauss", [0.1, 0.2]).0)
+        .collect();
     let rates: Vec<f64> = errors.windows(2).map(|e| (e[0] / e[1]).log2()).collect();
     println!("oedometer, uniform points: h = {sizes:?}\n  nodal errors {errors:?}\n  observed rates {rates:.3?}");
-    assert!(errors.windows(2).all(|e| e[1] < e[0]), "errors must fall: {errors:?}");
+    assert!(
+        errors.windows(2).all(|e| e[1] < e[0]),
+        "errors must fall: {errors:?}"
+    );
     let last = *rates.last().unwrap();
     assert!(last >= 0.9, "observed rate {last:.3} < 0.9");
 }

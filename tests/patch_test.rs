@@ -16,7 +16,12 @@ fn check_patch(overrides: &[&str]) {
     for (p, s) in sim.particles.stress.iter().enumerate() {
         for k in 0..4 {
             let err = (s[k] - expected[k]).abs() / scale;
-            assert!(err <= 1e-10, "point {p} component {k}: {} vs {} (rel {err:e})", s[k], expected[k]);
+            assert!(
+                err <= 1e-10,
+                "point {p} component {k}: {} vs {} (rel {err:e})",
+                s[k],
+                expected[k]
+            );
         }
     }
 }

@@ -9,8 +9,13 @@ use mpm_geo::run::run_scene;
 fn curve_with_threads(path: &str, overrides: &[&str], threads: usize) -> String {
     let scene = common::scene(path, overrides);
     let dir = tempfile::tempdir().unwrap();
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
-    let outcome = pool.install(|| run_scene(scene, dir.path(), false)).unwrap();
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap();
+    let outcome = pool
+        .install(|| run_scene(scene, dir.path(), false))
+        .unwrap();
     assert!(outcome.error.is_none(), "{:?}", outcome.error);
     std::fs::read_to_string(dir.path().join("curve.csv")).unwrap()
 }
@@ -19,7 +24,10 @@ fn assert_identical(path: &str, overrides: &[&str]) {
     let one = curve_with_threads(path, overrides, 1);
     let two = curve_with_threads(path, overrides, 2);
     assert!(one.lines().count() > 2, "{path}: curve too short");
-    assert_eq!(one, two, "{path}: curve.csv differs between 1 and 2 threads");
+    assert_eq!(
+        one, two,
+        "{path}: curve.csv differs between 1 and 2 threads"
+    );
 }
 
 #[test]

@@ -12,7 +12,9 @@ fn fd_check(path: &str, overrides: &[&str]) {
     let mut sim = common::simulation(path, overrides);
     let n = sim.unknowns().unwrap();
     // a deterministic, non-trivial increment of size ~1e-5 m
-    let u: Vec<f64> = (0..n).map(|i| 1e-5 * ((i as f64 * 0.7).sin() + 0.3)).collect();
+    let u: Vec<f64> = (0..n)
+        .map(|i| 1e-5 * ((i as f64 * 0.7).sin() + 0.3))
+        .collect();
     let (_, k) = sim.linearize(&u).unwrap();
     let eta = 1e-7;
     let mut worst = 0.0f64;
@@ -30,8 +32,15 @@ fn fd_check(path: &str, overrides: &[&str]) {
             scale = scale.max(k.get(i, j).abs());
         }
     }
-    println!("{path}: {n} unknowns, max |K - K_fd| / max |K| = {:.3e}", worst / scale);
-    assert!(worst <= 1e-6 * scale, "tangent mismatch {:.3e}", worst / scale);
+    println!(
+        "{path}: {n} unknowns, max |K - K_fd| / max |K| = {:.3e}",
+        worst / scale
+    );
+    assert!(
+        worst <= 1e-6 * scale,
+        "tangent mismatch {:.3e}",
+        worst / scale
+    );
 }
 
 #[test]
@@ -41,5 +50,8 @@ fn quasi_static_tangent_with_penalty_matches_finite_differences() {
 
 #[test]
 fn dynamic_tangent_with_mass_term_matches_finite_differences() {
-    fd_check("elastic/bar_implicit.toml", &["solver.background_stiffness=0"]);
+    fd_check(
+        "elastic/bar_implicit.toml",
+        &["solver.background_stiffness=0"],
+    );
 }

@@ -17,7 +17,11 @@ use crate::transfer::{self, ParticleBins};
 impl Simulation {
     /// Stable time step Δt = α_CFL · min_p h / (c_p + |v_p|) (DESIGN D20), and the
     /// limit at α = 1. With driven points also Δt ≤ α·2·sqrt(m_i/k_i) at their nodes.
-    fn explicit_time_step(&self, nodal_mass: &[f64], shapes: &[crate::grid::ShapeAt]) -> (f64, f64, String) {
+    fn explicit_time_step(
+        &self,
+        nodal_mass: &[f64],
+        shapes: &[crate::grid::ShapeAt],
+    ) -> (f64, f64, String) {
         let p = &self.particles;
         let h = self.grid.cell_size;
         let mut limit = f64::INFINITY;
@@ -56,10 +60,24 @@ impl Simulation {
         let grid = self.grid.clone();
         let n_nodes = grid.node_count();
         let setup = self.profile.time(Stage::Setup, || {
-            let shapes = transfer::shapes_at(&grid, &self.particles.position)
-                .map_err(|o| RunError::ParticleLeftGrid { step, time: t, particle: o.particle, position: o.position })?;
+            let shapes = transfer::shapes_at(&grid, &self.particles.position).map_err(|o| {
+                RunError::ParticleLeftGrid {
+                    step,
+                    time: t,
+                    particle: o.particle,
+                    position: o.position,
+                }
+            })?;
             let bins = ParticleBins::new(&grid, &shapes);
-            let traction_shapes = self.traction.shapes(&grid).ok_or(RunError::NonFinite { step, time: t, what: "a traction point left the grid".into() })?;
+            let traction_shapes =
+                self.traction
+                    .shapes(&grid)
+                    .map_err(|o| RunError::TractionPointLeftGrid {
+                        step,
+                        time: t,
+                        point: o.particle,
+                        position: o.position,
+                    })?;
             Ok((shapes, bins, traction_shapes))
         })?;
         let (shapes, bins, traction_shapes) = setup;
@@ -68,28 +86,49 @@ impl Simulation {
         // 1. P2G: mass, momentum, forces at t.
         let (mass, mut momentum, force) = self.profile.time(Stage::P2G, || {
             let mass = transfer::nodal_mass(&grid, &bins, &shapes, &p.mass);
-            let momentum = transfer::nodal_mass_weighted(&grid, &bins, &shapes, &p.mass, &p.velocity);
+            let momentum =
+                transfer::nodal_mass_weighted(&grid, &bins, &shapes, &p.mass, &p.velocity);
             let internal = transfer::internal_force(&grid, &bins, &shapes, &p.volume, &p.stress);
             let g = self.scene.loads.gravity_at(t);
-            let mut external =
-                if g != 0.0 { transfer::body_force(&grid, &bins, &shapes, &p.mass, [0.0, -g]) } else { vec![[0.0; 2]; n_nodes] };
+            let mut external = if g != 0.0 {
+                transfer::body_force(&grid, &bins, &shapes, &p.mass, [0.0, -g])
+            } else {
+                vec![[0.0; 2]; n_nodes]
+            };
             self.traction.add_forces(&traction_shapes, &mut external);
-            self.driven.add_forces(p, &shapes, &vec![[0.0; 2]; n_nodes], t, &mut external);
-            let force: Vec<[f64; 2]> = external.iter().zip(&internal).map(|(e, i)| [e[0] - i[0], e[1] - i[1]]).collect();
+            self.driven
+                .add_forces(p, &shapes, &vec![[0.0; 2]; n_nodes], t, &mut external);
+            let force: Vec<[f64; 2]> = external
+                .iter()
+                .zip(&internal)
+                .map(|(e, i)| [e[0] - i[0], e[1] - i[1]])
+                .collect();
             (mass, momentum, force)
         });
 
         // Time step, checked every step as the points move.
         let (cfl_dt, limit, reason) = self.explicit_time_step(&mass, &shapes);
         let dt = match self.scene.scene.dt {
-            Some(fixed) if fixed > limit => return Err(RunError::UnstableTimeStep { step, time: t, dt: fixed, limit, reason }),
+            Some(fixed) if fixed > limit => {
+                return Err(RunError::UnstableTimeStep {
+                    step,
+                    time: t,
+                    dt: fixed,
+                    limit,
+                    reason,
+                })
+            }
             Some(fixed) => fixed,
             None => cfl_dt,
         };
         let end = self.scene.scene.end_time.unwrap_or(f64::INFINITY);
         let dt = dt.min(end - t).max(0.0);
-        if !(dt > 0.0) || !dt.is_finite() {
-            return Err(RunError::NonFinite { step, time: t, what: format!("explicit time step {dt}") });
+        if dt <= 0.0 || !dt.is_finite() {
+            return Err(RunError::NonFinite {
+                step,
+                time: t,
+                what: format!("explicit time step {dt}"),
+            });
         }
 
         // 2. Nodal update with damping (D21) and Dirichlet conditions.
@@ -132,8 +171,17 @@ impl Simulation {
         }
 
         // 3. G2P: v_p += Δt Σ N a_i, x_p += Δt Σ N p_i/m_i.
-        let velocity_nodes: Vec<[f64; 2]> =
-            momentum.iter().zip(&mass).map(|(q, &m)| if m > tiny { [q[0] / m, q[1] / m] } else { [0.0; 2] }).collect();
+        let velocity_nodes: Vec<[f64; 2]> = momentum
+            .iter()
+            .zip(&mass)
+            .map(|(q, &m)| {
+                if m > tiny {
+                    [q[0] / m, q[1] / m]
+                } else {
+                    [0.0; 2]
+                }
+            })
+            .collect();
         let start = std::time::Instant::now();
         {
             let p = &mut self.particles;
@@ -152,7 +200,8 @@ impl Simulation {
         // 4. Re-map the updated particle momentum (MUSL), Dirichlet again.
         let du: Vec<[f64; 2]> = self.profile.time(Stage::P2G, || {
             let p = &self.particles;
-            let remapped = transfer::nodal_mass_weighted(&grid, &bins, &shapes, &p.mass, &p.velocity);
+            let remapped =
+                transfer::nodal_mass_weighted(&grid, &bins, &shapes, &p.mass, &p.velocity);
             (0..n_nodes)
                 .map(|node| {
                     let mut u = [0.0; 2];
@@ -173,8 +222,22 @@ impl Simulation {
         // 5. Strain increment and stress update; F, V (positions already moved).
         let mut trial = TrialStresses::default();
         self.profile
-            .time(Stage::StressUpdate, || evaluate_stresses(&self.particles, &self.materials, &shapes, &du, None, &mut trial))
-            .map_err(|(particle, source)| RunError::Constitutive { step, time: t + dt, particle, source })?;
+            .time(Stage::StressUpdate, || {
+                evaluate_stresses(
+                    &self.particles,
+                    &self.materials,
+                    &shapes,
+                    &du,
+                    None,
+                    &mut trial,
+                )
+            })
+            .map_err(|(particle, source)| RunError::Constitutive {
+                step,
+                time: t + dt,
+                particle,
+                source,
+            })?;
         let start = std::time::Instant::now();
         {
             let p = &mut self.particles;
@@ -184,10 +247,19 @@ impl Simulation {
                 p.state[i] = trial.state[i];
             }
             if let Some(i) = (0..p.len()).find(|&i| !grid.contains(p.position[i])) {
-                return Err(RunError::ParticleLeftGrid { step, time: t + dt, particle: i, position: p.position[i] });
+                return Err(RunError::ParticleLeftGrid {
+                    step,
+                    time: t + dt,
+                    particle: i,
+                    position: p.position[i],
+                });
             }
             if let Some(i) = (0..p.len()).find(|&i| p.stress[i].iter().any(|s| !s.is_finite())) {
-                return Err(RunError::NonFinite { step, time: t + dt, what: format!("stress of material point {i}") });
+                return Err(RunError::NonFinite {
+                    step,
+                    time: t + dt,
+                    what: format!("stress of material point {i}"),
+                });
             }
         }
         self.traction.advect(&traction_shapes, &du);
@@ -196,6 +268,12 @@ impl Simulation {
         self.last_increment = du;
         self.step = step;
         self.time = t + dt;
-        Ok(StepReport { step, time: self.time, dt, iterations: 0, substeps: 1 })
+        Ok(StepReport {
+            step,
+            time: self.time,
+            dt,
+            iterations: 0,
+            substeps: 1,
+        })
     }
 }

@@ -34,8 +34,10 @@ pub(crate) enum StepFailure {
     Motion(f64),
     /// Linear solver error.
     Solver(String),
-    /// Not retried: a point left the grid.
+    /// Not retried: a material point left the grid.
     LeftGrid(usize, [f64; 2]),
+    /// Not retried: a traction point left the grid.
+    TractionLeftGrid(usize, [f64; 2]),
 }
 
 /// Start-of-step nodal quantities of a (sub-)step.
@@ -69,7 +71,11 @@ impl Simulation {
     pub(crate) fn implicit_step(&mut self) -> Result<StepReport, RunError> {
         let dt = self.implicit_dt();
         let t0 = self.time;
-        let mut report = StepReport { step: self.step + 1, dt, ..Default::default() };
+        let mut report = StepReport {
+            step: self.step + 1,
+            dt,
+            ..Default::default()
+        };
         self.advance_implicit(t0, dt, 0, &mut report)?;
         self.step += 1;
         self.time = t0 + dt;
@@ -77,7 +83,13 @@ impl Simulation {
         Ok(report)
     }
 
-    fn advance_implicit(&mut self, t: f64, dt: f64, depth: usize, report: &mut StepReport) -> Result<(), RunError> {
+    fn advance_implicit(
+        &mut self,
+        t: f64,
+        dt: f64,
+        depth: usize,
+        report: &mut StepReport,
+    ) -> Result<(), RunError> {
         match self.try_implicit(t, dt) {
             Ok(iterations) => {
                 report.iterations += iterations;
@@ -85,8 +97,8 @@ impl Simulation {
                 self.solver_usage.newton_iterations += iterations;
                 Ok(())
             }
-            Err(StepFailure::LeftGrid(particle, position)) => {
-                Err(RunError::ParticleLeftGrid { step: self.step + 1, time: t + dt, particle, position })
+            Err(f @ (StepFailure::LeftGrid(..) | StepFailure::TractionLeftGrid(..))) => {
+                Err(self.failure_to_error(f, t + dt, depth))
             }
             Err(_) if depth < self.scene.solver.max_halvings => {
                 self.solver_usage.halvings += 1;
@@ -100,20 +112,53 @@ impl Simulation {
     fn failure_to_error(&self, failure: StepFailure, time: f64, halvings: usize) -> RunError {
         let step = self.step + 1;
         match failure {
-            StepFailure::Constitutive(particle, source) => RunError::Constitutive { step, time, particle, source },
-            StepFailure::Solver(message) => RunError::Solver { step, time, message },
-            StepFailure::LeftGrid(particle, position) => RunError::ParticleLeftGrid { step, time, particle, position },
-            StepFailure::Diverged(history) => {
-                RunError::NewtonFailed { step, time, halvings, cause: "residual grew in 3 consecutive iterations".into(), history }
-            }
+            StepFailure::Constitutive(particle, source) => RunError::Constitutive {
+                step,
+                time,
+                particle,
+                source,
+            },
+            StepFailure::Solver(message) => RunError::Solver {
+                step,
+                time,
+                message,
+            },
+            StepFailure::LeftGrid(particle, position) => RunError::ParticleLeftGrid {
+                step,
+                time,
+                particle,
+                position,
+            },
+            StepFailure::TractionLeftGrid(point, position) => RunError::TractionPointLeftGrid {
+                step,
+                time,
+                point,
+                position,
+            },
+            StepFailure::Diverged(history) => RunError::NewtonFailed {
+                step,
+                time,
+                halvings,
+                cause: "residual grew in 3 consecutive iterations".into(),
+                history,
+            },
             StepFailure::IterationLimit(history) => RunError::NewtonFailed {
                 step,
                 time,
                 halvings,
-                cause: format!("no convergence within {} iterations", self.scene.solver.max_iterations),
+                cause: format!(
+                    "no convergence within {} iterations",
+                    self.scene.solver.max_iterations
+                ),
                 history,
             },
-            StepFailure::NonFinite(what, history) => RunError::NewtonFailed { step, time, halvings, cause: format!("non-finite {what}"), history },
+            StepFailure::NonFinite(what, history) => RunError::NewtonFailed {
+                step,
+                time,
+                halvings,
+                cause: format!("non-finite {what}"),
+                history,
+            },
             StepFailure::Motion(d) => RunError::NewtonFailed {
                 step,
                 time,
@@ -135,10 +180,14 @@ impl Simulation {
         let grid = &self.grid;
         let profile = &self.profile;
         let (shapes, bins, dofs, traction_shapes) = profile.time(Stage::Setup, || {
-            let shapes = transfer::shapes_at(grid, &p.position).map_err(|o| StepFailure::LeftGrid(o.particle, o.position))?;
+            let shapes = transfer::shapes_at(grid, &p.position)
+                .map_err(|o| StepFailure::LeftGrid(o.particle, o.position))?;
             let bins = ParticleBins::new(grid, &shapes);
             let dofs = DofMap::new(&bins, &self.constraints);
-            let traction_shapes = self.traction.shapes(grid).ok_or_else(|| StepFailure::LeftGrid(usize::MAX, [f64::NAN; 2]))?;
+            let traction_shapes = self
+                .traction
+                .shapes(grid)
+                .map_err(|o| StepFailure::TractionLeftGrid(o.particle, o.position))?;
             Ok((shapes, bins, dofs, traction_shapes))
         })?;
         let dynamic = self.dynamic();
@@ -146,8 +195,10 @@ impl Simulation {
             let (mut mass, mut velocity, mut acceleration) = (Vec::new(), Vec::new(), Vec::new());
             if dynamic {
                 mass = transfer::nodal_mass(grid, &bins, &shapes, &p.mass);
-                let momentum = transfer::nodal_mass_weighted(grid, &bins, &shapes, &p.mass, &p.velocity);
-                let ma = transfer::nodal_mass_weighted(grid, &bins, &shapes, &p.mass, &p.acceleration);
+                let momentum =
+                    transfer::nodal_mass_weighted(grid, &bins, &shapes, &p.mass, &p.velocity);
+                let ma =
+                    transfer::nodal_mass_weighted(grid, &bins, &shapes, &p.mass, &p.acceleration);
                 velocity = divide_by_mass(&momentum, &mass);
                 acceleration = divide_by_mass(&ma, &mass);
                 // Dirichlet: fixed dofs neither move nor accelerate.
@@ -167,7 +218,16 @@ impl Simulation {
             self.traction.add_forces(&traction_shapes, &mut external);
             (mass, velocity, acceleration, external)
         });
-        Ok(StepGrid { shapes, bins, dofs, mass, velocity, acceleration, external, traction_shapes })
+        Ok(StepGrid {
+            shapes,
+            bins,
+            dofs,
+            mass,
+            velocity,
+            acceleration,
+            external,
+            traction_shapes,
+        })
     }
 
     /// Newmark acceleration a_{n+1} = (4/Δt²) Δu − (4/Δt) v_n − a_n (DESIGN D15) at grid dof `d`.
@@ -176,10 +236,19 @@ impl Simulation {
     }
 
     /// Residual R = f_ext + f_pen − f_int − M a (DESIGN D16) and its norms (D18).
-    fn residual(&self, sg: &StepGrid, trial: &TrialStresses, du: &[[f64; 2]], t1: f64, dt: f64) -> Residual {
+    fn residual(
+        &self,
+        sg: &StepGrid,
+        trial: &TrialStresses,
+        du: &[[f64; 2]],
+        t1: f64,
+        dt: f64,
+    ) -> Residual {
         let grid = &self.grid;
         let p = &self.particles;
-        let internal = self.profile.time(Stage::P2G, || transfer::internal_force(grid, &sg.bins, &sg.shapes, &p.volume, &trial.stress));
+        let internal = self.profile.time(Stage::P2G, || {
+            transfer::internal_force(grid, &sg.bins, &sg.shapes, &p.volume, &trial.stress)
+        });
         let mut penalty = vec![[0.0; 2]; grid.node_count()];
         self.driven.add_forces(p, &sg.shapes, du, t1, &mut penalty);
         let dynamic = self.dynamic();
@@ -190,7 +259,11 @@ impl Simulation {
                 continue;
             }
             for c in 0..2 {
-                let inertia = if dynamic { sg.mass[node] * Self::newmark_acceleration(sg, du, dt, node, c) } else { 0.0 };
+                let inertia = if dynamic {
+                    sg.mass[node] * Self::newmark_acceleration(sg, du, dt, node, c)
+                } else {
+                    0.0
+                };
                 let ext = sg.external[node][c] + penalty[node][c];
                 let r = ext - internal[node][c] - inertia;
                 residual[node][c] = r;
@@ -204,25 +277,45 @@ impl Simulation {
         }
         let floor = 1e-6 * self.max_youngs_modulus() * grid.cell_size;
         let reference = ext2.sqrt().max(int2.sqrt()).max(inertia2.sqrt()).max(floor);
-        Residual { residual, norm: norm2.sqrt(), reference }
+        Residual {
+            residual,
+            norm: norm2.sqrt(),
+            reference,
+        }
     }
 
     /// Largest Young's modulus of the materials, kPa.
     pub(crate) fn max_youngs_modulus(&self) -> f64 {
-        self.scene.materials.values().map(|m| m.youngs_modulus()).fold(0.0, f64::max)
+        self.scene
+            .materials
+            .values()
+            .map(|m| m.youngs_modulus())
+            .fold(0.0, f64::max)
     }
 
     /// Assemble K_T (+ 4M/Δt² when dynamic) from the cell blocks (DESIGN D17, D19, D41).
-    fn assemble_tangent(&mut self, sg: &StepGrid, trial: &TrialStresses, dt: f64) -> Result<SparseMatrix, StepFailure> {
+    fn assemble_tangent(
+        &mut self,
+        sg: &StepGrid,
+        trial: &TrialStresses,
+        dt: f64,
+    ) -> Result<SparseMatrix, StepFailure> {
         let start = std::time::Instant::now();
         let element_dofs = sg.dofs.element_dofs(&self.grid, &sg.bins);
         let n = sg.dofs.n_free;
-        let reuse = matches!(&self.assembler, Some((key, a)) if *key == element_dofs && a.n_dofs() == n);
+        let reuse =
+            matches!(&self.assembler, Some((key, a)) if *key == element_dofs && a.n_dofs() == n);
         if !reuse {
-            let assembler = Assembler::new(n, &element_dofs).map_err(|e| StepFailure::Solver(e.to_string()))?;
+            let assembler =
+                Assembler::new(n, &element_dofs).map_err(|e| StepFailure::Solver(e.to_string()))?;
             self.assembler = Some((element_dofs, assembler));
         }
-        let mut blocks = transfer::cell_stiffness_blocks(&sg.bins, &sg.shapes, &self.particles.volume, &trial.tangent);
+        let mut blocks = transfer::cell_stiffness_blocks(
+            &sg.bins,
+            &sg.shapes,
+            &self.particles.volume,
+            &trial.tangent,
+        );
         for block in blocks.iter_mut() {
             for (b, bg) in block.iter_mut().zip(self.background_block.iter()) {
                 *b += bg;
@@ -238,19 +331,31 @@ impl Simulation {
             }
             diag
         });
-        let Some((_, assembler)) = self.assembler.as_ref() else { unreachable!("assembler set above") };
-        let matrix = assembler.assemble_with_diagonal(&blocks, diagonal.as_deref()).map_err(|e| StepFailure::Solver(e.to_string()))?;
-        self.profile.add(Stage::Assembly, start.elapsed().as_secs_f64());
+        let Some((_, assembler)) = self.assembler.as_ref() else {
+            unreachable!("assembler set above")
+        };
+        let matrix = assembler
+            .assemble_with_diagonal(&blocks, diagonal.as_deref())
+            .map_err(|e| StepFailure::Solver(e.to_string()))?;
+        self.profile
+            .add(Stage::Assembly, start.elapsed().as_secs_f64());
         Ok(matrix)
     }
 
     /// Assemble and factorise the tangent; Cholesky when every material's tangent is symmetric.
-    fn factorise_tangent(&mut self, sg: &StepGrid, trial: &TrialStresses, dt: f64) -> Result<(), StepFailure> {
+    fn factorise_tangent(
+        &mut self,
+        sg: &StepGrid,
+        trial: &TrialStresses,
+        dt: f64,
+    ) -> Result<(), StepFailure> {
         let matrix = self.assemble_tangent(sg, trial, dt)?;
         let symmetric = self.symmetric_tangent;
         let kind = self
             .profile
-            .time(Stage::Factorisation, || self.solver.factorize(&matrix, symmetric))
+            .time(Stage::Factorisation, || {
+                self.solver.factorize(&matrix, symmetric)
+            })
             .map_err(|e| StepFailure::Solver(e.to_string()))?;
         match kind {
             FactorKind::Cholesky => self.solver_usage.cholesky += 1,
@@ -266,29 +371,53 @@ impl Simulation {
     /// the assembled tangent (DESIGN D16–D17, incl. the [D19] term), without
     /// changing the state. `free_increment` has one entry per free dof; its
     /// length must equal the number of unknowns (see [`Simulation::unknowns`]).
-    pub fn linearize(&mut self, free_increment: &[f64]) -> Result<(Vec<f64>, SparseMatrix), RunError> {
+    pub fn linearize(
+        &mut self,
+        free_increment: &[f64],
+    ) -> Result<(Vec<f64>, SparseMatrix), RunError> {
         let (t, dt) = (self.time, self.implicit_dt());
-        let sg = self.prepare_step(t, dt).map_err(|f| self.failure_to_error(f, t + dt, 0))?;
+        let sg = self
+            .prepare_step(t, dt)
+            .map_err(|f| self.failure_to_error(f, t + dt, 0))?;
         if free_increment.len() != sg.dofs.n_free {
             return Err(RunError::Solver {
                 step: self.step + 1,
                 time: t + dt,
-                message: format!("linearize: {} values given for {} unknowns", free_increment.len(), sg.dofs.n_free),
+                message: format!(
+                    "linearize: {} values given for {} unknowns",
+                    free_increment.len(),
+                    sg.dofs.n_free
+                ),
             });
         }
         let du = self.initial_increment(&sg, t, dt, free_increment);
         let mut trial = TrialStresses::default();
-        evaluate_stresses(&self.particles, &self.materials, &sg.shapes, &du, None, &mut trial)
-            .map_err(|(p, e)| self.failure_to_error(StepFailure::Constitutive(p, e), t + dt, 0))?;
+        evaluate_stresses(
+            &self.particles,
+            &self.materials,
+            &sg.shapes,
+            &du,
+            None,
+            &mut trial,
+        )
+        .map_err(|(p, e)| self.failure_to_error(StepFailure::Constitutive(p, e), t + dt, 0))?;
         let res = self.residual(&sg, &trial, &du, t + dt, dt);
-        let matrix = self.assemble_tangent(&sg, &trial, dt).map_err(|f| self.failure_to_error(f, t + dt, 0))?;
+        let matrix = self
+            .assemble_tangent(&sg, &trial, dt)
+            .map_err(|f| self.failure_to_error(f, t + dt, 0))?;
         Ok((gather_free(&sg.dofs, &res.residual), matrix))
     }
 
     /// Number of unknowns of the next implicit step.
     pub fn unknowns(&self) -> Result<usize, RunError> {
-        let shapes = transfer::shapes_at(&self.grid, &self.particles.position)
-            .map_err(|o| RunError::ParticleLeftGrid { step: self.step + 1, time: self.time, particle: o.particle, position: o.position })?;
+        let shapes = transfer::shapes_at(&self.grid, &self.particles.position).map_err(|o| {
+            RunError::ParticleLeftGrid {
+                step: self.step + 1,
+                time: self.time,
+                particle: o.particle,
+                position: o.position,
+            }
+        })?;
         let bins = ParticleBins::new(&self.grid, &shapes);
         Ok(DofMap::new(&bins, &self.constraints).n_free)
     }
@@ -299,7 +428,8 @@ impl Simulation {
         let mut du = vec![[0.0; 2]; self.grid.node_count()];
         for (d, c) in self.constraints.dof.iter().enumerate() {
             if matches!(c, DofConstraint::Prescribed { .. }) && sg.bins.node_active[d / 2] {
-                du[d / 2][d % 2] = self.constraints.prescribed_value(&self.grid, d, t + dt) - self.constraints.prescribed_value(&self.grid, d, t);
+                du[d / 2][d % 2] = self.constraints.prescribed_value(&self.grid, d, t + dt)
+                    - self.constraints.prescribed_value(&self.grid, d, t);
             }
             let index = sg.dofs.index[d];
             if index != NONE {
@@ -324,7 +454,16 @@ impl Simulation {
         let mut growth = 0;
         for iteration in 0..=settings.max_iterations {
             self.profile
-                .time(Stage::StressUpdate, || evaluate_stresses(&self.particles, &self.materials, &sg.shapes, &du, None, &mut trial))
+                .time(Stage::StressUpdate, || {
+                    evaluate_stresses(
+                        &self.particles,
+                        &self.materials,
+                        &sg.shapes,
+                        &du,
+                        None,
+                        &mut trial,
+                    )
+                })
                 .map_err(|(p, e)| StepFailure::Constitutive(p, e))?;
             let res = self.residual(&sg, &trial, &du, t1, dt);
             if !res.norm.is_finite() {
@@ -334,7 +473,9 @@ impl Simulation {
             let force_ok = res.norm <= settings.tolerance_force * res.reference;
             let free_residual = gather_free(&sg.dofs, &res.residual);
             // DESIGN D18, energy norm: work of the new residual on the last correction.
-            let energy_ok = iteration == 0 || dot(&last_correction, &free_residual).abs() <= settings.tolerance_energy * energy0;
+            let energy_ok = iteration == 0
+                || dot(&last_correction, &free_residual).abs()
+                    <= settings.tolerance_energy * energy0;
             if force_ok && energy_ok {
                 self.commit_implicit(&sg, &trial, &du, &res, dt)?;
                 return Ok(iteration);
@@ -356,10 +497,15 @@ impl Simulation {
                 .time(Stage::Solve, || self.solver.solve_in_place(&mut correction))
                 .map_err(|e| StepFailure::Solver(e.to_string()))?;
             if correction.iter().any(|v| !v.is_finite()) {
-                return Err(StepFailure::NonFinite("solution of the linear system".into(), history));
+                return Err(StepFailure::NonFinite(
+                    "solution of the linear system".into(),
+                    history,
+                ));
             }
             if iteration == 0 {
-                energy0 = dot(&correction, &free_residual).abs().max(f64::MIN_POSITIVE);
+                energy0 = dot(&correction, &free_residual)
+                    .abs()
+                    .max(f64::MIN_POSITIVE);
             }
             for (d, &index) in sg.dofs.index.iter().enumerate() {
                 if index != NONE {
@@ -373,13 +519,27 @@ impl Simulation {
 
     /// Accept the converged iterate: velocities/accelerations (dynamic), then
     /// positions, deformation gradients, volumes, stresses (DESIGN D14–D15).
-    fn commit_implicit(&mut self, sg: &StepGrid, trial: &TrialStresses, du: &[[f64; 2]], res: &Residual, dt: f64) -> Result<(), StepFailure> {
+    fn commit_implicit(
+        &mut self,
+        sg: &StepGrid,
+        trial: &TrialStresses,
+        du: &[[f64; 2]],
+        res: &Residual,
+        dt: f64,
+    ) -> Result<(), StepFailure> {
         let start = std::time::Instant::now();
         let dynamic = self.dynamic();
         let n = self.particles.len();
-        let motion: Vec<[f64; 2]> = sg.shapes.iter().map(|s| transfer::interpolate(s, du)).collect();
+        let motion: Vec<[f64; 2]> = sg
+            .shapes
+            .iter()
+            .map(|s| transfer::interpolate(s, du))
+            .collect();
         if dynamic {
-            let max_motion = motion.iter().map(|u| (u[0] * u[0] + u[1] * u[1]).sqrt()).fold(0.0, f64::max);
+            let max_motion = motion
+                .iter()
+                .map(|u| (u[0] * u[0] + u[1] * u[1]).sqrt())
+                .fold(0.0, f64::max);
             if max_motion > 0.5 * self.grid.cell_size {
                 return Err(StepFailure::Motion(max_motion));
             }
@@ -420,12 +580,22 @@ impl Simulation {
 }
 
 /// x_p += u_p; F_p ← (I + L) F_p; V_p ← det(I + L) V_p; accumulate Δε (DESIGN D14).
-pub(crate) fn update_kinematics(p: &mut crate::particles::Particles, i: usize, motion: [f64; 2], l: &[f64; 4]) {
+pub(crate) fn update_kinematics(
+    p: &mut crate::particles::Particles,
+    i: usize,
+    motion: [f64; 2],
+    l: &[f64; 4],
+) {
     p.position[i][0] += motion[0];
     p.position[i][1] += motion[1];
     let df = [1.0 + l[0], l[1], l[2], 1.0 + l[3]];
     let f = p.def_grad[i];
-    p.def_grad[i] = [df[0] * f[0] + df[1] * f[2], df[0] * f[1] + df[1] * f[3], df[2] * f[0] + df[3] * f[2], df[2] * f[1] + df[3] * f[3]];
+    p.def_grad[i] = [
+        df[0] * f[0] + df[1] * f[2],
+        df[0] * f[1] + df[1] * f[3],
+        df[2] * f[0] + df[3] * f[2],
+        df[2] * f[1] + df[3] * f[3],
+    ];
     p.volume[i] *= df[0] * df[3] - df[1] * df[2];
     let (de, _) = transfer::strain_and_spin(l);
     for k in 0..4 {
@@ -434,7 +604,17 @@ pub(crate) fn update_kinematics(p: &mut crate::particles::Particles, i: usize, m
 }
 
 fn divide_by_mass(weighted: &[[f64; 2]], mass: &[f64]) -> Vec<[f64; 2]> {
-    weighted.iter().zip(mass).map(|(w, &m)| if m > 0.0 { [w[0] / m, w[1] / m] } else { [0.0; 2] }).collect()
+    weighted
+        .iter()
+        .zip(mass)
+        .map(|(w, &m)| {
+            if m > 0.0 {
+                [w[0] / m, w[1] / m]
+            } else {
+                [0.0; 2]
+            }
+        })
+        .collect()
 }
 
 fn gather_free(dofs: &DofMap, nodal: &[[f64; 2]]) -> Vec<f64> {

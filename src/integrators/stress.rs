@@ -46,7 +46,12 @@ pub fn evaluate_stresses(
         .stress
         .par_iter_mut()
         .zip(trial.state.par_iter_mut())
-        .zip(trial.gradient.par_iter_mut().zip(trial.tangent.par_iter_mut()))
+        .zip(
+            trial
+                .gradient
+                .par_iter_mut()
+                .zip(trial.tangent.par_iter_mut()),
+        )
         .enumerate()
         .filter_map(|(p, ((stress, state), (grad, tangent)))| {
             let l = transfer::gradient(&shapes[p], du);

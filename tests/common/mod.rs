@@ -10,7 +10,9 @@ use mpm_geo::simulation::Simulation;
 
 /// Path of a file under `validation/`.
 pub fn validation(path: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("validation").join(path)
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("validation")
+        .join(path)
 }
 
 /// Load a validation scene with `overrides` (`key=value`).
@@ -36,5 +38,8 @@ pub fn run_history(sim: &mut Simulation) -> Vec<(f64, Vec<f64>)> {
 
 /// Column index of monitor `name`.
 pub fn column(sim: &Simulation, name: &str) -> usize {
-    sim.monitors.iter().position(|m| m.name == name).unwrap_or_else(|| panic!("no monitor {name}"))
+    sim.monitors
+        .iter()
+        .position(|m| m.name == name)
+        .unwrap_or_else(|| panic!("no monitor {name}"))
 }
