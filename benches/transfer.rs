@@ -1,1 +1,108 @@
-fn main() {}
+//! P2G + G2P cost per particle per step (issue 3 bench `transfer`), at 10k and
+//! 100k material points (2×2 per cell), serial (1-thread rayon pool) and
+//! rayon (all threads). Run: `cargo bench --bench transfer`.
+
+use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
+use mpm_geo::grid::Grid;
+use mpm_geo::transfer::{self, ParticleBins};
+
+struct Cloud {
+    grid: Grid,
+    position: Vec<[f64; 2]>,
+    mass: Vec<f64>,
+    volume: Vec<f64>,
+    velocity: Vec<[f64; 2]>,
+    stress: Vec<[f64; 4]>,
+}
+
+fn cloud(particles: usize) -> Cloud {
+    let cells_side = ((particles / 4) as f64).sqrt().ceil() as usize;
+    let h = 0.01;
+    let grid = Grid {
+        origin: [0.0, 0.0],
+        cell_size: h,
+        cells: [cells_side + 2, cells_side + 2],
+    };
+    let g = 0.5 / 3f64.sqrt();
+    let mut position = Vec::with_capacity(particles);
+    'outer: for cj in 1..=cells_side {
+        for ci in 1..=cells_side {
+            for (dx, dy) in [(-g, -g), (g, -g), (g, g), (-g, g)] {
+                if position.len() == particles {
+                    break 'outer;
+                }
+                position.push([(ci as f64 + 0.5 + dx) * h, (cj as f64 + 0.5 + dy) * h]);
+            }
+        }
+    }
+    let n = position.len();
+    let velocity = (0..n)
+        .map(|p| [(p as f64 * 0.1).sin(), (p as f64 * 0.3).cos()])
+        .collect();
+    let stress = (0..n)
+        .map(|p| [-100.0 - p as f64 * 1e-3, -80.0, -90.0, 5.0])
+        .collect();
+    Cloud {
+        grid,
+        position,
+        mass: vec![2e-4; n],
+        volume: vec![1e-4; n],
+        velocity,
+        stress,
+    }
+}
+
+/// One step's transfers: shapes + binning, P2G of mass, momentum and internal
+/// force, G2P of velocity and its gradient.
+fn p2g_g2p(c: &Cloud) -> f64 {
+    let shapes = transfer::shapes_at(&c.grid, &c.position).expect("inside");
+    let bins = ParticleBins::new(&c.grid, &shapes);
+    let mass = transfer::nodal_mass(&c.grid, &bins, &shapes, &c.mass);
+    let momentum = transfer::nodal_mass_weighted(&c.grid, &bins, &shapes, &c.mass, &c.velocity);
+    let force = transfer::internal_force(&c.grid, &bins, &shapes, &c.volume, &c.stress);
+    let v: Vec<[f64; 2]> = momentum
+        .iter()
+        .zip(&mass)
+        .map(|(q, &m)| {
+            if m > 0.0 {
+                [q[0] / m, q[1] / m]
+            } else {
+                [0.0; 2]
+            }
+        })
+        .collect();
+    use rayon::prelude::*;
+    let sum: f64 = shapes
+        .par_iter()
+        .map(|s| {
+            let u = transfer::interpolate(s, &v);
+            let l = transfer::gradient(s, &v);
+            u[0] + l[0] + l[3]
+        })
+        .sum();
+    sum + force[0][0]
+}
+
+fn bench_transfer(c: &mut Criterion) {
+    let mut group = c.benchmark_group("transfer");
+    group.sample_size(20);
+    let serial = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
+    let parallel = rayon::ThreadPoolBuilder::new().build().unwrap();
+    for n in [10_000usize, 100_000] {
+        let cloud = cloud(n);
+        group.throughput(Throughput::Elements(cloud.position.len() as u64));
+        group.bench_with_input(BenchmarkId::new("serial", n), &cloud, |b, cl| {
+            b.iter(|| serial.install(|| p2g_g2p(cl)))
+        });
+        group.bench_with_input(BenchmarkId::new("rayon", n), &cloud, |b, cl| {
+            b.iter(|| parallel.install(|| p2g_g2p(cl)))
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench_transfer);
+criterion_main!(benches);
