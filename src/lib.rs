@@ -33,3 +33,4 @@ pub mod scene;
 pub mod shape;
 pub mod simulation;
 pub mod transfer;
+pub mod smoothing;

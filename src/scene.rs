@@ -99,6 +99,57 @@ pub struct Scene {
     /// Monitored quantities written to `curve.csv`.
     #[serde(default)]
     pub monitor: Vec<MonitorSpec>,
+    /// Nonlocal regularisation (absent: local model).
+    #[serde(default)]
+    pub nonlocal: Option<NonlocalSpec>,
+    /// Stress smoothing.
+    #[serde(default)]
+    pub smoothing: SmoothingSpec,
+}
+
+/// When the nonlocal variable is updated (DESIGN §6).
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum NonlocalUpdate {
+    /// Every Newton iteration, lagged by one (DESIGN D36).
+    #[default]
+    Iteration,
+    /// Once per step after convergence (strength frozen at κ̄(n)); explicit runs always.
+    Step,
+}
+
+/// `[nonlocal]`: averaging of the equivalent plastic strain (paper eq. 6, DESIGN §6).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct NonlocalSpec {
+    /// Length scale l_s, m (> cell size; ≥ 5 cells recommended, the paper's 0.2 l_s rule).
+    pub length_scale: f64,
+    /// Cutoff radius in units of l_s (DESIGN: 3).
+    #[serde(default = "default_cutoff")]
+    pub cutoff_factor: f64,
+    /// `iteration` (default) or `step`.
+    #[serde(default)]
+    pub update: NonlocalUpdate,
+    /// ε_κ of DESIGN D18 (third criterion).
+    #[serde(default = "default_kappa_tolerance")]
+    pub tolerance: f64,
+}
+
+fn default_cutoff() -> f64 {
+    3.0
+}
+
+fn default_kappa_tolerance() -> f64 {
+    1e-3
+}
+
+/// `[smoothing]`.
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SmoothingSpec {
+    /// `auto` (on for softening materials), `off`, `increment` or `total` (DESIGN §7).
+    #[serde(default)]
+    pub double_mapping: crate::smoothing::DoubleMapping,
 }
 
 /// The time integration scheme.
@@ -780,7 +831,33 @@ impl Scene {
             self.validate_bc(&mut e);
         }
         self.validate_monitors(&mut e, grid_ok);
+        if let Some(nl) = &self.nonlocal {
+            check(&mut e, "nonlocal.length_scale", nl.length_scale > 0.0 && nl.length_scale.is_finite(), format!("must be > 0 m (got {})", nl.length_scale));
+            check(&mut e, "nonlocal.cutoff_factor", nl.cutoff_factor >= 1.0 && nl.cutoff_factor <= 10.0, format!("must lie in [1, 10] (got {})", nl.cutoff_factor));
+            check(&mut e, "nonlocal.tolerance", nl.tolerance > 0.0 && nl.tolerance < 1.0, "must lie in (0, 1)");
+            check(
+                &mut e,
+                "grid.cell_size",
+                self.grid.cell_size <= nl.length_scale,
+                format!("{} m exceeds the nonlocal length scale {} m: the averaging needs cells no larger than l_s", self.grid.cell_size, nl.length_scale),
+            );
+        }
         e
+    }
+
+    /// Advice that does not stop a run (printed by the CLI, written to `run.json`).
+    pub fn warnings(&self) -> Vec<String> {
+        let mut w = Vec::new();
+        if let Some(nl) = &self.nonlocal {
+            if self.grid.cell_size > 0.2 * nl.length_scale {
+                w.push(format!(
+                    "grid.cell_size {} m > 0.2 l_s = {} m: the paper finds nonlocal results mesh-objective only for h <= 0.2 l_s",
+                    self.grid.cell_size,
+                    0.2 * nl.length_scale
+                ));
+            }
+        }
+        w
     }
 
     fn validate_analysis(&self, e: &mut Vec<FieldError>) {

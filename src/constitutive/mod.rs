@@ -95,6 +95,19 @@ pub trait ConstitutiveModel: Send + Sync + Debug {
         state_n: &PointState,
         strength_kappa: Option<f64>,
     ) -> Result<StressUpdate, ConstitutiveError>;
+
+    /// True when the strength can decrease with plastic strain (softening):
+    /// double mapping is then on by default (DESIGN §7).
+    fn can_soften(&self) -> bool {
+        false
+    }
+
+    /// Return a stress that lies outside the yield surface to it at fixed mean
+    /// stress and Lode angle, without changing the state (DESIGN D39, used after
+    /// double mapping). Elastic models return the stress unchanged.
+    fn project_to_surface(&self, stress: &Voigt, _state: &PointState, _strength_kappa: Option<f64>) -> Voigt {
+        *stress
+    }
 }
 
 /// `D · a` for a 4×4 matrix and a Voigt vector.
