@@ -1,8 +1,6 @@
 //! Isotropic linear (hypo)elasticity in plane strain (DESIGN D22).
 
-use super::{
-    mat4_mul_vec, ConstitutiveError, ConstitutiveModel, Mat4, PointState, StressUpdate, Voigt,
-};
+use super::{mat4_mul_vec, ConstitutiveError, ConstitutiveModel, Mat4, PointState, StressUpdate, Voigt};
 
 /// Isotropic linear elasticity with Young's modulus `youngs_modulus` (kPa) and
 /// Poisson's ratio `poisson_ratio`.
@@ -17,10 +15,7 @@ pub struct LinearElastic {
 impl LinearElastic {
     /// New elastic law; the caller (scene validation) guarantees E > 0 and −1 < ν < 0.5.
     pub fn new(youngs_modulus: f64, poisson_ratio: f64) -> Self {
-        Self {
-            youngs_modulus,
-            poisson_ratio,
-        }
+        Self { youngs_modulus, poisson_ratio }
     }
 
     /// Bulk modulus K = E / (3(1 − 2ν)), kPa.
@@ -95,16 +90,9 @@ impl ConstitutiveModel for LinearElastic {
             *s += ds;
         }
         if stress.iter().any(|s| !s.is_finite()) {
-            return Err(ConstitutiveError::NonFinite(format!(
-                "elastic stress {stress:?}"
-            )));
+            return Err(ConstitutiveError::NonFinite(format!("elastic stress {stress:?}")));
         }
-        Ok(StressUpdate {
-            stress,
-            state: *state_n,
-            tangent: d,
-            yielded: false,
-        })
+        Ok(StressUpdate { stress, state: *state_n, tangent: d, yielded: false })
     }
 }
 
