@@ -8,4 +8,5 @@
 pub mod constitutive;
 pub mod grid;
 pub mod particles;
+pub mod point_driver;
 pub mod shape;
