@@ -36,6 +36,10 @@ pub trait Real:
     fn sin(self) -> Self;
     /// Cosine (radians).
     fn cos(self) -> Self;
+    /// Sine and cosine together (radians).
+    fn sin_cos(self) -> (Self, Self) {
+        (self.sin(), self.cos())
+    }
     /// Smaller of two values (derivative of the selected branch).
     fn min_by_value(self, other: Self) -> Self {
         if self.re() <= other.re() {
@@ -256,6 +260,11 @@ impl<const N: usize> Real for Dual<N> {
     fn cos(self) -> Self {
         let (s, c) = self.re.sin_cos();
         self.chain(c, -s)
+    }
+    #[inline(always)]
+    fn sin_cos(self) -> (Self, Self) {
+        let (s, c) = self.re.sin_cos();
+        (self.chain(s, c), self.chain(c, -s))
     }
 }
 

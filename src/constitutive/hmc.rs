@@ -396,15 +396,14 @@ impl Hmc {
             .cohesion_law
             .value(kappa)
             .max_by_value(T::cst(self.cohesion_min));
-        let friction = self.friction_law.value(kappa);
-        let tan_friction = friction.sin() / friction.cos();
-        let tensile_max = (cohesion - self.cohesion_min) / tan_friction;
+        let (sin_phi, cos_phi) = self.friction_law.value(kappa).sin_cos();
+        let tensile_max = (cohesion - self.cohesion_min) * cos_phi / sin_phi;
         let tensile = self
             .tensile_law
             .value(kappa)
             .min_by_value(tensile_max)
             .max_by_value(T::cst(0.0));
-        SurfaceStrength::new(cohesion, friction, tensile)
+        SurfaceStrength::from_sin_cos(cohesion, sin_phi, cos_phi, tensile)
     }
 
     /// Strength parameters at equivalent plastic strain κ (DESIGN D28, floor and clamp included).
@@ -475,25 +474,59 @@ impl Hmc {
         kappa_n: f64,
         frozen: Option<f64>,
     ) -> (Vec6, f64) {
-        let strength = self.strength(frozen.unwrap_or(kappa));
+        let strength = self.strength_f64(frozen.unwrap_or(kappa));
         let (f, gradient) = self.surface.value_and_gradient(stress, &strength);
         let m = self.flow.direction(&gradient, strength.tan_friction);
-        let mut r = Vec6::zeros();
-        let diff = [
-            stress[0] - trial[0],
-            stress[1] - trial[1],
-            stress[2] - trial[2],
-            stress[3] - trial[3],
-        ];
+        let r = self.assemble_residual(
+            stress,
+            kappa,
+            multiplier,
+            trial,
+            kappa_n,
+            frozen.is_none(),
+            &m,
+            strain_norm(&m),
+            f,
+        );
+        (r, f)
+    }
+
+    /// Residual vector of D29 from already evaluated m, h = ‖m‖ε and f.
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    fn assemble_residual(
+        &self,
+        stress: &Voigt,
+        kappa: f64,
+        multiplier: f64,
+        trial: &Voigt,
+        kappa_n: f64,
+        local: bool,
+        m: &Voigt,
+        h: f64,
+        f: f64,
+    ) -> Vec6 {
+        let diff: Voigt = std::array::from_fn(|i| stress[i] - trial[i]);
         let c_diff = mat4_mul_vec(&self.compliance, &diff);
+        let mut r = Vec6::zeros();
         for i in 0..4 {
             r[i] = c_diff[i] + multiplier * m[i];
         }
-        if frozen.is_none() {
-            r[4] = kappa - kappa_n - multiplier * strain_norm(&m);
+        if local {
+            r[4] = kappa - kappa_n - multiplier * h;
         }
         r[5] = f / self.parameters.youngs_modulus;
-        (r, f)
+        r
+    }
+
+    /// f64 strength at κ, with the κ = 0 (peak) strength precomputed.
+    #[inline]
+    fn strength_f64(&self, kappa: f64) -> SurfaceStrength<f64> {
+        if kappa == 0.0 {
+            self.fixed_strength
+        } else {
+            self.strength(kappa)
+        }
     }
 
     /// Jacobian A of DESIGN D30 (nonlocal: κ row and column replaced by the identity).
@@ -535,31 +568,19 @@ impl Hmc {
         let mut stress = *trial;
         let mut kappa = kappa_n;
         let mut multiplier = 0.0;
+        let mut lin = self.linearise(&stress, frozen.unwrap_or(kappa), local);
         for _ in 0..MAX_NEWTON_ITERATIONS {
-            let lin = self.linearise(&stress, frozen.unwrap_or(kappa), local);
-            let mut r = Vec6::zeros();
-            let diff = [
-                stress[0] - trial[0],
-                stress[1] - trial[1],
-                stress[2] - trial[2],
-                stress[3] - trial[3],
-            ];
-            let c_diff = mat4_mul_vec(&self.compliance, &diff);
-            for i in 0..4 {
-                r[i] = c_diff[i] + multiplier * lin.m[i];
-            }
-            if local {
-                r[4] = kappa - kappa_n - multiplier * lin.h;
-            }
-            r[5] = lin.f / e;
+            let r = self.assemble_residual(
+                &stress, kappa, multiplier, trial, kappa_n, local, &lin.m, lin.h, lin.f,
+            );
             let r_sigma = r[0].abs().max(r[1].abs()).max(r[2].abs()).max(r[3].abs());
             let jacobian = self.jacobian(&lin, multiplier, local);
+            let lu = jacobian.lu();
             if r_sigma * e <= tolerance && lin.f.abs() <= tolerance && r[4].abs() <= KAPPA_TOLERANCE
             {
                 if multiplier < 0.0 {
                     return Err("negative plastic multiplier");
                 }
-                let lu = jacobian.lu();
                 if !lu.is_invertible() {
                     return Err("singular Jacobian at the converged state");
                 }
@@ -576,26 +597,44 @@ impl Hmc {
                     jacobian: lu,
                 });
             }
-            let step = jacobian.lu().solve(&(-r)).ok_or("singular Jacobian")?;
+            let step = lu.solve(&(-r)).ok_or("singular Jacobian")?;
             if step.iter().any(|x| !x.is_finite()) {
                 return Err("non-finite Newton step");
             }
-            // Backtracking line search on ‖r‖ (DESIGN §5.6 step 2).
+            // Backtracking line search on ‖r‖ (DESIGN §5.6 step 2). The full step is evaluated
+            // with the dual linearisation, which is reused by the next iteration when accepted.
             let norm0 = r.norm();
-            let mut alpha = 1.0;
-            for halving in 0..=MAX_LINE_SEARCH_HALVINGS {
-                let s_try = [
-                    stress[0] + alpha * step[0],
-                    stress[1] + alpha * step[1],
-                    stress[2] + alpha * step[2],
-                    stress[3] + alpha * step[3],
-                ];
+            let point = |alpha: f64| {
+                let s_try: Voigt = std::array::from_fn(|i| stress[i] + alpha * step[i]);
                 let k_try = if local {
                     kappa + alpha * step[4]
                 } else {
                     kappa
                 };
-                let l_try = multiplier + alpha * step[5];
+                (s_try, k_try, multiplier + alpha * step[5])
+            };
+            let (s_full, k_full, l_full) = point(1.0);
+            let lin_full = self.linearise(&s_full, frozen.unwrap_or(k_full), local);
+            let r_full = self.assemble_residual(
+                &s_full,
+                k_full,
+                l_full,
+                trial,
+                kappa_n,
+                local,
+                &lin_full.m,
+                lin_full.h,
+                lin_full.f,
+            );
+            let norm_full = r_full.norm();
+            if norm_full.is_finite() && norm_full <= (1.0 - 1e-4) * norm0 {
+                (stress, kappa, multiplier, lin) = (s_full, k_full, l_full, lin_full);
+                continue;
+            }
+            let mut alpha = 1.0;
+            for halving in 1..=MAX_LINE_SEARCH_HALVINGS {
+                alpha *= 0.5;
+                let (s_try, k_try, l_try) = point(alpha);
                 let (r_try, _) = self.residual(&s_try, k_try, l_try, trial, kappa_n, frozen);
                 let norm = r_try.norm();
                 if (norm.is_finite() && norm <= (1.0 - 1e-4 * alpha) * norm0)
@@ -604,13 +643,11 @@ impl Hmc {
                     if !norm.is_finite() {
                         return Err("non-finite residual in the line search");
                     }
-                    stress = s_try;
-                    kappa = k_try;
-                    multiplier = l_try;
+                    (stress, kappa, multiplier) = (s_try, k_try, l_try);
                     break;
                 }
-                alpha *= 0.5;
             }
+            lin = self.linearise(&stress, frozen.unwrap_or(kappa), local);
         }
         Err("Newton iteration limit reached")
     }
@@ -646,7 +683,7 @@ impl Hmc {
                 stress[2] + d_sub[2],
                 stress[3] + d_sub[3],
             ];
-            let strength = self.strength(frozen.unwrap_or(kappa));
+            let strength = self.strength_f64(frozen.unwrap_or(kappa));
             let f_trial = self.surface.value(&trial, &strength);
             if f_trial <= elastic_tolerance {
                 stress = trial;
@@ -712,7 +749,7 @@ impl Hmc {
         let mut stress = [0.0; 4];
         let mut plastic = [0.0; 4];
         for _ in 0..50 {
-            let tensile = self.strength(frozen.unwrap_or(kappa)).tensile_strength;
+            let tensile = self.strength_f64(frozen.unwrap_or(kappa)).tensile_strength;
             stress = [tensile, tensile, tensile, 0.0];
             let diff = [
                 stress[0] - stress_n[0],
@@ -835,7 +872,7 @@ impl Hmc {
         // Never hand back a stress outside the surface.
         let f = self.surface.value(
             &result.stress,
-            &self.strength(strength_kappa.unwrap_or(result.kappa)),
+            &self.strength_f64(strength_kappa.unwrap_or(result.kappa)),
         );
         let scale = self
             .strength_scale

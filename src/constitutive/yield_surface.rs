@@ -34,10 +34,14 @@ pub struct SurfaceStrength<T> {
 /// extension for friction angle `friction_angle` (radians) (DESIGN D25).
 #[inline]
 pub fn van_eekelen_shape<T: Real>(friction_angle: T) -> (T, T) {
-    let sin_phi = friction_angle.sin();
-    let cos_phi = friction_angle.cos();
+    van_eekelen_shape_sin_cos(friction_angle.sin(), friction_angle.cos())
+}
+
+/// [`van_eekelen_shape`] from sin φ and cos φ (DESIGN D25).
+#[inline]
+pub fn van_eekelen_shape_sin_cos<T: Real>(sin_phi: T, cos_phi: T) -> (T, T) {
     let three_minus = T::cst(3.0) - sin_phi;
-    let ratio = (sin_phi + 3.0).powf(-1.0) * three_minus; // k = r_e / r_c
+    let ratio = three_minus / (sin_phi + 3.0); // k = r_e / r_c
     let t = ratio.powf(1.0 / VAN_EEKELEN_EXPONENT);
     let y = (T::cst(1.0) - t) / (t + 1.0);
     let r_compression = cos_phi * (2.0 * 3f64.sqrt()) / three_minus;
@@ -55,8 +59,15 @@ impl<T: Real> SurfaceStrength<T> {
     /// Strength from cohesion (kPa), friction angle (radians) and tensile strength (kPa).
     #[inline]
     pub fn new(cohesion: T, friction_angle: T, tensile_strength: T) -> Self {
-        let tan_friction = friction_angle.sin() / friction_angle.cos();
-        let (shape_x, shape_y) = van_eekelen_shape(friction_angle);
+        let (sin_phi, cos_phi) = friction_angle.sin_cos();
+        Self::from_sin_cos(cohesion, sin_phi, cos_phi, tensile_strength)
+    }
+
+    /// [`SurfaceStrength::new`] from sin φ and cos φ of the friction angle.
+    #[inline]
+    pub fn from_sin_cos(cohesion: T, sin_phi: T, cos_phi: T, tensile_strength: T) -> Self {
+        let tan_friction = sin_phi / cos_phi;
+        let (shape_x, shape_y) = van_eekelen_shape_sin_cos(sin_phi, cos_phi);
         Self {
             cohesion,
             tan_friction,
@@ -137,7 +148,24 @@ impl HyperbolicMohrCoulomb {
     /// f(σ) = sqrt(J²/fd(θ) + a²) − (c + p tanφ) (DESIGN D23), kPa.
     #[inline]
     pub fn value<T: Real>(&self, stress: &[T; 4], strength: &SurfaceStrength<T>) -> T {
-        self.value_and_gradient(stress, strength).0
+        let p = -(stress[0] + stress[1] + stress[2]) / 3.0;
+        let (sx, sy, sz, txy) = (stress[0] + p, stress[1] + p, stress[2] + p, stress[3]);
+        let j2 = (sx * sx + sy * sy + sz * sz) * 0.5 + txy * txy;
+        let r = if j2.re() < self.j_min * self.j_min {
+            strength.shape_x
+        } else {
+            let j3 = sz * (sx * sy - txy * txy);
+            let sin_3theta = -(j3 / (j2 * j2.sqrt())) * LODE_FACTOR;
+            let clamped = T::cst(sin_3theta.re().clamp(-1.0, 1.0));
+            let sin_3theta = if sin_3theta.re().abs() > 1.0 {
+                clamped
+            } else {
+                sin_3theta
+            };
+            Self::shape_radius(strength, sin_3theta)
+        };
+        let a = strength.hyperbola_a;
+        (j2 / (r * r) + a * a).sqrt() - (strength.cohesion + p * strength.tan_friction)
     }
 
     /// f (kPa) and its analytic gradient f_σ = ∂f/∂σ (Voigt, DESIGN D31).
@@ -158,7 +186,7 @@ impl HyperbolicMohrCoulomb {
             let fd = strength.shape_x * strength.shape_x;
             let big_r = (j2 / fd + a * a).sqrt();
             let f = big_r - pressure_strength;
-            let k = (fd * big_r * 2.0).powf(-1.0);
+            let k = T::cst(0.5) / (fd * big_r);
             let g = [
                 sx * k + tan_third,
                 sy * k + tan_third,
@@ -180,7 +208,7 @@ impl HyperbolicMohrCoulomb {
         let big_r = (j2 / fd + a * a).sqrt();
         let f = big_r - pressure_strength;
         // ∂f/∂J2 at fixed θ, times ∂J2/∂σ = [sx, sy, sz, 2σxy].
-        let k = (fd * big_r * 2.0).powf(-1.0);
+        let k = T::cst(0.5) / (fd * big_r);
         let mut g = [
             sx * k + tan_third,
             sy * k + tan_third,
@@ -204,7 +232,7 @@ impl HyperbolicMohrCoulomb {
                 sz * sz - two_thirds_j2,
                 txy * (sx + sy) * 2.0,
             ];
-            let inv_j = j.powf(-1.0);
+            let inv_j = T::cst(1.0) / j;
             let c1 = coef * inv_j;
             let c2 = coef * j3 * 1.5 / (j2 * j);
             let s = [sx, sy, sz, txy * 2.0];
