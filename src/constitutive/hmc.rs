@@ -1358,8 +1358,20 @@ mod tests {
                 None,
             ));
         }
+        // A large increment that needs sub-stepping (the tangent is chained through the sub-steps).
+        let big: Voigt = [0.0, -3.0, 0.0, 0.0];
+        let t = elastic_limit(&softening, &isotropic(100.0), &big);
+        cases.push((
+            "sub-stepped".into(),
+            &softening,
+            isotropic(100.0),
+            scale(&big, 100.0 * t),
+            0.0,
+            None,
+        ));
         assert!(cases.len() >= 20);
         let mut plastic_cases = 0;
+        let mut worst_overall: f64 = 0.0;
         for (label, m, stress0, inc, kappa0, frozen) in &cases {
             let state0 = PointState {
                 plastic_strain_eq: *kappa0,
@@ -1389,12 +1401,23 @@ mod tests {
                 }
             }
             let rel = worst / dmax;
+            worst_overall = worst_overall.max(rel);
             assert!(
                 rel <= 1e-5,
                 "{label}: tangent error {rel:e} (yielded {})",
                 u.yielded
             );
         }
+        let (_, substeps) = softening
+            .update_with_substeps(
+                &isotropic(100.0),
+                &scale(&big, 100.0 * t),
+                &PointState::default(),
+                None,
+            )
+            .unwrap();
+        eprintln!("tangent check: {} cases, worst relative error {worst_overall:.2e}; large case used {substeps} sub-steps", cases.len());
+        assert!(substeps > 1);
         assert!(plastic_cases >= 20, "only {plastic_cases} plastic cases");
     }
 
