@@ -576,6 +576,42 @@ mod tests {
         );
     }
 
+    /// The clap arguments parse as documented (defaults, value names, repeatable --set).
+    #[test]
+    fn clap_arguments() {
+        use clap::Parser;
+        #[derive(clap::Parser)]
+        struct Cli {
+            #[command(flatten)]
+            point: PointArgs,
+        }
+        let cli = Cli::try_parse_from(["mpm-geo"]).unwrap();
+        assert_eq!(cli.point.test, PointTest::Biaxial);
+        assert_eq!(
+            (cli.point.confinement, cli.point.strain, cli.point.steps),
+            (100.0, 0.0452, 2260)
+        );
+        assert_eq!(cli.point.out, PathBuf::from("point.csv"));
+        let cli = Cli::try_parse_from([
+            "mpm-geo",
+            "--test",
+            "simple-shear",
+            "--set",
+            "omega=0.5",
+            "--set",
+            "b_res=1",
+            "--strain",
+            "0.2",
+        ])
+        .unwrap();
+        assert_eq!(cli.point.test, PointTest::SimpleShear);
+        assert_eq!(
+            cli.point.set,
+            vec!["omega=0.5".to_string(), "b_res=1".to_string()]
+        );
+        assert!(Cli::try_parse_from(["mpm-geo", "--test", "oedometer"]).is_err());
+    }
+
     /// Simple shear keeps εxx = εyy = εzz = 0 and stays on the surface; the driver writes a CSV with
     /// one header and steps + 1 rows; bad options and parameters are reported as errors, not panics.
     #[test]
