@@ -1509,12 +1509,14 @@ mod tests {
                     .iter()
                     .flatten()
                     .fold(0.0f64, |a, x| a.max(x.abs()));
-                for i in 0..4 {
-                    for j in 0..4 {
-                        assert!((lin.m_sigma[i][j] - m_sigma[i][j]).abs() <= 1e-5 * big);
+                for (dual_row, fd_row) in lin.m_sigma.iter().zip(&m_sigma) {
+                    for (exact, fd) in dual_row.iter().zip(fd_row) {
+                        assert!((exact - fd).abs() <= 1e-5 * big);
                     }
-                    let big_k = lin.m_kappa.iter().fold(1e-12f64, |a, x| a.max(x.abs()));
-                    assert!((lin.m_kappa[i] - m_kappa[i]).abs() <= 1e-5 * big_k);
+                }
+                let big_k = lin.m_kappa.iter().fold(1e-12f64, |a, x| a.max(x.abs()));
+                for (exact, fd) in lin.m_kappa.iter().zip(&m_kappa) {
+                    assert!((exact - fd).abs() <= 1e-5 * big_k);
                 }
                 assert!((lin.f_kappa - f_kappa).abs() <= 1e-5 * f_kappa.abs().max(1e-9));
             }
