@@ -797,6 +797,8 @@ impl Hmc {
             )));
         }
         let kappa_n = state_n.plastic_strain_eq;
+        // κ̄ is a non-negative average; guard against round-off below zero.
+        let strength_kappa = strength_kappa.map(|k| k.max(0.0));
         let d_eps = mat4_mul_vec(&self.stiffness, strain_increment);
         let trial: Voigt = std::array::from_fn(|i| stress_rotated[i] + d_eps[i]);
         let trial_mean = -(trial[0] + trial[1] + trial[2]) / 3.0;
