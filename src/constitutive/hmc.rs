@@ -883,11 +883,15 @@ impl Hmc {
                 result.stress, result.kappa
             )));
         }
-        // Never hand back a stress outside the surface.
-        let f = self.surface.value(
-            &result.stress,
-            &self.strength_f64(strength_kappa.unwrap_or(result.kappa)),
-        );
+        // Never hand back a stress outside the surface (elastic results passed the check already).
+        let f = if result.yielded {
+            self.surface.value(
+                &result.stress,
+                &self.strength_f64(strength_kappa.unwrap_or(result.kappa)),
+            )
+        } else {
+            f64::NEG_INFINITY
+        };
         let scale = self
             .strength_scale
             .max(1e-6 * trial.iter().fold(0.0f64, |acc, x| acc.max(x.abs())));
