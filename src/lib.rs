@@ -27,6 +27,7 @@ pub mod monitor;
 pub mod nonlocal;
 pub mod output;
 pub mod particles;
+pub mod point_driver;
 pub mod profile;
 pub mod run;
 pub mod scene;

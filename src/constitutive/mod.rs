@@ -8,11 +8,17 @@
 //! Sign convention (DESIGN D1–D2): stress is tension-positive, Voigt order
 //! `[xx, yy, zz, xy]`; strains carry engineering shear `γxy = 2 εxy`.
 
+pub mod dual;
 pub mod elastic;
+pub mod flow_rule;
+pub mod hmc;
+pub mod softening;
+pub mod yield_surface;
 
 use std::fmt::Debug;
 
 pub use elastic::LinearElastic;
+pub use hmc::{Hmc, HmcParameters};
 
 /// Voigt 4-vector `[xx, yy, zz, xy]` (DESIGN D2).
 pub type Voigt = [f64; 4];

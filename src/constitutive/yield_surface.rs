@@ -1,0 +1,386 @@
+//! Hyperbolic Mohr–Coulomb yield criterion (DESIGN D23, paper eq. 3) with the
+//! van Eekelen deviatoric shape (DESIGN D24–D25), invariants (D1–D6) and the
+//! analytic gradient f_σ (D31).
+//!
+//! Everything is generic over [`Real`] so that the same code gives f64 values
+//! and, evaluated with dual numbers, exact second derivatives.
+
+use super::dual::Real;
+
+/// van Eekelen exponent Z of DESIGN D24 (chosen for convexity).
+pub const VAN_EEKELEN_EXPONENT: f64 = -0.229;
+
+/// 3√3/2, the factor of the Lode-angle definition (DESIGN D6).
+const LODE_FACTOR: f64 = 2.598_076_211_353_316;
+
+/// Strength of the hyperbolic Mohr–Coulomb surface at one value of κ.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SurfaceStrength<T> {
+    /// Asymptotic cohesion c* (kPa).
+    pub cohesion: T,
+    /// tan φ* of the asymptotic friction angle.
+    pub tan_friction: T,
+    /// Tensile strength p_t ≥ 0 (kPa, magnitude; the tip is at p = −p_t).
+    pub tensile_strength: T,
+    /// Hyperbola parameter a = c − p_t tanφ (kPa, DESIGN D23).
+    pub hyperbola_a: T,
+    /// van Eekelen X (DESIGN D25).
+    pub shape_x: T,
+    /// van Eekelen Y (DESIGN D25).
+    pub shape_y: T,
+}
+
+/// van Eekelen constants (X, Y) matching Mohr–Coulomb in triaxial compression and
+/// extension for friction angle `friction_angle` (radians) (DESIGN D25).
+#[inline]
+pub fn van_eekelen_shape<T: Real>(friction_angle: T) -> (T, T) {
+    van_eekelen_shape_sin_cos(friction_angle.sin(), friction_angle.cos())
+}
+
+/// [`van_eekelen_shape`] from sin φ and cos φ (DESIGN D25).
+#[inline]
+pub fn van_eekelen_shape_sin_cos<T: Real>(sin_phi: T, cos_phi: T) -> (T, T) {
+    let three_minus = T::cst(3.0) - sin_phi;
+    let ratio = three_minus / (sin_phi + 3.0); // k = r_e / r_c
+    let t = ratio.powf(1.0 / VAN_EEKELEN_EXPONENT);
+    let y = (T::cst(1.0) - t) / (t + 1.0);
+    let r_compression = cos_phi * (2.0 * 3f64.sqrt()) / three_minus;
+    let x = r_compression * (y + 1.0).powf(-VAN_EEKELEN_EXPONENT);
+    (x, y)
+}
+
+/// Mohr–Coulomb radius r_MC(θ) = cosφ / (cosθ − sinθ sinφ/√3) (DESIGN D7), θ and φ in radians.
+pub fn mohr_coulomb_radius(lode_angle: f64, friction_angle: f64) -> f64 {
+    friction_angle.cos()
+        / (lode_angle.cos() - lode_angle.sin() * friction_angle.sin() / 3f64.sqrt())
+}
+
+impl<T: Real> SurfaceStrength<T> {
+    /// Strength from cohesion (kPa), friction angle (radians) and tensile strength (kPa).
+    #[inline]
+    pub fn new(cohesion: T, friction_angle: T, tensile_strength: T) -> Self {
+        let (sin_phi, cos_phi) = friction_angle.sin_cos();
+        Self::from_sin_cos(cohesion, sin_phi, cos_phi, tensile_strength)
+    }
+
+    /// [`SurfaceStrength::new`] from sin φ and cos φ of the friction angle.
+    #[inline]
+    pub fn from_sin_cos(cohesion: T, sin_phi: T, cos_phi: T, tensile_strength: T) -> Self {
+        let tan_friction = sin_phi / cos_phi;
+        let (shape_x, shape_y) = van_eekelen_shape_sin_cos(sin_phi, cos_phi);
+        Self {
+            cohesion,
+            tan_friction,
+            tensile_strength,
+            hyperbola_a: cohesion - tensile_strength * tan_friction,
+            shape_x,
+            shape_y,
+        }
+    }
+}
+
+impl SurfaceStrength<f64> {
+    /// The same strength as constants of another scalar type.
+    #[inline]
+    pub fn lift<T: Real>(&self) -> SurfaceStrength<T> {
+        SurfaceStrength {
+            cohesion: T::cst(self.cohesion),
+            tan_friction: T::cst(self.tan_friction),
+            tensile_strength: T::cst(self.tensile_strength),
+            hyperbola_a: T::cst(self.hyperbola_a),
+            shape_x: T::cst(self.shape_x),
+            shape_y: T::cst(self.shape_y),
+        }
+    }
+}
+
+/// Stress invariants of DESIGN D1–D6.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Invariants {
+    /// Compression-positive mean stress p (kPa, D1).
+    pub mean_stress: f64,
+    /// J = sqrt(J2) (kPa, D4).
+    pub j: f64,
+    /// sin 3θ ∈ [−1, 1] (D6); +1 triaxial compression, −1 triaxial extension.
+    pub sin_3theta: f64,
+}
+
+impl Invariants {
+    /// Invariants of a tension-positive Voigt stress; sin3θ = 0 when J < `j_min` (kPa).
+    pub fn of(stress: &[f64; 4], j_min: f64) -> Self {
+        let p = -(stress[0] + stress[1] + stress[2]) / 3.0;
+        let (sx, sy, sz, txy) = (stress[0] + p, stress[1] + p, stress[2] + p, stress[3]);
+        let j2 = 0.5 * (sx * sx + sy * sy + sz * sz) + txy * txy;
+        let j = j2.sqrt();
+        let sin_3theta = if j < j_min {
+            0.0
+        } else {
+            let j3 = sz * (sx * sy - txy * txy);
+            (-LODE_FACTOR * j3 / (j2 * j)).clamp(-1.0, 1.0)
+        };
+        Self {
+            mean_stress: p,
+            j,
+            sin_3theta,
+        }
+    }
+
+    /// Lode angle θ (radians, D6).
+    pub fn lode_angle(&self) -> f64 {
+        self.sin_3theta.asin() / 3.0
+    }
+}
+
+/// The hyperbolic Mohr–Coulomb yield criterion (DESIGN D23–D25).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HyperbolicMohrCoulomb {
+    /// Below this J (kPa) the Lode angle is undefined: sin3θ = 0 and the θ-term of f_σ is dropped (D6, D31).
+    pub j_min: f64,
+}
+
+impl HyperbolicMohrCoulomb {
+    /// Deviatoric radius r(θ) = X (1 + Y sin3θ)^Z (DESIGN D24).
+    #[inline]
+    pub fn shape_radius<T: Real>(strength: &SurfaceStrength<T>, sin_3theta: T) -> T {
+        strength.shape_x * (strength.shape_y * sin_3theta + 1.0).powf(VAN_EEKELEN_EXPONENT)
+    }
+
+    /// f(σ) = sqrt(J²/fd(θ) + a²) − (c + p tanφ) (DESIGN D23), kPa.
+    #[inline]
+    pub fn value<T: Real>(&self, stress: &[T; 4], strength: &SurfaceStrength<T>) -> T {
+        let p = -(stress[0] + stress[1] + stress[2]) / 3.0;
+        let (sx, sy, sz, txy) = (stress[0] + p, stress[1] + p, stress[2] + p, stress[3]);
+        let j2 = (sx * sx + sy * sy + sz * sz) * 0.5 + txy * txy;
+        let r = if j2.re() < self.j_min * self.j_min {
+            strength.shape_x
+        } else {
+            let j3 = sz * (sx * sy - txy * txy);
+            let sin_3theta = -(j3 / (j2 * j2.sqrt())) * LODE_FACTOR;
+            let clamped = T::cst(sin_3theta.re().clamp(-1.0, 1.0));
+            let sin_3theta = if sin_3theta.re().abs() > 1.0 {
+                clamped
+            } else {
+                sin_3theta
+            };
+            Self::shape_radius(strength, sin_3theta)
+        };
+        let a = strength.hyperbola_a;
+        (j2 / (r * r) + a * a).sqrt() - (strength.cohesion + p * strength.tan_friction)
+    }
+
+    /// f (kPa) and its analytic gradient f_σ = ∂f/∂σ (Voigt, DESIGN D31).
+    #[inline]
+    pub fn value_and_gradient<T: Real>(
+        &self,
+        stress: &[T; 4],
+        strength: &SurfaceStrength<T>,
+    ) -> (T, [T; 4]) {
+        let p = -(stress[0] + stress[1] + stress[2]) / 3.0;
+        let (sx, sy, sz, txy) = (stress[0] + p, stress[1] + p, stress[2] + p, stress[3]);
+        let j2 = (sx * sx + sy * sy + sz * sz) * 0.5 + txy * txy;
+        let a = strength.hyperbola_a;
+        let tan_third = strength.tan_friction / 3.0;
+        let pressure_strength = strength.cohesion + p * strength.tan_friction;
+        if j2.re() < self.j_min * self.j_min {
+            // Lode angle undefined: sin3θ = 0 (D6), r = X; θ-term dropped (D31).
+            let fd = strength.shape_x * strength.shape_x;
+            let big_r = (j2 / fd + a * a).sqrt();
+            let f = big_r - pressure_strength;
+            let k = T::cst(0.5) / (fd * big_r);
+            let g = [
+                sx * k + tan_third,
+                sy * k + tan_third,
+                sz * k + tan_third,
+                txy * k * 2.0,
+            ];
+            return (f, g);
+        }
+        let j = j2.sqrt();
+        let j3 = sz * (sx * sy - txy * txy);
+        let mut sin_3theta = -(j3 / (j2 * j)) * LODE_FACTOR;
+        let clamped = sin_3theta.re().abs() > 1.0;
+        if clamped {
+            sin_3theta = T::cst(sin_3theta.re().clamp(-1.0, 1.0));
+        }
+        let base = strength.shape_y * sin_3theta + 1.0;
+        let r = strength.shape_x * base.powf(VAN_EEKELEN_EXPONENT);
+        let fd = r * r;
+        let big_r = (j2 / fd + a * a).sqrt();
+        let f = big_r - pressure_strength;
+        // ∂f/∂J2 at fixed θ, times ∂J2/∂σ = [sx, sy, sz, 2σxy].
+        let k = T::cst(0.5) / (fd * big_r);
+        let mut g = [
+            sx * k + tan_third,
+            sy * k + tan_third,
+            sz * k + tan_third,
+            txy * k * 2.0,
+        ];
+        if !clamped {
+            // f_s ∂(sin3θ)/∂σ with f_s = −J² r'/(r³ R), r' = X Z Y base^{Z−1} (D31); written with
+            // fewer inverse powers of J:
+            // f_s ∂s3/∂σ = (3√3/2) r'/(r³ R) [∂J3/∂σ / J − (3/2) J3 [s] / J³].
+            let r_prime = strength.shape_x
+                * strength.shape_y
+                * base.powf(VAN_EEKELEN_EXPONENT - 1.0)
+                * VAN_EEKELEN_EXPONENT;
+            let coef = r_prime / (fd * r * big_r) * LODE_FACTOR;
+            let two_thirds_j2 = j2 * (2.0 / 3.0);
+            let txy2 = txy * txy;
+            let dj3 = [
+                sx * sx + txy2 - two_thirds_j2,
+                sy * sy + txy2 - two_thirds_j2,
+                sz * sz - two_thirds_j2,
+                txy * (sx + sy) * 2.0,
+            ];
+            let inv_j = T::cst(1.0) / j;
+            let c1 = coef * inv_j;
+            let c2 = coef * j3 * 1.5 / (j2 * j);
+            let s = [sx, sy, sz, txy * 2.0];
+            for i in 0..4 {
+                g[i] = g[i] + c1 * dj3[i] - c2 * s[i];
+            }
+        }
+        (f, g)
+    }
+}
+
+/// Principal (σxy = 0) tension-positive Voigt stress with compression-positive mean stress `p` (kPa),
+/// deviatoric radius `j` = sqrt(J2) (kPa) and Lode angle `theta` (radians, DESIGN D6); the most
+/// compressive principal stress is σxx.
+pub fn stress_from_invariants(p: f64, j: f64, theta: f64) -> [f64; 4] {
+    // Compression-positive principal deviators c_i = k cos(θ − π/6 − 2πi/3), k = 2J/√3:
+    // their product is k³ sin3θ / 4, which with D6 gives back θ.
+    let k = 2.0 / 3f64.sqrt() * j;
+    let a = theta - std::f64::consts::FRAC_PI_6;
+    let third = 2.0 * std::f64::consts::PI / 3.0;
+    let (s1, s2, s3) = (k * a.cos(), k * (a - third).cos(), k * (a + third).cos());
+    [-(p + s1), -(p + s2), -(p + s3), 0.0]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn strength(c: f64, phi_deg: f64, pt: f64) -> SurfaceStrength<f64> {
+        SurfaceStrength::new(c, phi_deg.to_radians(), pt)
+    }
+
+    /// D25's printed constants: φ = 20°: X = 1.06255, Y = −0.46213; φ = 15°: X = 1.10181,
+    /// Y = −0.36069 (tolerance 1e-5, the printed precision) and fd at TC/TE = 1.4999 / 0.9487 (1e-4).
+    #[test]
+    fn van_eekelen_printed_constants() {
+        let (x20, y20) = van_eekelen_shape(20f64.to_radians());
+        let (x15, y15) = van_eekelen_shape(15f64.to_radians());
+        assert!((x20 - 1.06255).abs() < 1e-5, "X(20) = {x20}");
+        assert!((y20 + 0.46213).abs() < 1e-5, "Y(20) = {y20}");
+        assert!((x15 - 1.10181).abs() < 1e-5, "X(15) = {x15}");
+        assert!((y15 + 0.36069).abs() < 1e-5, "Y(15) = {y15}");
+        let s = strength(200.0, 20.0, 0.0);
+        let fd_tc = HyperbolicMohrCoulomb::shape_radius(&s, 1.0).powi(2);
+        let fd_te = HyperbolicMohrCoulomb::shape_radius(&s, -1.0).powi(2);
+        assert!((fd_tc - 1.4999).abs() < 1e-4, "fd(TC) = {fd_tc}");
+        assert!((fd_te - 0.9487).abs() < 1e-4, "fd(TE) = {fd_te}");
+    }
+
+    /// The Lode angle convention of D6: the helper stress at θ = +30° is triaxial compression.
+    #[test]
+    fn lode_angle_convention() {
+        let s = stress_from_invariants(100.0, 50.0, 30f64.to_radians());
+        // σ1 (most compressive) alone, σ2 = σ3: triaxial compression.
+        assert!((s[1] - s[2]).abs() < 1e-9 && s[0] < s[1]);
+        let inv = Invariants::of(&s, 1e-10);
+        assert!((inv.sin_3theta - 1.0).abs() < 1e-9);
+        assert!((inv.j - 50.0).abs() < 1e-9 && (inv.mean_stress - 100.0).abs() < 1e-9);
+        let inv = Invariants::of(&stress_from_invariants(100.0, 50.0, 0.2), 1e-10);
+        assert!((inv.lode_angle() - 0.2).abs() < 1e-9);
+    }
+
+    /// f = 0 at the tip (p = −p_t, J = 0) to 1e-12 relative; the surface with c = p_t = 0 passes
+    /// through the origin (f = 0 to 1e-12).
+    #[test]
+    fn tip_and_origin() {
+        let surface = HyperbolicMohrCoulomb { j_min: 1e-8 };
+        for (c, phi, pt) in [
+            (200.0, 20.0, 0.0),
+            (50.0, 30.0, 40.0),
+            (10.0, 15.0, 10.0 / 15f64.to_radians().tan()),
+        ] {
+            let s = strength(c, phi, pt);
+            let f = surface.value(&[pt, pt, pt, 0.0], &s);
+            assert!(
+                f.abs() <= 1e-12 * c,
+                "f(tip) = {f} for c = {c}, φ = {phi}, pt = {pt}"
+            );
+            // Slightly off the tip, in tension, outside; in compression at J = 0 inside.
+            assert!(surface.value(&[pt + 1.0, pt + 1.0, pt + 1.0, 0.0], &s) > 0.0);
+            assert!(surface.value(&[pt - 1.0, pt - 1.0, pt - 1.0, 0.0], &s) < 0.0);
+        }
+        let s = strength(0.0, 20.0, 0.0);
+        let f = surface.value(&[0.0; 4], &s);
+        assert!(f.abs() <= 1e-12, "f(origin) = {f}");
+        // and a small deviator at zero pressure is outside (no strength at p = 0).
+        assert!(surface.value(&stress_from_invariants(0.0, 1e-3, 0.1), &s) > 0.0);
+    }
+
+    /// At large p the surface tends to the MC line J = r_MC(θ)(c + p tanφ) (D7) in triaxial
+    /// compression and extension: relative difference in J below 0.1 % at p = 1e3·c.
+    #[test]
+    fn asymptote_is_mohr_coulomb_in_compression_and_extension() {
+        let surface = HyperbolicMohrCoulomb { j_min: 1e-8 };
+        for (c, phi_deg, pt) in [(200.0, 20.0, 0.0), (10.0, 35.0, 5.0), (100.0, 15.0, 0.0)] {
+            let phi = f64::to_radians(phi_deg);
+            let s = strength(c, phi_deg, pt);
+            let p = 1e3 * c;
+            for theta_deg in [30.0f64, -30.0] {
+                let theta = theta_deg.to_radians();
+                let j_mc = mohr_coulomb_radius(theta, phi) * (c + p * phi.tan());
+                // Find J on the surface by bisection along the meridian.
+                let (mut lo, mut hi) = (0.0, 2.0 * j_mc);
+                for _ in 0..200 {
+                    let mid = 0.5 * (lo + hi);
+                    if surface.value(&stress_from_invariants(p, mid, theta), &s) > 0.0 {
+                        hi = mid;
+                    } else {
+                        lo = mid;
+                    }
+                }
+                let rel = (lo - j_mc).abs() / j_mc;
+                assert!(
+                    rel < 1e-3,
+                    "θ = {theta_deg}: J = {lo} vs MC {j_mc} (rel {rel})"
+                );
+            }
+        }
+    }
+
+    /// The analytic gradient (D31) equals central differences of f (step 1e-5 kPa,
+    /// tolerance 1e-6 relative to ‖f_σ‖) at assorted states, including θ near ±30°.
+    #[test]
+    fn gradient_matches_finite_differences() {
+        let surface = HyperbolicMohrCoulomb { j_min: 1e-8 };
+        let s = strength(50.0, 25.0, 10.0);
+        let states = [
+            [-100.0, -300.0, -150.0, 40.0],
+            [-10.0, -12.0, -11.0, 0.5],
+            stress_from_invariants(80.0, 40.0, 29.9f64.to_radians()),
+            stress_from_invariants(80.0, 40.0, -29.9f64.to_radians()),
+            [5.0, 4.0, 6.0, 0.0],
+        ];
+        for sigma in states {
+            let (_, g) = surface.value_and_gradient(&sigma, &s);
+            let norm = g.iter().map(|x| x * x).sum::<f64>().sqrt();
+            for j in 0..4 {
+                let h = 1e-5;
+                let (mut sp, mut sm) = (sigma, sigma);
+                sp[j] += h;
+                sm[j] -= h;
+                let fd = (surface.value(&sp, &s) - surface.value(&sm, &s)) / (2.0 * h);
+                assert!(
+                    (fd - g[j]).abs() <= 1e-6 * norm,
+                    "σ = {sigma:?}, j = {j}: {} vs {fd}",
+                    g[j]
+                );
+            }
+        }
+    }
+}
