@@ -196,23 +196,30 @@ impl TractionPoints {
         ([t[1] / len, -t[0] / len], len)
     }
 
-    /// Shape functions at each point, looked up at x_s − 1e−9·h·n_s so that a point
-    /// on a grid line belongs to the body's cell. Errs with the first point that left the grid.
-    pub fn shapes(&self, grid: &Grid) -> Result<Vec<ShapeAt>, transfer::OutsideGrid> {
+    /// Shape functions at each point, in the cell of the body it loads: the cell
+    /// containing x_s − 1e−9·h·n_s if it is active (holds material points), else the
+    /// first active cell met going inward along −n_s (up to one cell). When the
+    /// body's edge has moved into an empty cell, the shape functions of the
+    /// body's cell are thereby extrapolated to x_s: this keeps the traction in
+    /// balance with the internal force of the material points (a homogeneous
+    /// stress equal to the pressure stays in equilibrium), where the empty
+    /// cell's nodes carry no unknowns and would lose part of the load.
+    /// Errs with the first point that left the grid.
+    pub fn shapes(&self, grid: &Grid, bins: &ParticleBins) -> Result<Vec<ShapeAt>, transfer::OutsideGrid> {
         (0..self.len())
             .map(|s| {
                 let (n, _) = self.normal_and_length(s);
                 let x = self.position[s];
-                let probe = [
-                    x[0] - 1e-9 * grid.cell_size * n[0],
-                    x[1] - 1e-9 * grid.cell_size * n[1],
-                ];
-                grid.locate(probe)
-                    .map(|(ci, cj)| grid.shape_in_cell(ci, cj, x))
-                    .ok_or(transfer::OutsideGrid {
-                        particle: s,
-                        position: x,
-                    })
+                let outside = transfer::OutsideGrid { particle: s, position: x };
+                let probe = |depth: f64| [x[0] - depth * grid.cell_size * n[0], x[1] - depth * grid.cell_size * n[1]];
+                let own = grid.locate(probe(1e-9)).ok_or(outside)?;
+                let active = |(ci, cj): (usize, usize)| bins.cell_slot[cj * grid.cells[0] + ci] != NONE;
+                let cell = [1e-9, 0.5, 1.0]
+                    .iter()
+                    .filter_map(|&d| grid.locate(probe(d)))
+                    .find(|&c| active(c))
+                    .unwrap_or(own);
+                Ok(grid.shape_in_cell(cell.0, cell.1, x))
             })
             .collect()
     }

@@ -32,6 +32,8 @@ enum Command {
         #[arg(long)]
         quiet: bool,
     },
+    /// Homogeneous test on one material point (biaxial, triaxial, simple shear) → CSV.
+    Point(mpm_geo::point_driver::PointArgs),
     /// Validate a scene without running it (exit 0 when valid).
     Check {
         /// Scene file (TOML).
@@ -45,6 +47,10 @@ enum Command {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
+        Command::Point(args) => match mpm_geo::point_driver::run(&args) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(e) => fail(1, &e.to_string()),
+        },
         Command::Check { scene, overrides } => match Scene::load(&scene, &overrides) {
             Ok(s) => match mpm_geo::simulation::Simulation::new(s) {
                 Ok(sim) => {

@@ -278,6 +278,9 @@ impl Default for SolverSpec {
 pub enum MaterialSpec {
     /// Isotropic linear elasticity (DESIGN D22).
     LinearElastic(ElasticSpec),
+    /// Hyperbolic Mohr–Coulomb with exponential softening (paper eq. 3–5, DESIGN §5),
+    /// keys named as in the paper's Table 1.
+    Hmc(crate::constitutive::hmc::HmcParameters),
 }
 
 /// Parameters of `model = "linear_elastic"`.
@@ -298,6 +301,7 @@ impl MaterialSpec {
     pub fn density(&self) -> f64 {
         match self {
             MaterialSpec::LinearElastic(e) => e.density,
+            MaterialSpec::Hmc(h) => h.density,
         }
     }
 
@@ -305,6 +309,7 @@ impl MaterialSpec {
     pub fn youngs_modulus(&self) -> f64 {
         match self {
             MaterialSpec::LinearElastic(e) => e.youngs_modulus,
+            MaterialSpec::Hmc(h) => h.youngs_modulus,
         }
     }
 
@@ -312,6 +317,7 @@ impl MaterialSpec {
     pub fn poisson_ratio(&self) -> f64 {
         match self {
             MaterialSpec::LinearElastic(e) => e.nu,
+            MaterialSpec::Hmc(h) => h.poisson_ratio,
         }
     }
 
@@ -336,6 +342,16 @@ impl MaterialSpec {
                     e.density > 0.0,
                     format!("must be > 0 t/m³ (got {})", e.density),
                 );
+            }
+            MaterialSpec::Hmc(h) => {
+                for problem in h.validate(prefix) {
+                    // messages read "<field> = <value> ..."; keep the field path separate
+                    let (field, message) = problem.split_once(' ').unwrap_or((prefix, problem.as_str()));
+                    errors.push(FieldError {
+                        field: field.to_string(),
+                        message: message.trim_start_matches("= ").to_string(),
+                    });
+                }
             }
         }
     }

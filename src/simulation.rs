@@ -97,6 +97,9 @@ pub struct Simulation {
     pub reaction: Vec<[f64; 2]>,
     /// Nodal displacement increment of the last (sub-)step, per grid node, m.
     pub last_increment: Vec<[f64; 2]>,
+    /// ‖R‖ per Newton iteration of the last converged (sub-)step, kN/m, and the
+    /// reference force of DESIGN D18 it was compared with.
+    pub last_residuals: (Vec<f64>, f64),
     /// Stage timings.
     pub profile: Profile,
     /// Linear-solver usage counts.
@@ -129,11 +132,12 @@ fn gauss_rule(n: usize) -> (Vec<f64>, Vec<f64>) {
     }
 }
 
-/// Build a material law from its scene entry.
-pub fn build_material(spec: &MaterialSpec) -> Arc<dyn ConstitutiveModel> {
-    match spec {
+/// Build a material law from its scene entry (parameter problems as messages).
+pub fn build_material(spec: &MaterialSpec) -> Result<Arc<dyn ConstitutiveModel>, Vec<String>> {
+    Ok(match spec {
         MaterialSpec::LinearElastic(e) => Arc::new(LinearElastic::new(e.youngs_modulus, e.nu)),
-    }
+        MaterialSpec::Hmc(h) => Arc::new(crate::constitutive::hmc::Hmc::new(h.clone())?),
+    })
 }
 
 impl Simulation {
@@ -148,9 +152,20 @@ impl Simulation {
             cells: scene.grid_cells(),
         };
         let material_names: Vec<String> = scene.materials.keys().cloned().collect();
-        let materials: Vec<Arc<dyn ConstitutiveModel>> =
-            scene.materials.values().map(build_material).collect();
         let mut errors = Vec::new();
+        let mut materials: Vec<Arc<dyn ConstitutiveModel>> = Vec::new();
+        for (name, spec) in &scene.materials {
+            match build_material(spec) {
+                Ok(m) => materials.push(m),
+                Err(problems) => {
+                    errors.extend(problems.into_iter().map(|message| FieldError {
+                        field: format!("materials.{name}"),
+                        message,
+                    }));
+                    materials.push(Arc::new(LinearElastic::new(1.0, 0.0)));
+                }
+            }
+        }
         let particles = seed_particles(&scene, &grid, &material_names, &mut errors);
         let youngs: Vec<f64> = scene
             .materials
@@ -200,6 +215,7 @@ impl Simulation {
             step: 0,
             reaction: vec![[0.0; 2]; n_nodes],
             last_increment: vec![[0.0; 2]; n_nodes],
+            last_residuals: (Vec::new(), 0.0),
             profile: Profile::default(),
             solver_usage: SolverUsage::default(),
             solver: DirectSolver::new(policy),

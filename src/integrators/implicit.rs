@@ -186,7 +186,7 @@ impl Simulation {
             let dofs = DofMap::new(&bins, &self.constraints);
             let traction_shapes = self
                 .traction
-                .shapes(grid)
+                .shapes(grid, &bins)
                 .map_err(|o| StepFailure::TractionLeftGrid(o.particle, o.position))?;
             Ok((shapes, bins, dofs, traction_shapes))
         })?;
@@ -477,6 +477,7 @@ impl Simulation {
                 || dot(&last_correction, &free_residual).abs()
                     <= settings.tolerance_energy * energy0;
             if force_ok && energy_ok {
+                self.last_residuals = (history.clone(), res.reference);
                 self.commit_implicit(&sg, &trial, &du, &res, dt)?;
                 return Ok(iteration);
             }
