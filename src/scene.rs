@@ -240,8 +240,8 @@ pub struct SolverSpec {
     pub tolerance_force: f64,
     /// ε_E of DESIGN D18 (relative energy norm).
     pub tolerance_energy: f64,
-    /// Newton iteration limit per step.
-    pub max_iterations: usize,
+    /// Newton iteration limit per step (default 25 local, 60 nonlocal, DESIGN §3).
+    pub max_iterations: Option<usize>,
     /// Number of step halvings allowed when Newton fails (DESIGN §3: 4, i.e. 1/16).
     pub max_halvings: usize,
     /// `auto`, `cholesky` or `lu`.
@@ -261,7 +261,7 @@ impl Default for SolverSpec {
         Self {
             tolerance_force: 1e-5,
             tolerance_energy: 1e-10,
-            max_iterations: 25,
+            max_iterations: None,
             max_halvings: 4,
             linear_solver: LinearSolverChoice::Auto,
             background_stiffness: 1e-6,
@@ -814,6 +814,11 @@ impl Scene {
         ]
     }
 
+    /// Newton iteration limit: the scene's value, else 25 (local) or 60 (nonlocal).
+    pub fn max_iterations(&self) -> usize {
+        self.solver.max_iterations.unwrap_or(if self.nonlocal.is_some() { 60 } else { 25 })
+    }
+
     /// Index of the body named `name` (`None` → the first body).
     pub fn body_index(&self, name: Option<&str>) -> Option<usize> {
         match name {
@@ -989,7 +994,7 @@ impl Scene {
         check(
             e,
             "solver.max_iterations",
-            s.max_iterations >= 1,
+            s.max_iterations.is_none_or(|n| n >= 1),
             "must be >= 1",
         );
         check(

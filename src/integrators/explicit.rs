@@ -6,7 +6,7 @@
 //! particle momentum → strain increment from the re-mapped nodal velocity and
 //! stress update → grid reset.
 
-use super::{evaluate_stresses, TrialStresses};
+use super::{evaluate_stresses, NonlocalStep, TrialStresses};
 use crate::bc::DofConstraint;
 use crate::error::RunError;
 use crate::integrators::implicit::update_kinematics;
@@ -81,6 +81,16 @@ impl Simulation {
             Ok((shapes, bins, traction_shapes))
         })?;
         let (shapes, bins, traction_shapes) = setup;
+        // Nonlocal weights from the start-of-step configuration; explicit runs
+        // update κ̄ once per step (DESIGN §4, mode "step").
+        let mut nonlocal = match &self.scene.nonlocal {
+            Some(spec) => Some(NonlocalStep::new(spec, &self.particles, true).map_err(|e| RunError::NonFinite {
+                step,
+                time: t,
+                what: format!("nonlocal weights: {e}"),
+            })?),
+            None => None,
+        };
         let p = &self.particles;
 
         // 1. P2G: mass, momentum, forces at t.
@@ -228,7 +238,7 @@ impl Simulation {
                     &self.materials,
                     &shapes,
                     &du,
-                    None,
+                    nonlocal.as_ref().map(|n| n.strength_kappa()),
                     &mut trial,
                 )
             })
@@ -239,12 +249,15 @@ impl Simulation {
                 source,
             })?;
         let start = std::time::Instant::now();
+        let (stress, state) = self
+            .finalize_stresses(&bins, &shapes, &trial, nonlocal.as_mut())
+            .map_err(|e| RunError::NonFinite { step, time: t + dt, what: format!("nonlocal average: {e}") })?;
         {
             let p = &mut self.particles;
             for i in 0..p.len() {
                 update_kinematics(p, i, [0.0; 2], &trial.gradient[i]);
-                p.stress[i] = trial.stress[i];
-                p.state[i] = trial.state[i];
+                p.stress[i] = stress[i];
+                p.state[i] = state[i];
             }
             if let Some(i) = (0..p.len()).find(|&i| !grid.contains(p.position[i])) {
                 return Err(RunError::ParticleLeftGrid {

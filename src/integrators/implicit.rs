@@ -10,7 +10,7 @@
 
 use mpm_solvers::{Assembler, FactorKind, SparseMatrix};
 
-use super::{evaluate_stresses, TrialStresses};
+use super::{evaluate_stresses, NonlocalStep, TrialStresses};
 use crate::bc::{DofConstraint, DofMap};
 use crate::error::RunError;
 use crate::grid::ShapeAt;
@@ -148,7 +148,7 @@ impl Simulation {
                 halvings,
                 cause: format!(
                     "no convergence within {} iterations",
-                    self.scene.solver.max_iterations
+                    self.scene.max_iterations()
                 ),
                 history,
             },
@@ -447,12 +447,20 @@ impl Simulation {
         // Δu⁰: prescribed nodal increments (validation scenes), zero elsewhere.
         let mut du = self.initial_increment(&sg, t, dt, &vec![0.0; sg.dofs.n_free]);
         let settings = self.scene.solver.clone();
+        let max_iterations = self.scene.max_iterations();
+        let mut nonlocal = match &self.scene.nonlocal {
+            Some(spec) => Some(
+                NonlocalStep::new(spec, &self.particles, false)
+                    .map_err(|e| StepFailure::NonFinite(format!("nonlocal weights: {e}"), Vec::new()))?,
+            ),
+            None => None,
+        };
         let mut trial = TrialStresses::default();
         let mut history = Vec::new();
         let mut energy0 = 0.0;
         let mut last_correction: Vec<f64> = Vec::new();
         let mut growth = 0;
-        for iteration in 0..=settings.max_iterations {
+        for iteration in 0..=max_iterations {
             self.profile
                 .time(Stage::StressUpdate, || {
                     evaluate_stresses(
@@ -460,7 +468,7 @@ impl Simulation {
                         &self.materials,
                         &sg.shapes,
                         &du,
-                        None,
+                        nonlocal.as_ref().map(|n| n.strength_kappa()),
                         &mut trial,
                     )
                 })
@@ -476,12 +484,19 @@ impl Simulation {
             let energy_ok = iteration == 0
                 || dot(&last_correction, &free_residual).abs()
                     <= settings.tolerance_energy * energy0;
-            if force_ok && energy_ok {
+            // DESIGN D18, third criterion (nonlocal): κ̄ lagged by one iteration has settled.
+            let kappa_ok = match nonlocal.as_mut() {
+                Some(nl) => nl
+                    .iterate(&self.particles, |p| trial.state[p].plastic_strain_eq)
+                    .map_err(|e| StepFailure::NonFinite(format!("nonlocal average: {e}"), history.clone()))?,
+                None => true,
+            };
+            if force_ok && energy_ok && kappa_ok {
                 self.last_residuals = (history.clone(), res.reference);
-                self.commit_implicit(&sg, &trial, &du, &res, dt)?;
+                self.commit_implicit(&sg, &trial, &du, &res, dt, nonlocal.as_mut())?;
                 return Ok(iteration);
             }
-            if iteration == settings.max_iterations {
+            if iteration == max_iterations {
                 return Err(StepFailure::IterationLimit(history));
             }
             if history.len() >= 2 && history[history.len() - 1] > history[history.len() - 2] {
@@ -527,6 +542,7 @@ impl Simulation {
         du: &[[f64; 2]],
         res: &Residual,
         dt: f64,
+        nonlocal: Option<&mut NonlocalStep>,
     ) -> Result<(), StepFailure> {
         let start = std::time::Instant::now();
         let dynamic = self.dynamic();
@@ -545,6 +561,9 @@ impl Simulation {
                 return Err(StepFailure::Motion(max_motion));
             }
         }
+        let (stress, state) = self
+            .finalize_stresses(&sg.bins, &sg.shapes, trial, nonlocal)
+            .map_err(|e| StepFailure::NonFinite(format!("nonlocal average: {e}"), Vec::new()))?;
         // Reactions at the nodes (support forces), −R.
         self.reaction = res.residual.iter().map(|r| [-r[0], -r[1]]).collect();
         let p = &mut self.particles;
@@ -567,8 +586,8 @@ impl Simulation {
         }
         for i in 0..n {
             update_kinematics(p, i, motion[i], &trial.gradient[i]);
-            p.stress[i] = trial.stress[i];
-            p.state[i] = trial.state[i];
+            p.stress[i] = stress[i];
+            p.state[i] = state[i];
         }
         if let Some(i) = (0..n).find(|&i| !self.grid.contains(p.position[i])) {
             return Err(StepFailure::LeftGrid(i, p.position[i]));

@@ -8,6 +8,9 @@
 
 pub mod explicit;
 pub mod implicit;
+mod finalize;
+mod regularisation;
 mod stress;
 
+pub(crate) use regularisation::NonlocalStep;
 pub(crate) use stress::{evaluate_stresses, TrialStresses};

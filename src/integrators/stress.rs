@@ -23,6 +23,8 @@ pub struct TrialStresses {
     pub tangent: Vec<Mat4>,
     /// Displacement-increment gradient L per point (row-major 2×2).
     pub gradient: Vec<[f64; 4]>,
+    /// σ^R(n): the committed stress rotated by the step's spin (D13).
+    pub rotated: Vec<Voigt>,
 }
 
 /// Evaluate the stress update at every material point for the nodal
@@ -42,22 +44,20 @@ pub fn evaluate_stresses(
     trial.state.resize(n, PointState::default());
     trial.gradient.resize(n, [0.0; 4]);
     trial.tangent.resize(n, [[0.0; 4]; 4]);
+    trial.rotated.resize(n, [0.0; 4]);
     let failures: Vec<(usize, ConstitutiveError)> = trial
         .stress
         .par_iter_mut()
         .zip(trial.state.par_iter_mut())
-        .zip(
-            trial
-                .gradient
-                .par_iter_mut()
-                .zip(trial.tangent.par_iter_mut()),
-        )
+        .zip(trial.gradient.par_iter_mut().zip(trial.tangent.par_iter_mut()))
+        .zip(trial.rotated.par_iter_mut())
         .enumerate()
-        .filter_map(|(p, ((stress, state), (grad, tangent)))| {
+        .filter_map(|(p, (((stress, state), (grad, tangent)), rotated_out))| {
             let l = transfer::gradient(&shapes[p], du);
             *grad = l;
             let (strain_increment, spin) = transfer::strain_and_spin(&l);
             let rotated = transfer::rotate_stress(&particles.stress[p], spin);
+            *rotated_out = rotated;
             let material = &materials[particles.material[p] as usize];
             let kappa = strength_kappa.map(|k| k[p]);
             match material.update(&rotated, &strain_increment, &particles.state[p], kappa) {
