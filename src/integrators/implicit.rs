@@ -439,8 +439,31 @@ impl Simulation {
         du
     }
 
+    /// Stress update and residual at the increment `du` (one Newton evaluation).
+    fn evaluate(
+        &self,
+        sg: &StepGrid,
+        du: &[[f64; 2]],
+        nonlocal: Option<&NonlocalStep>,
+        t1: f64,
+        dt: f64,
+        trial: &mut TrialStresses,
+    ) -> Result<Residual, StepFailure> {
+        self.profile
+            .time(Stage::StressUpdate, || {
+                evaluate_stresses(&self.particles, &self.materials, &sg.shapes, du, nonlocal.map(|n| n.strength_kappa()), trial)
+            })
+            .map_err(|(p, e)| StepFailure::Constitutive(p, e))?;
+        Ok(self.residual(sg, trial, du, t1, dt))
+    }
+
     /// Newton–Raphson for one (sub-)step from `t` to `t + dt`; commits the
     /// particles on convergence and returns the iteration count.
+    ///
+    /// Each correction is applied with a backtracking line search on ‖R‖
+    /// (step lengths 1, ½, … ⅟₆₄; the first that reduces the residual is taken,
+    /// else the one with the smallest residual): softening makes the tangent
+    /// indefinite and full Newton steps can overshoot.
     fn try_implicit(&mut self, t: f64, dt: f64) -> Result<usize, StepFailure> {
         let t1 = t + dt;
         let sg = self.prepare_step(t, dt)?;
@@ -456,24 +479,12 @@ impl Simulation {
             None => None,
         };
         let mut trial = TrialStresses::default();
+        let mut res = self.evaluate(&sg, &du, nonlocal.as_ref(), t1, dt, &mut trial)?;
         let mut history = Vec::new();
         let mut energy0 = 0.0;
         let mut last_correction: Vec<f64> = Vec::new();
         let mut growth = 0;
         for iteration in 0..=max_iterations {
-            self.profile
-                .time(Stage::StressUpdate, || {
-                    evaluate_stresses(
-                        &self.particles,
-                        &self.materials,
-                        &sg.shapes,
-                        &du,
-                        nonlocal.as_ref().map(|n| n.strength_kappa()),
-                        &mut trial,
-                    )
-                })
-                .map_err(|(p, e)| StepFailure::Constitutive(p, e))?;
-            let res = self.residual(&sg, &trial, &du, t1, dt);
             if !res.norm.is_finite() {
                 return Err(StepFailure::NonFinite("residual".into(), history));
             }
@@ -482,8 +493,7 @@ impl Simulation {
             let free_residual = gather_free(&sg.dofs, &res.residual);
             // DESIGN D18, energy norm: work of the new residual on the last correction.
             let energy_ok = iteration == 0
-                || dot(&last_correction, &free_residual).abs()
-                    <= settings.tolerance_energy * energy0;
+                || dot(&last_correction, &free_residual).abs() <= settings.tolerance_energy * energy0;
             // DESIGN D18, third criterion (nonlocal): κ̄ lagged by one iteration has settled.
             let kappa_ok = match nonlocal.as_mut() {
                 Some(nl) => nl
@@ -513,24 +523,70 @@ impl Simulation {
                 .time(Stage::Solve, || self.solver.solve_in_place(&mut correction))
                 .map_err(|e| StepFailure::Solver(e.to_string()))?;
             if correction.iter().any(|v| !v.is_finite()) {
-                return Err(StepFailure::NonFinite(
-                    "solution of the linear system".into(),
-                    history,
-                ));
+                return Err(StepFailure::NonFinite("solution of the linear system".into(), history));
             }
             if iteration == 0 {
-                energy0 = dot(&correction, &free_residual)
-                    .abs()
-                    .max(f64::MIN_POSITIVE);
+                energy0 = dot(&correction, &free_residual).abs().max(f64::MIN_POSITIVE);
             }
-            for (d, &index) in sg.dofs.index.iter().enumerate() {
-                if index != NONE {
-                    du[d / 2][d % 2] += correction[index as usize];
-                }
-            }
+            // κ̄ changed since `res` was evaluated: the line search compares against
+            // the residual at the current κ̄, so re-evaluate the reference first.
+            let reference_norm = if nonlocal.is_some() && iteration > 0 {
+                self.evaluate(&sg, &du, nonlocal.as_ref(), t1, dt, &mut trial)?.norm
+            } else {
+                res.norm
+            };
+            let (new_du, new_trial, new_res) =
+                self.line_search(&sg, &du, &correction, reference_norm, nonlocal.as_ref(), t1, dt)?;
+            du = new_du;
+            trial = new_trial;
+            res = new_res;
             last_correction = correction;
         }
         Err(StepFailure::IterationLimit(history))
+    }
+
+    /// Backtracking on ‖R(Δu + α δu)‖ < (1 − 10⁻⁴ α) ‖R(Δu)‖ for α = 1, ½, … ⅟₆₄.
+    #[allow(clippy::too_many_arguments)]
+    fn line_search(
+        &self,
+        sg: &StepGrid,
+        du: &[[f64; 2]],
+        correction: &[f64],
+        reference_norm: f64,
+        nonlocal: Option<&NonlocalStep>,
+        t1: f64,
+        dt: f64,
+    ) -> Result<(Vec<[f64; 2]>, TrialStresses, Residual), StepFailure> {
+        let mut best: Option<(Vec<[f64; 2]>, TrialStresses, Residual)> = None;
+        let mut alpha = 1.0;
+        for _ in 0..7 {
+            let mut candidate = du.to_vec();
+            for (d, &index) in sg.dofs.index.iter().enumerate() {
+                if index != NONE {
+                    candidate[d / 2][d % 2] += alpha * correction[index as usize];
+                }
+            }
+            let mut trial = TrialStresses::default();
+            let res = match self.evaluate(sg, &candidate, nonlocal, t1, dt, &mut trial) {
+                Ok(r) if r.norm.is_finite() => r,
+                // a failed stress update at a too-long step: shorten it
+                Ok(_) | Err(StepFailure::Constitutive(..)) => {
+                    alpha *= 0.5;
+                    continue;
+                }
+                Err(e) => return Err(e),
+            };
+            let accepted = res.norm < (1.0 - 1e-4 * alpha) * reference_norm;
+            let better = best.as_ref().is_none_or(|b| res.norm < b.2.norm);
+            if accepted || better {
+                best = Some((candidate, trial, res));
+            }
+            if accepted {
+                break;
+            }
+            alpha *= 0.5;
+        }
+        best.ok_or_else(|| StepFailure::NonFinite("stress update at every line-search step".into(), Vec::new()))
     }
 
     /// Accept the converged iterate: velocities/accelerations (dynamic), then
