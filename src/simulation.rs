@@ -110,6 +110,8 @@ pub struct Simulation {
     pub(crate) background_block: [f64; 64],
     /// True when every material has a symmetric tangent (Cholesky allowed).
     pub(crate) symmetric_tangent: bool,
+    /// Elastic compliance C = D⁻¹ of every material (D22).
+    pub(crate) compliances: Vec<Mat4>,
 }
 
 /// Gauss–Legendre abscissae and weights on [−1, 1] for n = 1…4.
@@ -195,6 +197,7 @@ impl Simulation {
         let constraints = Constraints::from_scene(&scene, &grid);
         let traction = TractionPoints::from_scene(&scene);
         let symmetric_tangent = materials.iter().all(|m| m.has_symmetric_tangent());
+        let compliances: Vec<Mat4> = materials.iter().map(|m| invert4(&m.elastic_stiffness())).collect();
         let policy = match scene.solver.linear_solver {
             LinearSolverChoice::Auto => SolverPolicy::Auto,
             LinearSolverChoice::Cholesky => SolverPolicy::Cholesky,
@@ -222,6 +225,7 @@ impl Simulation {
             assembler: None,
             background_block,
             symmetric_tangent,
+            compliances,
             scene,
         };
         sim.monitors = sim
@@ -288,11 +292,7 @@ impl Simulation {
     /// Elastic strain energy Σ ½ V_p σ_pᵀ C σ_p, kJ per metre run (C = D⁻¹ of the
     /// particle's material).
     pub fn strain_energy(&self) -> f64 {
-        let compliances: Vec<Mat4> = self
-            .materials
-            .iter()
-            .map(|m| invert4(&m.elastic_stiffness()))
-            .collect();
+        let compliances = &self.compliances;
         let p = &self.particles;
         (0..p.len())
             .map(|i| {

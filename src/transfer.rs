@@ -326,6 +326,7 @@ pub fn cell_stiffness_blocks(
     shapes: &[ShapeAt],
     volume: &[f64],
     tangent: &[Mat4],
+    spin_sensitivity: Option<&[Voigt]>,
 ) -> Vec<[f64; 64]> {
     bins.active_cells
         .par_iter()
@@ -334,10 +335,37 @@ pub fn cell_stiffness_blocks(
             for &p in bins.particles_in(c as usize) {
                 let p = p as usize;
                 add_particle_stiffness(&mut block, &shapes[p], volume[p], &tangent[p]);
+                if let Some(s) = spin_sensitivity {
+                    add_spin_stiffness(&mut block, &shapes[p], volume[p], &s[p]);
+                }
             }
             block
         })
         .collect()
+}
+
+/// The linearisation of the Jaumann rotation (DESIGN D13) through the stress
+/// update: σ_{n+1} depends on the spin ω = ½ Σ_b (u_bx ∂yN_b − u_by ∂xN_b) via
+/// σ^R, with dσ_{n+1}/dω = D_alg C g, g = [2σxy, −2σxy, 0, σyy − σxx]
+/// (`spin_sensitivity`). Adds V_p B_aᵀ (D_alg C g) w_bᵀ, w_b = ½[∂yN_b, −∂xN_b],
+/// to the block: an unsymmetric term that makes the tangent consistent for
+/// prestressed, rotating material.
+#[inline]
+pub fn add_spin_stiffness(block: &mut [f64; 64], shape: &ShapeAt, volume: f64, spin_sensitivity: &Voigt) {
+    let s = spin_sensitivity;
+    for a in 0..4 {
+        let [dxa, dya] = shape.dn[a];
+        let bx = dxa * s[0] + dya * s[3];
+        let by = dya * s[1] + dxa * s[3];
+        for b in 0..4 {
+            let [dxb, dyb] = shape.dn[b];
+            let (wx, wy) = (0.5 * dyb, -0.5 * dxb);
+            block[(2 * a) * 8 + 2 * b] += volume * bx * wx;
+            block[(2 * a) * 8 + 2 * b + 1] += volume * bx * wy;
+            block[(2 * a + 1) * 8 + 2 * b] += volume * by * wx;
+            block[(2 * a + 1) * 8 + 2 * b + 1] += volume * by * wy;
+        }
+    }
 }
 
 #[cfg(test)]
@@ -431,7 +459,7 @@ mod tests {
             .fold((0.0, 0.0), |acc, v| (acc.0 + v[0], acc.1 + v[1]));
         assert!(fx.abs() < 1e-12 && fy.abs() < 1e-12);
         let d = crate::constitutive::LinearElastic::new(1000.0, 0.3).stiffness();
-        let blocks = cell_stiffness_blocks(&bins, &shapes, &mass, &vec![d; pos.len()]);
+        let blocks = cell_stiffness_blocks(&bins, &shapes, &mass, &vec![d; pos.len()], None);
         for b in &blocks {
             for i in 0..8 {
                 for j in 0..8 {
@@ -455,7 +483,7 @@ mod tests {
         let shapes = shapes_at(&grid, &pos).unwrap();
         let bins = ParticleBins::new(&grid, &shapes);
         let d = crate::constitutive::LinearElastic::new(500.0, 0.25).stiffness();
-        let blocks = cell_stiffness_blocks(&bins, &shapes, &vol, &vec![d; pos.len()]);
+        let blocks = cell_stiffness_blocks(&bins, &shapes, &vol, &vec![d; pos.len()], None);
         let u: Vec<[f64; 2]> = vec![[0.01, -0.02], [0.03, 0.005], [-0.01, 0.02], [0.004, 0.001]];
         let stress: Vec<Voigt> = shapes
             .iter()

@@ -239,6 +239,7 @@ impl Simulation {
                     &shapes,
                     &du,
                     nonlocal.as_ref().map(|n| n.strength_kappa()),
+                    None,
                     &mut trial,
                 )
             })

@@ -284,6 +284,14 @@ impl Simulation {
         }
     }
 
+    /// Compliances for the spin term of the tangent (see
+    /// `transfer::add_spin_stiffness`), included when the tangent is
+    /// unsymmetric anyway (LU); symmetric (Cholesky) scenes omit this
+    /// unsymmetric geometric term and converge linearly under large rotations.
+    fn spin_compliances(&self) -> Option<&[crate::constitutive::Mat4]> {
+        (!self.symmetric_tangent).then_some(self.compliances.as_slice())
+    }
+
     /// Largest Young's modulus of the materials, kPa.
     pub(crate) fn max_youngs_modulus(&self) -> f64 {
         self.scene
@@ -310,12 +318,9 @@ impl Simulation {
                 Assembler::new(n, &element_dofs).map_err(|e| StepFailure::Solver(e.to_string()))?;
             self.assembler = Some((element_dofs, assembler));
         }
-        let mut blocks = transfer::cell_stiffness_blocks(
-            &sg.bins,
-            &sg.shapes,
-            &self.particles.volume,
-            &trial.tangent,
-        );
+        let spin = (!trial.spin_sensitivity.is_empty()).then_some(trial.spin_sensitivity.as_slice());
+        let mut blocks =
+            transfer::cell_stiffness_blocks(&sg.bins, &sg.shapes, &self.particles.volume, &trial.tangent, spin);
         for block in blocks.iter_mut() {
             for (b, bg) in block.iter_mut().zip(self.background_block.iter()) {
                 *b += bg;
@@ -398,6 +403,7 @@ impl Simulation {
             &sg.shapes,
             &du,
             None,
+            self.spin_compliances(),
             &mut trial,
         )
         .map_err(|(p, e)| self.failure_to_error(StepFailure::Constitutive(p, e), t + dt, 0))?;
@@ -451,7 +457,15 @@ impl Simulation {
     ) -> Result<Residual, StepFailure> {
         self.profile
             .time(Stage::StressUpdate, || {
-                evaluate_stresses(&self.particles, &self.materials, &sg.shapes, du, nonlocal.map(|n| n.strength_kappa()), trial)
+                evaluate_stresses(
+                    &self.particles,
+                    &self.materials,
+                    &sg.shapes,
+                    du,
+                    nonlocal.map(|n| n.strength_kappa()),
+                    self.spin_compliances(),
+                    trial,
+                )
             })
             .map_err(|(p, e)| StepFailure::Constitutive(p, e))?;
         Ok(self.residual(sg, trial, du, t1, dt))

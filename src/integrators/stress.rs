@@ -6,7 +6,7 @@ use std::sync::Arc;
 
 use rayon::prelude::*;
 
-use crate::constitutive::{ConstitutiveError, ConstitutiveModel, Mat4, PointState, Voigt};
+use crate::constitutive::{mat4_mul_vec, ConstitutiveError, ConstitutiveModel, Mat4, PointState, Voigt};
 use crate::grid::ShapeAt;
 use crate::particles::Particles;
 use crate::transfer;
@@ -25,6 +25,9 @@ pub struct TrialStresses {
     pub gradient: Vec<[f64; 4]>,
     /// σ^R(n): the committed stress rotated by the step's spin (D13).
     pub rotated: Vec<Voigt>,
+    /// dσ_{n+1}/dω = D_alg C g (see `transfer::add_spin_stiffness`); filled only
+    /// when compliances are passed (unsymmetric tangents).
+    pub spin_sensitivity: Vec<Voigt>,
 }
 
 /// Evaluate the stress update at every material point for the nodal
@@ -37,6 +40,7 @@ pub fn evaluate_stresses(
     shapes: &[ShapeAt],
     du: &[[f64; 2]],
     strength_kappa: Option<&[f64]>,
+    compliances: Option<&[Mat4]>,
     trial: &mut TrialStresses,
 ) -> Result<(), (usize, ConstitutiveError)> {
     let n = particles.len();
@@ -71,6 +75,17 @@ pub fn evaluate_stresses(
             }
         })
         .collect();
+    if let Some(compliances) = compliances {
+        trial.spin_sensitivity.resize(n, [0.0; 4]);
+        trial.spin_sensitivity.par_iter_mut().enumerate().for_each(|(p, out)| {
+            let s = &particles.stress[p];
+            let g = [2.0 * s[3], -2.0 * s[3], 0.0, s[1] - s[0]];
+            let cg = mat4_mul_vec(&compliances[particles.material[p] as usize], &g);
+            *out = mat4_mul_vec(&trial.tangent[p], &cg);
+        });
+    } else {
+        trial.spin_sensitivity.clear();
+    }
     match failures.into_iter().min_by_key(|(p, _)| *p) {
         Some(first) => Err(first),
         None => Ok(()),
