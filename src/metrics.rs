@@ -83,7 +83,7 @@ fn check_curve(curve: &[(f64, f64)], what: &'static str) -> Result<()> {
 ///
 /// `x` within [`RANGE_TOL`]·range outside the curve is clamped to the end
 /// value; farther out is [`MetricsError::OutOfRange`]. At a vertical step
-/// (repeated abscissa) the first point of the step is used.
+/// (repeated abscissa) the value right of the step (its last point) is used.
 pub fn interpolate(curve: &[(f64, f64)], x: f64) -> Result<f64> {
     check_curve(curve, "curve")?;
     interp_unchecked(curve, x)
@@ -103,11 +103,9 @@ fn interp_unchecked(curve: &[(f64, f64)], x: f64) -> Result<f64> {
     }
     // first index with abscissa > x (exists because x < hi)
     let k = curve.partition_point(|p| p.0 <= x);
+    // curve[k - 1].0 <= x < curve[k].0: the interval has positive length
     let (x0, y0) = curve[k - 1];
     let (x1, y1) = curve[k];
-    if x1 == x0 {
-        return Ok(y0);
-    }
     Ok(y0 + (y1 - y0) * (x - x0) / (x1 - x0))
 }
 
@@ -160,7 +158,9 @@ pub fn curve_discrepancy(
         den += r * r;
     }
     if den == 0.0 {
-        return Err(MetricsError::Degenerate("reference is zero on the interval"));
+        return Err(MetricsError::Degenerate(
+            "reference is zero on the interval",
+        ));
     }
     Ok((num / den).sqrt())
 }
@@ -319,7 +319,9 @@ pub fn shear_band_width_in(
         return Err(MetricsError::Degenerate("h must be positive and finite"));
     }
     if !(l_s.is_finite() && l_s >= 0.0) {
-        return Err(MetricsError::Degenerate("l_s must be non-negative and finite"));
+        return Err(MetricsError::Degenerate(
+            "l_s must be non-negative and finite",
+        ));
     }
     // selected, finite points
     let mut n_skipped = 0usize;
@@ -450,7 +452,9 @@ pub fn shear_band_width_in(
         .max_by(|a, b| a.1.total_cmp(b.1))
         .ok_or(MetricsError::Empty("profile"))?;
     if peak <= 0.0 {
-        return Err(MetricsError::Degenerate("profile peak not above background"));
+        return Err(MetricsError::Degenerate(
+            "profile peak not above background",
+        ));
     }
     let half = 0.5 * peak;
     let cross = |i_in: usize, i_out: usize| -> f64 {
@@ -634,8 +638,7 @@ impl Dissipation {
         dstrain: &[[f64; 4]],
         compliance: ComplianceSource<'_>,
     ) -> Result<f64> {
-        let inc =
-            dissipation_increment(volumes, stress_new, stress_rot_old, dstrain, compliance)?;
+        let inc = dissipation_increment(volumes, stress_new, stress_rot_old, dstrain, compliance)?;
         self.total += inc;
         self.history.push((at, self.total));
         Ok(inc)

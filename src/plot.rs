@@ -53,12 +53,8 @@ fn ensure_fonts() -> Result<()> {
     let ok = *OK.get_or_init(|| {
         plotters::style::register_font("sans-serif", FontStyle::Normal, dejavu::sans::regular())
             .is_ok()
-            && plotters::style::register_font(
-                "sans-serif",
-                FontStyle::Bold,
-                dejavu::sans::bold(),
-            )
-            .is_ok()
+            && plotters::style::register_font("sans-serif", FontStyle::Bold, dejavu::sans::bold())
+                .is_ok()
     });
     if ok {
         Ok(())
@@ -143,13 +139,11 @@ pub fn map_value(value: f64, range: (f64, f64)) -> RGBColor {
 /// Tick label with a precision suited to the axis span.
 fn fmt_tick(v: f64, span: f64) -> String {
     let span = span.abs();
-    if v == 0.0 {
-        return "0".into();
-    }
     if !(1e-3..1e5).contains(&span) {
         return format!("{v:.2e}");
     }
-    let dec = (2.0 - span.log10().floor()).clamp(0.0, 6.0) as usize;
+    // ticks are about span/10 apart: one significant digit of the step
+    let dec = (1.0 - span.log10().floor()).clamp(0.0, 6.0) as usize;
     format!("{v:.dec$}")
 }
 
@@ -264,7 +258,7 @@ pub fn plot_curves_sized(
         };
         let dashed = s.dashed;
         anno.label(s.name.clone()).legend(move |(x, y)| {
-            let pts = vec![(x, y), (x + 28, y)];
+            let pts = vec![(x, y), (x + 30, y)];
             if dashed {
                 DashedPathElement::new(pts, 7, 4, style).into_dyn()
             } else {
@@ -275,6 +269,7 @@ pub fn plot_curves_sized(
     chart
         .configure_series_labels()
         .label_font(("sans-serif", 16))
+        .legend_area_size(40)
         .background_style(WHITE.mix(0.85))
         .border_style(BLACK)
         .position(SeriesLabelPosition::UpperRight)
@@ -335,11 +330,16 @@ pub struct Panel<'a> {
     pub values: &'a [f64],
     /// Plotted region (equal axis scales are kept).
     pub bounds: Bounds,
-    /// Side of the square drawn per point, in model units (the MP spacing,
-    /// h/2 for 2×2 MPs per cell); `None` = sqrt(area of the points' bounding
-    /// box / number of points).
+    /// Side of the square drawn per point, in model units. Slightly more
+    /// than the MP spacing closes the gaps between squares: for 2×2 MPs per
+    /// cell at the Gauss positions the spacing alternates 0.42h and 0.58h,
+    /// so use 0.6h. `None` = [`AUTO_MARKER_FACTOR`]·sqrt(area of the points'
+    /// bounding box / number of points) (= 0.6h for that layout).
     pub marker: Option<f64>,
 }
+
+/// Factor on the mean MP spacing for the automatic marker size.
+pub const AUTO_MARKER_FACTOR: f64 = 1.2;
 
 /// Height in pixels of a field panel's drawing region (auto sizing).
 const PANEL_PLOT_H: f64 = 520.0;
@@ -442,7 +442,7 @@ pub fn plot_field_panels_sized(
         }
     };
     let (w, h) = size;
-    if w < COLORBAR_W + 50 * panels.len() as u32 || h < FIG_TITLE_H + 100 {
+    if w < COLORBAR_W + 120 * panels.len() as u32 || h < FIG_TITLE_H + 140 {
         return Err(PlotError::Bounds("image too small"));
     }
 
@@ -583,7 +583,7 @@ fn auto_marker(positions: &[[f64; 2]], idx: &[usize], b: Bounds) -> f64 {
     }
     let area = (x1 - x0) * (y1 - y0);
     if idx.len() > 1 && area > 0.0 {
-        (area / idx.len() as f64).sqrt()
+        AUTO_MARKER_FACTOR * (area / idx.len() as f64).sqrt()
     } else {
         0.01 * b.width().min(b.height())
     }
@@ -603,10 +603,9 @@ fn draw_colorbar(
     let mut chart = ChartBuilder::on(area)
         .margin_top(PANEL_TITLE_H + PANEL_MARGIN)
         .margin_bottom(PANEL_XLAB + PANEL_MARGIN)
-        .margin_left(6)
-        .margin_right(70)
-        .y_label_area_size(0)
-        .right_y_label_area_size(60)
+        .margin_left(12)
+        .margin_right(36)
+        .right_y_label_area_size(58)
         .build_cartesian_2d(0.0..1.0, lo..hi)
         .map_err(de)?;
     chart
@@ -637,7 +636,7 @@ fn draw_colorbar(
         let (w, h) = area.dim_in_pixel();
         area.draw(&Text::new(
             label.to_string(),
-            ((w as i32) - 12, (h / 2) as i32),
+            ((w as i32) - 16, (h / 2) as i32),
             ("sans-serif", 18)
                 .into_font()
                 .transform(FontTransform::Rotate270)

@@ -129,6 +129,7 @@ fn curves_png_written_with_size_and_content() {
 fn curves_reject_empty_input() {
     let dir = out_dir();
     let path = dir.path.join("none.png");
+    let _ = std::fs::remove_file(&path);
     assert!(plot_curves(&path, "t", "x", "y", &[]).is_err());
     let s = Series {
         name: "nan".into(),
@@ -207,7 +208,7 @@ fn field_png_single_and_panels() {
             positions: x,
             values: e,
             bounds: b,
-            marker: Some(0.5 * h),
+            marker: Some(0.6 * h),
         })
         .collect();
     let path = dir.path.join("panels.png");
@@ -238,6 +239,7 @@ fn field_png_single_and_panels() {
 fn field_rejects_bad_input() {
     let dir = out_dir();
     let path = dir.path.join("bad.png");
+    let _ = std::fs::remove_file(&path);
     let b = Bounds::new(0.0, 1.0, 0.0, 1.0);
     let x = [[0.5, 0.5], [0.2, 0.2]];
     assert!(matches!(
@@ -248,10 +250,30 @@ fn field_rejects_bad_input() {
     assert!(plot_field(&path, "", &x, &[1.0, 2.0], bad, None).is_err());
     assert!(plot_field(&path, "", &x, &[1.0, 2.0], b, Some((2.0, 1.0))).is_err());
     assert!(plot_field_panels(&path, "", &[], None, "").is_err());
+    let p = Panel {
+        title: "tiny".into(),
+        positions: &x,
+        values: &[1.0, 2.0],
+        bounds: b,
+        marker: None,
+    };
+    assert!(matches!(
+        plot_field_panels_sized(&path, (100, 100), "", &[p], None, ""),
+        Err(PlotError::Bounds(_))
+    ));
     assert!(!path.exists());
     // degenerate but valid: constant values, NaN values, no points
     plot_field(&path, "", &x, &[1.0, 1.0], b, None).unwrap();
     plot_field(&path, "", &x, &[f64::NAN, 1.0], b, None).unwrap();
     plot_field(&path, "", &[], &[], b, None).unwrap();
+    // the smallest accepted size renders without panicking
+    let p = Panel {
+        title: "tiny".into(),
+        positions: &x,
+        values: &[1.0, 2.0],
+        bounds: b,
+        marker: None,
+    };
+    plot_field_panels_sized(&path, (250, 180), "t", &[p], None, "e").unwrap();
     assert!(path.exists());
 }
