@@ -197,15 +197,16 @@ impl TractionPoints {
     }
 
     /// Shape functions at each point, in the cell of the body it loads: the cell
-    /// containing x_s − 1e−9·h·n_s if it is active (holds material points), else the
-    /// first active cell met going inward along −n_s (up to one cell). When the
-    /// body's edge has moved into an empty cell, the shape functions of the
-    /// body's cell are thereby extrapolated to x_s: this keeps the traction in
-    /// balance with the internal force of the material points (a homogeneous
-    /// stress equal to the pressure stays in equilibrium), where the empty
-    /// cell's nodes carry no unknowns and would lose part of the load.
-    /// Errs with the first point that left the grid.
-    pub fn shapes(&self, grid: &Grid, bins: &ParticleBins) -> Result<Vec<ShapeAt>, transfer::OutsideGrid> {
+    /// containing x_s − 1e−9·h·n_s if it is *filled* (holds at least
+    /// `min_points` material points, half the seeding count), else the first
+    /// filled cell met going inward along −n_s (up to one cell). When the body's
+    /// edge has moved into an empty or nearly empty cell, the shape functions of
+    /// the body's cell are thereby extrapolated to x_s: this keeps the traction
+    /// in balance with the internal force of the material points (a homogeneous
+    /// stress equal to the pressure stays in equilibrium), whereas the far
+    /// nodes of a nearly empty cell have almost no stiffness and would be
+    /// thrown away by the load. Errs with the first point that left the grid.
+    pub fn shapes(&self, grid: &Grid, bins: &ParticleBins, min_points: usize) -> Result<Vec<ShapeAt>, transfer::OutsideGrid> {
         (0..self.len())
             .map(|s| {
                 let (n, _) = self.normal_and_length(s);
@@ -213,11 +214,11 @@ impl TractionPoints {
                 let outside = transfer::OutsideGrid { particle: s, position: x };
                 let probe = |depth: f64| [x[0] - depth * grid.cell_size * n[0], x[1] - depth * grid.cell_size * n[1]];
                 let own = grid.locate(probe(1e-9)).ok_or(outside)?;
-                let active = |(ci, cj): (usize, usize)| bins.cell_slot[cj * grid.cells[0] + ci] != NONE;
+                let filled = |(ci, cj): (usize, usize)| bins.particles_in(cj * grid.cells[0] + ci).len() >= min_points;
                 let cell = [1e-9, 0.5, 1.0]
                     .iter()
                     .filter_map(|&d| grid.locate(probe(d)))
-                    .find(|&c| active(c))
+                    .find(|&c| filled(c))
                     .unwrap_or(own);
                 Ok(grid.shape_in_cell(cell.0, cell.1, x))
             })

@@ -276,6 +276,11 @@ impl Simulation {
         Ok(())
     }
 
+    /// Material points a cell needs to carry traction points (half the seeding count).
+    pub(crate) fn traction_min_points(&self) -> usize {
+        (self.scene.grid.points_per_cell.pow(2) / 2).max(1)
+    }
+
     /// Current monitor values, in column order.
     pub fn monitor_values(&self) -> Vec<f64> {
         self.monitors.iter().map(|m| m.value(self)).collect()

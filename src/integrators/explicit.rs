@@ -71,7 +71,7 @@ impl Simulation {
             let bins = ParticleBins::new(&grid, &shapes);
             let traction_shapes =
                 self.traction
-                    .shapes(&grid, &bins)
+                    .shapes(&grid, &bins, self.traction_min_points())
                     .map_err(|o| RunError::TractionPointLeftGrid {
                         step,
                         time: t,

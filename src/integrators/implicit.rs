@@ -30,8 +30,9 @@ pub(crate) enum StepFailure {
     Constitutive(usize, crate::constitutive::ConstitutiveError),
     /// Non-finite residual or solution.
     NonFinite(String, Vec<f64>),
-    /// A point moved more than half a cell in one dynamic step (DESIGN §3 motion limit).
-    Motion(f64),
+    /// A point (index, position) moved this far, more than half a cell, in one dynamic
+    /// step (DESIGN §3 motion limit).
+    Motion(usize, [f64; 2], f64),
     /// Linear solver error.
     Solver(String),
     /// Not retried: a material point left the grid.
@@ -159,11 +160,14 @@ impl Simulation {
                 cause: format!("non-finite {what}"),
                 history,
             },
-            StepFailure::Motion(d) => RunError::NewtonFailed {
+            StepFailure::Motion(p, x, d) => RunError::NewtonFailed {
                 step,
                 time,
                 halvings,
-                cause: format!("a material point moved {d:.3e} m > h/2 in one step"),
+                cause: format!(
+                    "material point {p} at ({:.6}, {:.6}) m moved {d:.3e} m > h/2 in one step",
+                    x[0], x[1]
+                ),
                 history: Vec::new(),
             },
         }
@@ -186,7 +190,7 @@ impl Simulation {
             let dofs = DofMap::new(&bins, &self.constraints);
             let traction_shapes = self
                 .traction
-                .shapes(grid, &bins)
+                .shapes(grid, &bins, self.traction_min_points())
                 .map_err(|o| StepFailure::TractionLeftGrid(o.particle, o.position))?;
             Ok((shapes, bins, dofs, traction_shapes))
         })?;
@@ -623,12 +627,13 @@ impl Simulation {
             .map(|s| transfer::interpolate(s, du))
             .collect();
         if dynamic {
-            let max_motion = motion
+            let (p, max_motion) = motion
                 .iter()
                 .map(|u| (u[0] * u[0] + u[1] * u[1]).sqrt())
-                .fold(0.0, f64::max);
+                .enumerate()
+                .fold((0, 0.0), |a, b| if b.1 > a.1 { b } else { a });
             if max_motion > 0.5 * self.grid.cell_size {
-                return Err(StepFailure::Motion(max_motion));
+                return Err(StepFailure::Motion(p, self.particles.position[p], max_motion));
             }
         }
         let (stress, state) = self
