@@ -206,15 +206,30 @@ impl TractionPoints {
     /// stress equal to the pressure stays in equilibrium), whereas the far
     /// nodes of a nearly empty cell have almost no stiffness and would be
     /// thrown away by the load. Errs with the first point that left the grid.
-    pub fn shapes(&self, grid: &Grid, bins: &ParticleBins, min_points: usize) -> Result<Vec<ShapeAt>, transfer::OutsideGrid> {
+    pub fn shapes(
+        &self,
+        grid: &Grid,
+        bins: &ParticleBins,
+        min_points: usize,
+    ) -> Result<Vec<ShapeAt>, transfer::OutsideGrid> {
         (0..self.len())
             .map(|s| {
                 let (n, _) = self.normal_and_length(s);
                 let x = self.position[s];
-                let outside = transfer::OutsideGrid { particle: s, position: x };
-                let probe = |depth: f64| [x[0] - depth * grid.cell_size * n[0], x[1] - depth * grid.cell_size * n[1]];
+                let outside = transfer::OutsideGrid {
+                    particle: s,
+                    position: x,
+                };
+                let probe = |depth: f64| {
+                    [
+                        x[0] - depth * grid.cell_size * n[0],
+                        x[1] - depth * grid.cell_size * n[1],
+                    ]
+                };
                 let own = grid.locate(probe(1e-9)).ok_or(outside)?;
-                let filled = |(ci, cj): (usize, usize)| bins.particles_in(cj * grid.cells[0] + ci).len() >= min_points;
+                let filled = |(ci, cj): (usize, usize)| {
+                    bins.particles_in(cj * grid.cells[0] + ci).len() >= min_points
+                };
                 let cell = [1e-9, 0.5, 1.0]
                     .iter()
                     .filter_map(|&d| grid.locate(probe(d)))

@@ -19,6 +19,7 @@
 #![allow(clippy::needless_range_loop)]
 
 pub mod bc;
+pub mod campaign;
 pub mod constitutive;
 pub mod error;
 pub mod grid;
@@ -35,5 +36,5 @@ pub mod run;
 pub mod scene;
 pub mod shape;
 pub mod simulation;
-pub mod transfer;
 pub mod smoothing;
+pub mod transfer;

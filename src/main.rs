@@ -32,6 +32,21 @@ enum Command {
         #[arg(long)]
         quiet: bool,
     },
+    /// Run every scene of a directory (in parallel) and write curves.csv,
+    /// metrics.csv, report.md and plots (mesh-objectivity campaign).
+    Campaign {
+        /// Directory of scene files (e.g. validation/biaxial).
+        dir: PathBuf,
+        /// Output directory (default: out/campaign-<dir name>).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Scenes run at the same time.
+        #[arg(long, default_value_t = 2)]
+        jobs: usize,
+        /// Override a value in every scene (repeatable).
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        overrides: Vec<String>,
+    },
     /// Homogeneous test on one material point (biaxial, triaxial, simple shear) → CSV.
     Point(mpm_geo::point_driver::PointArgs),
     /// Validate a scene without running it (exit 0 when valid).
@@ -47,6 +62,35 @@ enum Command {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
+        Command::Campaign {
+            dir,
+            out,
+            jobs,
+            overrides,
+        } => {
+            let name = dir
+                .file_name()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_else(|| "campaign".into());
+            let out = out.unwrap_or_else(|| PathBuf::from("out").join(format!("campaign-{name}")));
+            match mpm_geo::campaign::run_campaign(&dir, &out, jobs, &overrides) {
+                Ok(runs) => {
+                    let stopped = runs.iter().filter(|r| r.error.is_some()).count();
+                    eprintln!(
+                        "campaign: {} runs ({} stopped early); report in {}",
+                        runs.len(),
+                        stopped,
+                        out.join("report.md").display()
+                    );
+                    if stopped == 0 {
+                        ExitCode::SUCCESS
+                    } else {
+                        ExitCode::from(1)
+                    }
+                }
+                Err(e) => fail(2, &e.to_string()),
+            }
+        }
         Command::Point(args) => match mpm_geo::point_driver::run(&args) {
             Ok(()) => ExitCode::SUCCESS,
             Err(e) => fail(1, &e.to_string()),

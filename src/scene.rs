@@ -346,7 +346,9 @@ impl MaterialSpec {
             MaterialSpec::Hmc(h) => {
                 for problem in h.validate(prefix) {
                     // messages read "<field> = <value> ..."; keep the field path separate
-                    let (field, message) = problem.split_once(' ').unwrap_or((prefix, problem.as_str()));
+                    let (field, message) = problem
+                        .split_once(' ')
+                        .unwrap_or((prefix, problem.as_str()));
                     errors.push(FieldError {
                         field: field.to_string(),
                         message: message.trim_start_matches("= ").to_string(),
@@ -816,7 +818,9 @@ impl Scene {
 
     /// Newton iteration limit: the scene's value, else 25 (local) or 60 (nonlocal).
     pub fn max_iterations(&self) -> usize {
-        self.solver.max_iterations.unwrap_or(if self.nonlocal.is_some() { 60 } else { 25 })
+        self.solver
+            .max_iterations
+            .unwrap_or(if self.nonlocal.is_some() { 60 } else { 25 })
     }
 
     /// Index of the body named `name` (`None` → the first body).
@@ -853,9 +857,24 @@ impl Scene {
         }
         self.validate_monitors(&mut e, grid_ok);
         if let Some(nl) = &self.nonlocal {
-            check(&mut e, "nonlocal.length_scale", nl.length_scale > 0.0 && nl.length_scale.is_finite(), format!("must be > 0 m (got {})", nl.length_scale));
-            check(&mut e, "nonlocal.cutoff_factor", nl.cutoff_factor >= 1.0 && nl.cutoff_factor <= 10.0, format!("must lie in [1, 10] (got {})", nl.cutoff_factor));
-            check(&mut e, "nonlocal.tolerance", nl.tolerance > 0.0 && nl.tolerance < 1.0, "must lie in (0, 1)");
+            check(
+                &mut e,
+                "nonlocal.length_scale",
+                nl.length_scale > 0.0 && nl.length_scale.is_finite(),
+                format!("must be > 0 m (got {})", nl.length_scale),
+            );
+            check(
+                &mut e,
+                "nonlocal.cutoff_factor",
+                nl.cutoff_factor >= 1.0 && nl.cutoff_factor <= 10.0,
+                format!("must lie in [1, 10] (got {})", nl.cutoff_factor),
+            );
+            check(
+                &mut e,
+                "nonlocal.tolerance",
+                nl.tolerance > 0.0 && nl.tolerance < 1.0,
+                "must lie in (0, 1)",
+            );
             check(
                 &mut e,
                 "grid.cell_size",

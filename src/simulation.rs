@@ -138,7 +138,7 @@ fn gauss_rule(n: usize) -> (Vec<f64>, Vec<f64>) {
 pub fn build_material(spec: &MaterialSpec) -> Result<Arc<dyn ConstitutiveModel>, Vec<String>> {
     Ok(match spec {
         MaterialSpec::LinearElastic(e) => Arc::new(LinearElastic::new(e.youngs_modulus, e.nu)),
-        MaterialSpec::Hmc(h) => Arc::new(crate::constitutive::hmc::Hmc::new(h.clone())?),
+        MaterialSpec::Hmc(h) => Arc::new(crate::constitutive::hmc::Hmc::new(*h)?),
     })
 }
 
@@ -197,7 +197,10 @@ impl Simulation {
         let constraints = Constraints::from_scene(&scene, &grid);
         let traction = TractionPoints::from_scene(&scene);
         let symmetric_tangent = materials.iter().all(|m| m.has_symmetric_tangent());
-        let compliances: Vec<Mat4> = materials.iter().map(|m| invert4(&m.elastic_stiffness())).collect();
+        let compliances: Vec<Mat4> = materials
+            .iter()
+            .map(|m| invert4(&m.elastic_stiffness()))
+            .collect();
         let policy = match scene.solver.linear_solver {
             LinearSolverChoice::Auto => SolverPolicy::Auto,
             LinearSolverChoice::Cholesky => SolverPolicy::Cholesky,

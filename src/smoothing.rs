@@ -72,7 +72,13 @@ pub fn double_map(
     });
     let nodal: Vec<Voigt> = weighted
         .iter()
-        .map(|v| if v[4] > 0.0 { [v[0] / v[4], v[1] / v[4], v[2] / v[4], v[3] / v[4]] } else { [0.0; 4] })
+        .map(|v| {
+            if v[4] > 0.0 {
+                [v[0] / v[4], v[1] / v[4], v[2] / v[4], v[3] / v[4]]
+            } else {
+                [0.0; 4]
+            }
+        })
         .collect();
     // D38: σ_p ← σ^R_p + Σ_i N_ip Δσ̂_i, then D39
     for p in 0..stress.len() {
@@ -103,18 +109,49 @@ mod tests {
     /// only for uniform fields; a uniform field is exact to round-off).
     #[test]
     fn uniform_increment_is_unchanged_and_mass_weighting_is_exact() {
-        let grid = Grid { origin: [0.0, 0.0], cell_size: 0.5, cells: [3, 3] };
-        let positions: Vec<[f64; 2]> = (0..36).map(|i| [0.1 + 0.04 * i as f64, 0.2 + 0.03 * i as f64]).collect();
+        let grid = Grid {
+            origin: [0.0, 0.0],
+            cell_size: 0.5,
+            cells: [3, 3],
+        };
+        let positions: Vec<[f64; 2]> = (0..36)
+            .map(|i| [0.1 + 0.04 * i as f64, 0.2 + 0.03 * i as f64])
+            .collect();
         let shapes = transfer::shapes_at(&grid, &positions).unwrap();
         let bins = ParticleBins::new(&grid, &shapes);
         let mass: Vec<f64> = (0..36).map(|i| 1.0 + 0.1 * i as f64).collect();
-        let rotated: Vec<Voigt> = (0..36).map(|i| [-100.0 - i as f64, -50.0, -70.0, 3.0 * i as f64]).collect();
+        let rotated: Vec<Voigt> = (0..36)
+            .map(|i| [-100.0 - i as f64, -50.0, -70.0, 3.0 * i as f64])
+            .collect();
         let increment = [-5.0, 2.0, 1.0, -0.5];
-        let mut stress: Vec<Voigt> = rotated.iter().map(|r| [r[0] + increment[0], r[1] + increment[1], r[2] + increment[2], r[3] + increment[3]]).collect();
+        let mut stress: Vec<Voigt> = rotated
+            .iter()
+            .map(|r| {
+                [
+                    r[0] + increment[0],
+                    r[1] + increment[1],
+                    r[2] + increment[2],
+                    r[3] + increment[3],
+                ]
+            })
+            .collect();
         let expected = stress.clone();
-        let materials: Vec<Arc<dyn ConstitutiveModel>> = vec![Arc::new(LinearElastic::new(1000.0, 0.3))];
+        let materials: Vec<Arc<dyn ConstitutiveModel>> =
+            vec![Arc::new(LinearElastic::new(1000.0, 0.3))];
         let state = vec![PointState::default(); 36];
-        double_map(DoubleMapping::Increment, &grid, &bins, &shapes, &mass, &rotated, &mut stress, &materials, &[0; 36], &state, None);
+        double_map(
+            DoubleMapping::Increment,
+            &grid,
+            &bins,
+            &shapes,
+            &mass,
+            &rotated,
+            &mut stress,
+            &materials,
+            &[0; 36],
+            &state,
+            None,
+        );
         for (s, e) in stress.iter().zip(&expected) {
             for k in 0..4 {
                 assert!((s[k] - e[k]).abs() < 1e-12 * e[k].abs().max(1.0));

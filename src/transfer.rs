@@ -351,7 +351,12 @@ pub fn cell_stiffness_blocks(
 /// to the block: an unsymmetric term that makes the tangent consistent for
 /// prestressed, rotating material.
 #[inline]
-pub fn add_spin_stiffness(block: &mut [f64; 64], shape: &ShapeAt, volume: f64, spin_sensitivity: &Voigt) {
+pub fn add_spin_stiffness(
+    block: &mut [f64; 64],
+    shape: &ShapeAt,
+    volume: f64,
+    spin_sensitivity: &Voigt,
+) {
     let s = spin_sensitivity;
     for a in 0..4 {
         let [dxa, dya] = shape.dn[a];

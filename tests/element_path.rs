@@ -25,7 +25,10 @@ fn engine_reproduces_the_driver_and_first_yield() {
         // all four points carry the same homogeneous state
         let p = &sim.particles;
         for i in 1..p.len() {
-            assert!((p.stress[i][1] - p.stress[0][1]).abs() <= 1e-6 * p.stress[0][1].abs(), "not homogeneous");
+            assert!(
+                (p.stress[i][1] - p.stress[0][1]).abs() <= 1e-6 * p.stress[0][1].abs(),
+                "not homogeneous"
+            );
         }
         strains.push(p.strain[0][1]);
         stresses.push(p.stress[0][1]);
@@ -34,8 +37,15 @@ fn engine_reproduces_the_driver_and_first_yield() {
     let driver_syy: Vec<f64> = driver.iter().skip(1).map(|r| r.stress[1]).collect();
     assert_eq!(driver_syy.len(), stresses.len());
     let peak = stresses.iter().fold(0.0f64, |m, s| m.max(-s));
-    let worst = stresses.iter().zip(&driver_syy).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
-    println!("element path: max |σyy(engine) − σyy(driver)| = {worst:.3e} kPa ({:.3e} of the peak)", worst / peak);
+    let worst = stresses
+        .iter()
+        .zip(&driver_syy)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f64::max);
+    println!(
+        "element path: max |σyy(engine) − σyy(driver)| = {worst:.3e} kPa ({:.3e} of the peak)",
+        worst / peak
+    );
     assert!(worst <= 5e-3 * peak);
     let first_yield = peak - 100.0;
     println!("element path: first yield Δσyy = −{first_yield:.3} kPa (DESIGN −552.26)");
@@ -44,15 +54,28 @@ fn engine_reproduces_the_driver_and_first_yield() {
 
 #[test]
 fn newton_converges_quadratically_on_a_softening_step() {
-    let mut sim = common::simulation("hmc/element_path.toml", &["scene.steps=160", "solver.tolerance_force=1e-12"]);
+    let mut sim = common::simulation(
+        "hmc/element_path.toml",
+        &["scene.steps=160", "solver.tolerance_force=1e-12"],
+    );
     while !sim.finished() {
         sim.step_once().unwrap_or_else(|e| panic!("{e}"));
     }
-    assert!(sim.particles.state[0].plastic_strain_eq > 0.0, "the last step must be plastic");
+    assert!(
+        sim.particles.state[0].plastic_strain_eq > 0.0,
+        "the last step must be plastic"
+    );
     let (history, reference) = sim.last_residuals.clone();
     let normalised: Vec<f64> = history.iter().map(|r| r / reference).collect();
-    println!("softening step {}: ‖R‖/F_ref per iteration {normalised:?}", sim.step);
-    assert!(normalised.len() >= 3 && normalised.len() <= 7, "{} iterations", normalised.len() - 1);
+    println!(
+        "softening step {}: ‖R‖/F_ref per iteration {normalised:?}",
+        sim.step
+    );
+    assert!(
+        normalised.len() >= 3 && normalised.len() <= 7,
+        "{} iterations",
+        normalised.len() - 1
+    );
     let mut checked = 0;
     for w in normalised.windows(2) {
         if w[1] > 1e-11 {

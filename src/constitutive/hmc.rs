@@ -944,7 +944,12 @@ impl ConstitutiveModel for Hmc {
     /// DESIGN D39: a smoothed stress outside the surface is scaled back onto it at
     /// fixed p and θ (deviator scaled), or set to the tip p_t·[1,1,1,0] when the
     /// pressure lies beyond the apex. The strength is taken at κ̄ (nonlocal) or κ.
-    fn project_to_surface(&self, stress: &Voigt, state: &PointState, strength_kappa: Option<f64>) -> Voigt {
+    fn project_to_surface(
+        &self,
+        stress: &Voigt,
+        state: &PointState,
+        strength_kappa: Option<f64>,
+    ) -> Voigt {
         let kappa = strength_kappa.unwrap_or(state.plastic_strain_eq);
         let strength: SurfaceStrength<f64> = self.strength(kappa);
         if self.surface.value(stress, &strength) <= 1e-10 * self.strength_scale() {
@@ -958,7 +963,8 @@ impl ConstitutiveModel for Hmc {
             return [pt, pt, pt, 0.0];
         }
         let radius = HyperbolicMohrCoulomb::shape_radius(&strength, inv.sin_3theta);
-        let j_new = radius * (capacity * capacity - strength.hyperbola_a * strength.hyperbola_a).sqrt();
+        let j_new =
+            radius * (capacity * capacity - strength.hyperbola_a * strength.hyperbola_a).sqrt();
         let scale = j_new / inv.j;
         [
             -p + scale * (stress[0] + p),
@@ -1694,12 +1700,18 @@ mod tests {
     #[test]
     fn projection_after_double_mapping_keeps_p_and_theta() {
         let hmc = Hmc::new(HmcParameters::table1()).unwrap();
-        let state = PointState { plastic_strain_eq: 0.05, ..Default::default() };
+        let state = PointState {
+            plastic_strain_eq: 0.05,
+            ..Default::default()
+        };
         let outside = [-900.0, -150.0, -300.0, 120.0];
         let projected = hmc.project_to_surface(&outside, &state, None);
         let f = hmc.yield_function(&projected, 0.05);
         assert!(f.abs() <= 1e-9 * hmc.strength_scale(), "f = {f}");
-        let (a, b) = (Invariants::of(&outside, 1e-10), Invariants::of(&projected, 1e-10));
+        let (a, b) = (
+            Invariants::of(&outside, 1e-10),
+            Invariants::of(&projected, 1e-10),
+        );
         assert!((a.mean_stress - b.mean_stress).abs() < 1e-9 * a.mean_stress.abs());
         assert!((a.sin_3theta - b.sin_3theta).abs() < 1e-9);
         assert!(b.j < a.j);
@@ -1707,6 +1719,9 @@ mod tests {
         assert_eq!(hmc.project_to_surface(&inside, &state, None), inside);
         let tension = [50.0, 40.0, 45.0, 3.0];
         let pt = hmc.strength_at(0.05).tensile_strength;
-        assert_eq!(hmc.project_to_surface(&tension, &state, None), [pt, pt, pt, 0.0]);
+        assert_eq!(
+            hmc.project_to_surface(&tension, &state, None),
+            [pt, pt, pt, 0.0]
+        );
     }
 }

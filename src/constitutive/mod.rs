@@ -111,7 +111,12 @@ pub trait ConstitutiveModel: Send + Sync + Debug {
     /// Return a stress that lies outside the yield surface to it at fixed mean
     /// stress and Lode angle, without changing the state (DESIGN D39, used after
     /// double mapping). Elastic models return the stress unchanged.
-    fn project_to_surface(&self, stress: &Voigt, _state: &PointState, _strength_kappa: Option<f64>) -> Voigt {
+    fn project_to_surface(
+        &self,
+        stress: &Voigt,
+        _state: &PointState,
+        _strength_kappa: Option<f64>,
+    ) -> Voigt {
         *stress
     }
 }

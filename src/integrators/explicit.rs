@@ -69,25 +69,27 @@ impl Simulation {
                 }
             })?;
             let bins = ParticleBins::new(&grid, &shapes);
-            let traction_shapes =
-                self.traction
-                    .shapes(&grid, &bins, self.traction_min_points())
-                    .map_err(|o| RunError::TractionPointLeftGrid {
-                        step,
-                        time: t,
-                        point: o.particle,
-                        position: o.position,
-                    })?;
+            let traction_shapes = self
+                .traction
+                .shapes(&grid, &bins, self.traction_min_points())
+                .map_err(|o| RunError::TractionPointLeftGrid {
+                    step,
+                    time: t,
+                    point: o.particle,
+                    position: o.position,
+                })?;
             Ok((shapes, bins, traction_shapes))
         })?;
         let (shapes, bins, traction_shapes) = setup;
         // Nonlocal weights from the start-of-step configuration; explicit runs
         // update κ̄ once per step (DESIGN §4, mode "step").
         let mut nonlocal = match &self.scene.nonlocal {
-            Some(spec) => Some(NonlocalStep::new(spec, &self.particles, true).map_err(|e| RunError::NonFinite {
-                step,
-                time: t,
-                what: format!("nonlocal weights: {e}"),
+            Some(spec) => Some(NonlocalStep::new(spec, &self.particles, true).map_err(|e| {
+                RunError::NonFinite {
+                    step,
+                    time: t,
+                    what: format!("nonlocal weights: {e}"),
+                }
             })?),
             None => None,
         };
@@ -252,7 +254,11 @@ impl Simulation {
         let start = std::time::Instant::now();
         let (stress, state) = self
             .finalize_stresses(&bins, &shapes, &trial, nonlocal.as_mut())
-            .map_err(|e| RunError::NonFinite { step, time: t + dt, what: format!("nonlocal average: {e}") })?;
+            .map_err(|e| RunError::NonFinite {
+                step,
+                time: t + dt,
+                what: format!("nonlocal average: {e}"),
+            })?;
         {
             let p = &mut self.particles;
             for i in 0..p.len() {

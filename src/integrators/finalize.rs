@@ -14,7 +14,9 @@ impl Simulation {
     /// material can soften (the paper's use), else `off`.
     pub fn double_mapping(&self) -> DoubleMapping {
         match self.scene.smoothing.double_mapping {
-            DoubleMapping::Auto if self.materials.iter().any(|m| m.can_soften()) => DoubleMapping::Increment,
+            DoubleMapping::Auto if self.materials.iter().any(|m| m.can_soften()) => {
+                DoubleMapping::Increment
+            }
             DoubleMapping::Auto => DoubleMapping::Off,
             mode => mode,
         }
@@ -31,7 +33,8 @@ impl Simulation {
         let mut state = trial.state.clone();
         let kappa_bar = match nonlocal {
             Some(nl) => {
-                let committed = nl.committed(&self.particles, |p| trial.state[p].plastic_strain_eq)?;
+                let committed =
+                    nl.committed(&self.particles, |p| trial.state[p].plastic_strain_eq)?;
                 for (s, k) in state.iter_mut().zip(&committed) {
                     s.plastic_strain_eq_nonlocal = *k;
                 }

@@ -322,9 +322,15 @@ impl Simulation {
                 Assembler::new(n, &element_dofs).map_err(|e| StepFailure::Solver(e.to_string()))?;
             self.assembler = Some((element_dofs, assembler));
         }
-        let spin = (!trial.spin_sensitivity.is_empty()).then_some(trial.spin_sensitivity.as_slice());
-        let mut blocks =
-            transfer::cell_stiffness_blocks(&sg.bins, &sg.shapes, &self.particles.volume, &trial.tangent, spin);
+        let spin =
+            (!trial.spin_sensitivity.is_empty()).then_some(trial.spin_sensitivity.as_slice());
+        let mut blocks = transfer::cell_stiffness_blocks(
+            &sg.bins,
+            &sg.shapes,
+            &self.particles.volume,
+            &trial.tangent,
+            spin,
+        );
         for block in blocks.iter_mut() {
             for (b, bg) in block.iter_mut().zip(self.background_block.iter()) {
                 *b += bg;
@@ -489,13 +495,13 @@ impl Simulation {
         let mut du = self.initial_increment(&sg, t, dt, &vec![0.0; sg.dofs.n_free]);
         let settings = self.scene.solver.clone();
         let max_iterations = self.scene.max_iterations();
-        let mut nonlocal = match &self.scene.nonlocal {
-            Some(spec) => Some(
-                NonlocalStep::new(spec, &self.particles, false)
-                    .map_err(|e| StepFailure::NonFinite(format!("nonlocal weights: {e}"), Vec::new()))?,
-            ),
-            None => None,
-        };
+        let mut nonlocal =
+            match &self.scene.nonlocal {
+                Some(spec) => Some(NonlocalStep::new(spec, &self.particles, false).map_err(
+                    |e| StepFailure::NonFinite(format!("nonlocal weights: {e}"), Vec::new()),
+                )?),
+                None => None,
+            };
         let mut trial = TrialStresses::default();
         let mut res = self.evaluate(&sg, &du, nonlocal.as_ref(), t1, dt, &mut trial)?;
         let mut history = Vec::new();
@@ -511,12 +517,15 @@ impl Simulation {
             let free_residual = gather_free(&sg.dofs, &res.residual);
             // DESIGN D18, energy norm: work of the new residual on the last correction.
             let energy_ok = iteration == 0
-                || dot(&last_correction, &free_residual).abs() <= settings.tolerance_energy * energy0;
+                || dot(&last_correction, &free_residual).abs()
+                    <= settings.tolerance_energy * energy0;
             // DESIGN D18, third criterion (nonlocal): κ̄ lagged by one iteration has settled.
             let kappa_ok = match nonlocal.as_mut() {
                 Some(nl) => nl
                     .iterate(&self.particles, |p| trial.state[p].plastic_strain_eq)
-                    .map_err(|e| StepFailure::NonFinite(format!("nonlocal average: {e}"), history.clone()))?,
+                    .map_err(|e| {
+                        StepFailure::NonFinite(format!("nonlocal average: {e}"), history.clone())
+                    })?,
                 None => true,
             };
             if force_ok && energy_ok && kappa_ok {
@@ -541,20 +550,33 @@ impl Simulation {
                 .time(Stage::Solve, || self.solver.solve_in_place(&mut correction))
                 .map_err(|e| StepFailure::Solver(e.to_string()))?;
             if correction.iter().any(|v| !v.is_finite()) {
-                return Err(StepFailure::NonFinite("solution of the linear system".into(), history));
+                return Err(StepFailure::NonFinite(
+                    "solution of the linear system".into(),
+                    history,
+                ));
             }
             if iteration == 0 {
-                energy0 = dot(&correction, &free_residual).abs().max(f64::MIN_POSITIVE);
+                energy0 = dot(&correction, &free_residual)
+                    .abs()
+                    .max(f64::MIN_POSITIVE);
             }
             // κ̄ changed since `res` was evaluated: the line search compares against
             // the residual at the current κ̄, so re-evaluate the reference first.
             let reference_norm = if nonlocal.is_some() && iteration > 0 {
-                self.evaluate(&sg, &du, nonlocal.as_ref(), t1, dt, &mut trial)?.norm
+                self.evaluate(&sg, &du, nonlocal.as_ref(), t1, dt, &mut trial)?
+                    .norm
             } else {
                 res.norm
             };
-            let (new_du, new_trial, new_res) =
-                self.line_search(&sg, &du, &correction, reference_norm, nonlocal.as_ref(), t1, dt)?;
+            let (new_du, new_trial, new_res) = self.line_search(
+                &sg,
+                &du,
+                &correction,
+                reference_norm,
+                nonlocal.as_ref(),
+                t1,
+                dt,
+            )?;
             du = new_du;
             trial = new_trial;
             res = new_res;
@@ -604,7 +626,9 @@ impl Simulation {
             }
             alpha *= 0.5;
         }
-        best.ok_or_else(|| StepFailure::NonFinite("stress update at every line-search step".into(), Vec::new()))
+        best.ok_or_else(|| {
+            StepFailure::NonFinite("stress update at every line-search step".into(), Vec::new())
+        })
     }
 
     /// Accept the converged iterate: velocities/accelerations (dynamic), then
@@ -633,7 +657,11 @@ impl Simulation {
                 .enumerate()
                 .fold((0, 0.0), |a, b| if b.1 > a.1 { b } else { a });
             if max_motion > 0.5 * self.grid.cell_size {
-                return Err(StepFailure::Motion(p, self.particles.position[p], max_motion));
+                return Err(StepFailure::Motion(
+                    p,
+                    self.particles.position[p],
+                    max_motion,
+                ));
             }
         }
         let (stress, state) = self

@@ -7,8 +7,8 @@
 //! * [`explicit`]: MUSL central difference, matrix-free (DESIGN §4).
 
 pub mod explicit;
-pub mod implicit;
 mod finalize;
+pub mod implicit;
 mod regularisation;
 mod stress;
 

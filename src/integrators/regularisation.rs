@@ -23,17 +23,37 @@ pub struct NonlocalStep {
 impl NonlocalStep {
     /// Weights (D34) for the start-of-step configuration; MPs of different
     /// materials never average together.
-    pub fn new(spec: &NonlocalSpec, particles: &Particles, force_step_update: bool) -> Result<Self, String> {
-        let params = NonlocalParameters { length_scale: spec.length_scale, cutoff_factor: spec.cutoff_factor };
-        let averager = NonlocalAverager::new(&params, &particles.position, &particles.volume, &particles.material)
-            .map_err(|e| e.to_string())?;
-        let start: Vec<f64> = particles.state.iter().map(|s| s.plastic_strain_eq_nonlocal).collect();
+    pub fn new(
+        spec: &NonlocalSpec,
+        particles: &Particles,
+        force_step_update: bool,
+    ) -> Result<Self, String> {
+        let params = NonlocalParameters {
+            length_scale: spec.length_scale,
+            cutoff_factor: spec.cutoff_factor,
+        };
+        let averager = NonlocalAverager::new(
+            &params,
+            &particles.position,
+            &particles.volume,
+            &particles.material,
+        )
+        .map_err(|e| e.to_string())?;
+        let start: Vec<f64> = particles
+            .state
+            .iter()
+            .map(|s| s.plastic_strain_eq_nonlocal)
+            .collect();
         let n = start.len();
         Ok(Self {
             averager,
             current: start.clone(),
             start,
-            update: if force_step_update { NonlocalUpdate::Step } else { spec.update },
+            update: if force_step_update {
+                NonlocalUpdate::Step
+            } else {
+                spec.update
+            },
             tolerance: spec.tolerance,
             scratch_increment: vec![0.0; n],
             scratch_average: vec![0.0; n],
@@ -46,11 +66,17 @@ impl NonlocalStep {
     }
 
     /// κ̄(n) + Σ_q W_pq Δκ_q for the local increments Δκ = κ(trial) − κ(n) (D35).
-    fn averaged(&mut self, particles: &Particles, trial_kappa: impl Fn(usize) -> f64) -> Result<&[f64], String> {
+    fn averaged(
+        &mut self,
+        particles: &Particles,
+        trial_kappa: impl Fn(usize) -> f64,
+    ) -> Result<&[f64], String> {
         for (p, inc) in self.scratch_increment.iter_mut().enumerate() {
             *inc = trial_kappa(p) - particles.state[p].plastic_strain_eq;
         }
-        self.averager.average(&self.scratch_increment, &mut self.scratch_average).map_err(|e| e.to_string())?;
+        self.averager
+            .average(&self.scratch_increment, &mut self.scratch_average)
+            .map_err(|e| e.to_string())?;
         for (avg, start) in self.scratch_average.iter_mut().zip(&self.start) {
             *avg += start;
         }
@@ -60,7 +86,11 @@ impl NonlocalStep {
     /// After an iteration's stress update: lag κ̄ by one iteration (D36) and
     /// report whether it has converged (max change ≤ ε_κ · max(max Δκ̄, 1e−8)).
     /// In `step` mode the strength stays frozen at κ̄(n) and this is always true.
-    pub fn iterate(&mut self, particles: &Particles, trial_kappa: impl Fn(usize) -> f64) -> Result<bool, String> {
+    pub fn iterate(
+        &mut self,
+        particles: &Particles,
+        trial_kappa: impl Fn(usize) -> f64,
+    ) -> Result<bool, String> {
         if self.update == NonlocalUpdate::Step {
             return Ok(true);
         }
@@ -76,7 +106,11 @@ impl NonlocalStep {
     }
 
     /// κ̄(n+1) of the converged step (D35).
-    pub fn committed(&mut self, particles: &Particles, trial_kappa: impl Fn(usize) -> f64) -> Result<Vec<f64>, String> {
+    pub fn committed(
+        &mut self,
+        particles: &Particles,
+        trial_kappa: impl Fn(usize) -> f64,
+    ) -> Result<Vec<f64>, String> {
         Ok(self.averaged(particles, trial_kappa)?.to_vec())
     }
 }

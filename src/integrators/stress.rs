@@ -6,7 +6,9 @@ use std::sync::Arc;
 
 use rayon::prelude::*;
 
-use crate::constitutive::{mat4_mul_vec, ConstitutiveError, ConstitutiveModel, Mat4, PointState, Voigt};
+use crate::constitutive::{
+    mat4_mul_vec, ConstitutiveError, ConstitutiveModel, Mat4, PointState, Voigt,
+};
 use crate::grid::ShapeAt;
 use crate::particles::Particles;
 use crate::transfer;
@@ -53,7 +55,12 @@ pub fn evaluate_stresses(
         .stress
         .par_iter_mut()
         .zip(trial.state.par_iter_mut())
-        .zip(trial.gradient.par_iter_mut().zip(trial.tangent.par_iter_mut()))
+        .zip(
+            trial
+                .gradient
+                .par_iter_mut()
+                .zip(trial.tangent.par_iter_mut()),
+        )
         .zip(trial.rotated.par_iter_mut())
         .enumerate()
         .filter_map(|(p, (((stress, state), (grad, tangent)), rotated_out))| {
@@ -77,12 +84,16 @@ pub fn evaluate_stresses(
         .collect();
     if let Some(compliances) = compliances {
         trial.spin_sensitivity.resize(n, [0.0; 4]);
-        trial.spin_sensitivity.par_iter_mut().enumerate().for_each(|(p, out)| {
-            let s = &particles.stress[p];
-            let g = [2.0 * s[3], -2.0 * s[3], 0.0, s[1] - s[0]];
-            let cg = mat4_mul_vec(&compliances[particles.material[p] as usize], &g);
-            *out = mat4_mul_vec(&trial.tangent[p], &cg);
-        });
+        trial
+            .spin_sensitivity
+            .par_iter_mut()
+            .enumerate()
+            .for_each(|(p, out)| {
+                let s = &particles.stress[p];
+                let g = [2.0 * s[3], -2.0 * s[3], 0.0, s[1] - s[0]];
+                let cg = mat4_mul_vec(&compliances[particles.material[p] as usize], &g);
+                *out = mat4_mul_vec(&trial.tangent[p], &cg);
+            });
     } else {
         trial.spin_sensitivity.clear();
     }

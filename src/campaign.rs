@@ -1,0 +1,402 @@
+//! A mesh-objectivity campaign: every scene of a directory run side by side,
+//! a combined curve CSV, Fig. 3/4/5-style plots and the objectivity metrics of
+//! DESIGN §9 (M1–M4) in `metrics.csv` and `report.md`.
+//!
+//! Scenes are grouped into families by the presence of `[nonlocal]` (local vs
+//! nonlocal); within a family the finest mesh is the reference (DESIGN §9).
+//! Curves are read from each run's `curve.csv`: the abscissa is δ = −`top_uy`
+//! (m), the ordinate the monitor `load` (kN/m).
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use std::time::Instant;
+
+use crate::metrics;
+use crate::output::deviatoric_hencky_strain;
+use crate::plot::{self, Bounds, Panel, Series};
+use crate::run::run_scene;
+use crate::scene::Scene;
+
+/// Why a campaign could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum CampaignError {
+    /// The directory could not be read or holds no scene.
+    #[error("campaign directory {0}: {1}")]
+    Directory(String, String),
+    /// A scene is invalid (nothing was run).
+    #[error("{0}")]
+    Scene(String),
+    /// An output could not be written.
+    #[error("campaign output {0}: {1}")]
+    Output(String, String),
+}
+
+/// One finished (or stopped) run of a campaign.
+#[derive(Clone, Debug)]
+pub struct CampaignRun {
+    /// Scene file stem.
+    pub name: String,
+    /// Cell size h, m.
+    pub cell_size: f64,
+    /// Nonlocal length scale l_s, m (None: local).
+    pub length_scale: Option<f64>,
+    /// (δ, F) after every step.
+    pub curve: Vec<(f64, f64)>,
+    /// Final material-point positions, m.
+    pub positions: Vec<[f64; 2]>,
+    /// Final deviatoric strain εq (DESIGN D8) per point.
+    pub eps_q: Vec<f64>,
+    /// The error that stopped the run, if any.
+    pub error: Option<String>,
+    /// Wall time, s.
+    pub wall_seconds: f64,
+    /// Per-stage profile table.
+    pub profile: String,
+}
+
+fn scenes_in(dir: &Path) -> Result<Vec<PathBuf>, CampaignError> {
+    let entries = std::fs::read_dir(dir)
+        .map_err(|e| CampaignError::Directory(dir.display().to_string(), e.to_string()))?;
+    let mut paths: Vec<PathBuf> = entries
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+        .collect();
+    paths.sort();
+    if paths.is_empty() {
+        return Err(CampaignError::Directory(
+            dir.display().to_string(),
+            "no .toml scene in it".into(),
+        ));
+    }
+    Ok(paths)
+}
+
+fn read_curve(path: &Path) -> Vec<(f64, f64)> {
+    let Ok(mut reader) = csv::Reader::from_path(path) else {
+        return Vec::new();
+    };
+    let Ok(headers) = reader.headers().cloned() else {
+        return Vec::new();
+    };
+    let (Some(load), Some(top)) = (
+        headers.iter().position(|h| h == "load"),
+        headers.iter().position(|h| h == "top_uy"),
+    ) else {
+        return Vec::new();
+    };
+    reader
+        .records()
+        .filter_map(|r| r.ok())
+        .filter_map(|r| {
+            Some((
+                -r.get(top)?.parse::<f64>().ok()?,
+                r.get(load)?.parse::<f64>().ok()?,
+            ))
+        })
+        .collect()
+}
+
+/// Run every scene of `dir` (validated first, all of them, before anything
+/// runs), `jobs` at a time, into `out/<scene>/`, then write the combined
+/// outputs. Returns the runs in scene order.
+pub fn run_campaign(
+    dir: &Path,
+    out: &Path,
+    jobs: usize,
+    overrides: &[String],
+) -> Result<Vec<CampaignRun>, CampaignError> {
+    let paths = scenes_in(dir)?;
+    let scenes: Vec<(String, Scene)> = paths
+        .iter()
+        .map(|p| {
+            let name = p
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            Scene::load(p, overrides)
+                .map(|s| (name, s))
+                .map_err(|e| CampaignError::Scene(e.to_string()))
+        })
+        .collect::<Result<_, _>>()?;
+    let queue = Mutex::new(scenes.into_iter().enumerate().collect::<Vec<_>>());
+    let results = Mutex::new(Vec::new());
+    std::thread::scope(|scope| {
+        for _ in 0..jobs.max(1) {
+            scope.spawn(|| loop {
+                let next = queue.lock().map(|mut q| q.pop()).unwrap_or(None);
+                let Some((index, (name, scene))) = next else {
+                    break;
+                };
+                let run = run_one(&name, scene, &out.join(&name));
+                eprintln!(
+                    "campaign: {name} finished in {:.1} s{}",
+                    run.wall_seconds,
+                    run.error
+                        .as_ref()
+                        .map(|e| format!(" (stopped: {e})"))
+                        .unwrap_or_default()
+                );
+                if let Ok(mut r) = results.lock() {
+                    r.push((index, run));
+                }
+            });
+        }
+    });
+    let mut runs: Vec<(usize, CampaignRun)> = results.into_inner().unwrap_or_default();
+    runs.sort_by_key(|(i, _)| *i);
+    let runs: Vec<CampaignRun> = runs.into_iter().map(|(_, r)| r).collect();
+    write_outputs(out, &runs)?;
+    Ok(runs)
+}
+
+fn run_one(name: &str, scene: Scene, out: &Path) -> CampaignRun {
+    let cell_size = scene.grid.cell_size;
+    let length_scale = scene.nonlocal.as_ref().map(|n| n.length_scale);
+    let start = Instant::now();
+    let mut run = CampaignRun {
+        name: name.to_string(),
+        cell_size,
+        length_scale,
+        curve: Vec::new(),
+        positions: Vec::new(),
+        eps_q: Vec::new(),
+        error: None,
+        wall_seconds: 0.0,
+        profile: String::new(),
+    };
+    match run_scene(scene, out, false) {
+        Err(e) => run.error = Some(e.to_string()),
+        Ok(outcome) => {
+            let p = &outcome.simulation.particles;
+            run.positions = p.position.clone();
+            run.eps_q = p.def_grad.iter().map(deviatoric_hencky_strain).collect();
+            run.error = outcome.error.map(|e| e.to_string());
+            run.profile = outcome.simulation.profile.table(outcome.wall_seconds);
+        }
+    }
+    run.curve = read_curve(&out.join("curve.csv"));
+    run.wall_seconds = start.elapsed().as_secs_f64();
+    run
+}
+
+/// Per-run metrics of DESIGN §9 against the family reference.
+#[derive(Clone, Debug, Default)]
+pub struct RunMetrics {
+    /// Initial slope dF/dδ over the first 10 steps, kN/m per m.
+    pub initial_slope: f64,
+    /// Peak load and its δ.
+    pub peak: (f64, f64),
+    /// Load at the last δ reached.
+    pub final_load: f64,
+    /// M1 post-peak discrepancy e_h against the family reference.
+    pub discrepancy: Option<f64>,
+    /// M2 peak spread.
+    pub peak_spread: Option<f64>,
+    /// M3 brittleness.
+    pub brittleness: Option<f64>,
+    /// M4 band width, m.
+    pub band_width: Option<f64>,
+    /// External work W = ∫F dδ, kJ/m.
+    pub external_work: Option<f64>,
+}
+
+/// Metrics of every run (reference: the finest completed mesh of its family).
+pub fn compute_metrics(runs: &[CampaignRun]) -> Vec<RunMetrics> {
+    runs.iter()
+        .map(|run| {
+            let mut m = RunMetrics::default();
+            if run.curve.len() > 11 {
+                m.initial_slope =
+                    (run.curve[10].1 - run.curve[0].1) / (run.curve[10].0 - run.curve[0].0);
+            }
+            if let Ok((d, f)) = metrics::peak(&run.curve) {
+                m.peak = (d, f);
+            }
+            m.final_load = run.curve.last().map(|c| c.1).unwrap_or(f64::NAN);
+            let reference = runs
+                .iter()
+                .filter(|r| {
+                    r.length_scale.is_some() == run.length_scale.is_some() && r.error.is_none()
+                })
+                .min_by(|a, b| a.cell_size.total_cmp(&b.cell_size));
+            let delta_end = run.curve.last().map(|c| c.0).unwrap_or(0.0);
+            if let Some(reference) = reference {
+                let end = delta_end.min(reference.curve.last().map(|c| c.0).unwrap_or(0.0));
+                m.discrepancy =
+                    metrics::post_peak_discrepancy(&run.curve, &reference.curve, end).ok();
+                m.peak_spread = metrics::peak_spread(&run.curve, &reference.curve).ok();
+            }
+            m.brittleness = metrics::brittleness(&run.curve, delta_end).ok();
+            if !run.positions.is_empty() {
+                m.band_width = metrics::shear_band_width(
+                    &run.positions,
+                    &run.eps_q,
+                    run.cell_size,
+                    run.length_scale.unwrap_or(0.0),
+                )
+                .ok()
+                .map(|b| b.width);
+            }
+            m.external_work = metrics::external_work(&run.curve).ok();
+            m
+        })
+        .collect()
+}
+
+fn fmt_opt(v: Option<f64>, scale: f64, digits: usize) -> String {
+    v.map(|x| format!("{:.*}", digits, x * scale))
+        .unwrap_or_else(|| "–".into())
+}
+
+fn write_outputs(out: &Path, runs: &[CampaignRun]) -> Result<(), CampaignError> {
+    let io = |p: &Path, e: &dyn std::fmt::Display| {
+        CampaignError::Output(p.display().to_string(), e.to_string())
+    };
+    std::fs::create_dir_all(out).map_err(|e| io(out, &e))?;
+    // combined curves
+    let combined = out.join("curves.csv");
+    let mut text = String::from("run,family,cell_size,step,delta,load\n");
+    for r in runs {
+        let family = if r.length_scale.is_some() {
+            "nonlocal"
+        } else {
+            "local"
+        };
+        for (step, (d, f)) in r.curve.iter().enumerate() {
+            let _ = writeln!(
+                text,
+                "{},{family},{:e},{step},{d:e},{f:e}",
+                r.name, r.cell_size
+            );
+        }
+    }
+    std::fs::write(&combined, text).map_err(|e| io(&combined, &e))?;
+    // metrics
+    let m = compute_metrics(runs);
+    let metrics_path = out.join("metrics.csv");
+    let mut csv = String::from("run,family,cell_size,length_scale,status,wall_seconds,initial_slope,peak_delta,peak_load,final_load,M1_discrepancy,M2_peak_spread,M3_brittleness,M4_band_width,external_work\n");
+    let mut md = String::from("# Mesh-objectivity report\n\nReference of each family: its finest completed mesh (DESIGN §9). δ in mm, loads in kN/m, band width w in mm.\n\n| run | h (mm) | status | wall (s) | slope (kN/m/m) | peak F | δ_peak | F_end | β (M3) | M1 e_h | M2 | w (mm) | w/l_s |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    for (r, mm) in runs.iter().zip(&m) {
+        let family = if r.length_scale.is_some() {
+            "nonlocal"
+        } else {
+            "local"
+        };
+        let status = if r.error.is_some() {
+            "stopped"
+        } else {
+            "completed"
+        };
+        let _ = writeln!(
+            csv,
+            "{},{family},{:e},{},{status},{:.2},{:.1},{:e},{:e},{:e},{},{},{},{},{}",
+            r.name,
+            r.cell_size,
+            r.length_scale.map(|l| l.to_string()).unwrap_or_default(),
+            r.wall_seconds,
+            mm.initial_slope,
+            mm.peak.0,
+            mm.peak.1,
+            mm.final_load,
+            fmt_opt(mm.discrepancy, 1.0, 5),
+            fmt_opt(mm.peak_spread, 1.0, 5),
+            fmt_opt(mm.brittleness, 1.0, 5),
+            fmt_opt(mm.band_width, 1.0, 6),
+            fmt_opt(mm.external_work, 1.0, 6),
+        );
+        let ratio = match (mm.band_width, r.length_scale) {
+            (Some(w), Some(l)) => format!("{:.2}", w / l),
+            _ => "–".into(),
+        };
+        let _ = writeln!(
+            md,
+            "| {} | {:.3} | {status} | {:.1} | {:.0} | {:.3} | {:.3} | {:.3} | {} | {} | {} | {} | {ratio} |",
+            r.name,
+            r.cell_size * 1e3,
+            r.wall_seconds,
+            mm.initial_slope,
+            mm.peak.1,
+            mm.peak.0 * 1e3,
+            mm.final_load,
+            fmt_opt(mm.brittleness, 1.0, 3),
+            fmt_opt(mm.discrepancy, 1.0, 4),
+            fmt_opt(mm.peak_spread, 1.0, 4),
+            fmt_opt(mm.band_width, 1e3, 2),
+        );
+    }
+    for r in runs.iter().filter(|r| r.error.is_some()) {
+        let _ = writeln!(
+            md,
+            "\n- {} stopped: {}",
+            r.name,
+            r.error.as_deref().unwrap_or_default()
+        );
+    }
+    std::fs::write(&metrics_path, csv).map_err(|e| io(&metrics_path, &e))?;
+    let report = out.join("report.md");
+    std::fs::write(&report, md).map_err(|e| io(&report, &e))?;
+    // plots
+    let series: Vec<Series> = runs
+        .iter()
+        .enumerate()
+        .filter(|(_, r)| r.curve.len() > 1)
+        .map(|(i, r)| Series {
+            name: format!(
+                "{} h={:.2} mm",
+                if r.length_scale.is_some() {
+                    "nonlocal"
+                } else {
+                    "local"
+                },
+                r.cell_size * 1e3
+            ),
+            points: r.curve.iter().map(|(d, f)| (d * 1e3, *f)).collect(),
+            dashed: r.length_scale.is_none(),
+            color: i / 2,
+        })
+        .collect();
+    if !series.is_empty() {
+        let path = out.join("curves.png");
+        plot::plot_curves(
+            &path,
+            "Load vs displacement (dashed: local, solid: nonlocal)",
+            "δ (mm)",
+            "F (kN/m)",
+            &series,
+        )
+        .map_err(|e| io(&path, &e))?;
+    }
+    for (family, nonlocal) in [("local", false), ("nonlocal", true)] {
+        let members: Vec<&CampaignRun> = runs
+            .iter()
+            .filter(|r| r.length_scale.is_some() == nonlocal && !r.positions.is_empty())
+            .collect();
+        if members.is_empty() {
+            continue;
+        }
+        let panels: Vec<Panel> = members
+            .iter()
+            .map(|r| Panel {
+                title: format!("h = {:.2} mm", r.cell_size * 1e3),
+                positions: &r.positions,
+                values: &r.eps_q,
+                bounds: Bounds {
+                    x: (0.0, 0.04),
+                    y: (0.0, 0.05),
+                },
+                marker: Some(0.6 * r.cell_size),
+            })
+            .collect();
+        let path = out.join(format!("fields_{family}.png"));
+        plot::plot_field_panels(
+            &path,
+            &format!("Deviatoric strain εq at the last step ({family})"),
+            &panels,
+            None,
+            "εq",
+        )
+        .map_err(|e| io(&path, &e))?;
+    }
+    Ok(())
+}
