@@ -183,7 +183,8 @@ fn run_one(name: &str, scene: Scene, out: &Path) -> CampaignRun {
 /// Per-run metrics of DESIGN §9 against the family reference.
 #[derive(Clone, Debug, Default)]
 pub struct RunMetrics {
-    /// Initial slope dF/dδ over the first 10 steps, kN/m per m.
+    /// Initial slope dF/dδ, least-squares fit over δ ∈ [0.1, 0.5] mm (elastic,
+    /// after the start-up transient of dynamic runs), kN/m per m.
     pub initial_slope: f64,
     /// Peak load and its δ.
     pub peak: (f64, f64),
@@ -206,10 +207,7 @@ pub fn compute_metrics(runs: &[CampaignRun]) -> Vec<RunMetrics> {
     runs.iter()
         .map(|run| {
             let mut m = RunMetrics::default();
-            if run.curve.len() > 11 {
-                m.initial_slope =
-                    (run.curve[10].1 - run.curve[0].1) / (run.curve[10].0 - run.curve[0].0);
-            }
+            m.initial_slope = fitted_slope(&run.curve, 1e-4, 5e-4);
             if let Ok((d, f)) = metrics::peak(&run.curve) {
                 m.peak = (d, f);
             }
@@ -242,6 +240,25 @@ pub fn compute_metrics(runs: &[CampaignRun]) -> Vec<RunMetrics> {
             m
         })
         .collect()
+}
+
+/// Least-squares slope of the curve points with δ in [from, to] (NaN if < 2 points).
+fn fitted_slope(curve: &[(f64, f64)], from: f64, to: f64) -> f64 {
+    let pts: Vec<&(f64, f64)> = curve
+        .iter()
+        .filter(|(d, _)| *d >= from && *d <= to)
+        .collect();
+    let n = pts.len() as f64;
+    if pts.len() < 2 {
+        return f64::NAN;
+    }
+    let (mx, my) = (
+        pts.iter().map(|p| p.0).sum::<f64>() / n,
+        pts.iter().map(|p| p.1).sum::<f64>() / n,
+    );
+    let sxy: f64 = pts.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum();
+    let sxx: f64 = pts.iter().map(|p| (p.0 - mx).powi(2)).sum();
+    sxy / sxx
 }
 
 fn fmt_opt(v: Option<f64>, scale: f64, digits: usize) -> String {

@@ -175,6 +175,7 @@ pub fn write_run_json(
     let value = json!({
         "mpm_geo_version": env!("CARGO_PKG_VERSION"),
         "status": if error.is_some() { "failed" } else { "completed" },
+        "warnings": sim.scene.warnings(),
         "error": error.map(|e| e.to_string()),
         "steps_completed": sim.step,
         "time": sim.time,

@@ -95,10 +95,11 @@ fn other_out_of_range_values_are_refused() {
     );
 }
 
-#[test]
-fn particle_leaving_the_grid_stops_the_run_and_keeps_the_curve() {
+/// Run a scene of `validation/failures/` into a temporary directory:
+/// (exit code, messages, the temporary directory, the output folder).
+fn run_failing(scene: &str) -> (i32, String, tempfile::TempDir, std::path::PathBuf) {
     let dir = tempfile::tempdir().unwrap();
-    let scene = common::validation("failures/falls_out_of_grid.toml");
+    let scene = common::validation(scene);
     let out = dir.path().join("out");
     let (code, text) = mpm_geo(&[
         "run",
@@ -107,6 +108,12 @@ fn particle_leaving_the_grid_stops_the_run_and_keeps_the_curve() {
         out.to_str().unwrap(),
         "--quiet",
     ]);
+    (code, text, dir, out)
+}
+
+#[test]
+fn particle_leaving_the_grid_stops_the_run_and_keeps_the_curve() {
+    let (code, text, _dir, out) = run_failing("failures/falls_out_of_grid.toml");
     assert_eq!(code, 1, "{text}");
     assert!(
         text.contains("left the grid") && text.contains("material point"),
@@ -129,16 +136,7 @@ fn particle_leaving_the_grid_stops_the_run_and_keeps_the_curve() {
 
 #[test]
 fn singular_system_stops_the_run_with_a_solver_error() {
-    let dir = tempfile::tempdir().unwrap();
-    let scene = common::validation("failures/floating_body.toml");
-    let out = dir.path().join("out");
-    let (code, text) = mpm_geo(&[
-        "run",
-        scene.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-        "--quiet",
-    ]);
+    let (code, text, _dir, out) = run_failing("failures/floating_body.toml");
     assert_eq!(code, 1, "{text}");
     assert!(
         text.contains("step 1") && text.contains("linear solver"),
