@@ -121,6 +121,9 @@ fn main() -> ExitCode {
                 Ok(s) => s,
                 Err(e) => return fail(2, &e.to_string()),
             };
+            for w in loaded.warnings() {
+                eprintln!("warning: {w}");
+            }
             let stem = scene
                 .file_stem()
                 .map(|s| s.to_string_lossy().into_owned())
