@@ -206,8 +206,10 @@ pub struct RunMetrics {
 pub fn compute_metrics(runs: &[CampaignRun]) -> Vec<RunMetrics> {
     runs.iter()
         .map(|run| {
-            let mut m = RunMetrics::default();
-            m.initial_slope = fitted_slope(&run.curve, 1e-4, 5e-4);
+            let mut m = RunMetrics {
+                initial_slope: fitted_slope(&run.curve, 1e-4, 5e-4),
+                ..Default::default()
+            };
             if let Ok((d, f)) = metrics::peak(&run.curve) {
                 m.peak = (d, f);
             }
@@ -227,9 +229,10 @@ pub fn compute_metrics(runs: &[CampaignRun]) -> Vec<RunMetrics> {
             }
             m.brittleness = metrics::brittleness(&run.curve, delta_end).ok();
             if !run.positions.is_empty() {
+                let eps_q = metrics::clip_outliers(&run.eps_q, 0.99);
                 m.band_width = metrics::shear_band_width(
                     &run.positions,
-                    &run.eps_q,
+                    &eps_q,
                     run.cell_size,
                     run.length_scale.unwrap_or(0.0),
                 )

@@ -273,6 +273,24 @@ pub struct BandWidth {
     pub n_skipped: usize,
 }
 
+/// `values` with everything above their `quantile` (e.g. 0.99) clipped to it
+/// (NaN kept). Used before M4: a few material points squeezed at a platen
+/// corner reach strains far above the band's, and "½ max εq" would then select
+/// them instead of the band.
+pub fn clip_outliers(values: &[f64], quantile: f64) -> Vec<f64> {
+    let mut finite: Vec<f64> = values.iter().copied().filter(|v| v.is_finite()).collect();
+    if finite.is_empty() {
+        return values.to_vec();
+    }
+    finite.sort_by(f64::total_cmp);
+    let index = ((finite.len() - 1) as f64 * quantile.clamp(0.0, 1.0)).round() as usize;
+    let cap = finite[index];
+    values
+        .iter()
+        .map(|&v| if v.is_finite() { v.min(cap) } else { v })
+        .collect()
+}
+
 /// M4 shear-band width (DESIGN §9) over all material points.
 ///
 /// `positions` and `eps_q` (εq of [D8]) per MP, `h` the cell size, `l_s`

@@ -41,6 +41,9 @@ pub(crate) enum StepFailure {
     TractionLeftGrid(usize, [f64; 2]),
 }
 
+/// A line-search outcome: increment, its stresses and residual, step length α.
+type LineSearchResult = (Vec<[f64; 2]>, TrialStresses, Residual, f64);
+
 /// Start-of-step nodal quantities of a (sub-)step.
 struct StepGrid {
     shapes: Vec<ShapeAt>,
@@ -521,7 +524,8 @@ impl Simulation {
             // is accepted without it (soft modes of nearly empty cells make the
             // energy ratio stall near round-off).
             let energy_ok = iteration == 0
-                || dot(&last_correction, &free_residual).abs() <= settings.tolerance_energy * energy0
+                || dot(&last_correction, &free_residual).abs()
+                    <= settings.tolerance_energy * energy0
                 || res.norm <= 1e-2 * settings.tolerance_force * res.reference;
             // DESIGN D18, third criterion (nonlocal): κ̄ lagged by one iteration has settled.
             let kappa_ok = match nonlocal.as_mut() {
@@ -602,8 +606,8 @@ impl Simulation {
         nonlocal: Option<&NonlocalStep>,
         t1: f64,
         dt: f64,
-    ) -> Result<(Vec<[f64; 2]>, TrialStresses, Residual, f64), StepFailure> {
-        let mut best: Option<(Vec<[f64; 2]>, TrialStresses, Residual, f64)> = None;
+    ) -> Result<LineSearchResult, StepFailure> {
+        let mut best: Option<LineSearchResult> = None;
         let mut alpha = 1.0;
         for _ in 0..7 {
             let mut candidate = du.to_vec();

@@ -432,3 +432,15 @@ fn energy_balance_closes_for_elastoplastic_bar() {
     assert!((eps_p - 3e-3).abs() < 1e-12);
     assert!(energy_balance(w, acc.total(), du, 0.0).abs() < 1e-12 * w);
 }
+
+/// clip_outliers caps values above the quantile and keeps the rest and NaN.
+#[test]
+fn clip_outliers_caps_only_the_tail() {
+    let mut values: Vec<f64> = (0..100).map(|i| i as f64).collect();
+    values.push(1e6);
+    values.push(f64::NAN);
+    let clipped = clip_outliers(&values, 0.99);
+    assert_eq!(clipped[50], 50.0);
+    assert_eq!(clipped[100], 99.0);
+    assert!(clipped[101].is_nan());
+}
