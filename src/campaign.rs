@@ -357,11 +357,19 @@ fn write_outputs(out: &Path, runs: &[CampaignRun]) -> Result<(), CampaignError> 
     let report = out.join("report.md");
     std::fs::write(&report, md).map_err(|e| io(&report, &e))?;
     // plots
-    let series: Vec<Series> = runs
+    // one colour per cell size (local dashed, nonlocal solid), coarse to fine
+    let mut sizes: Vec<f64> = runs.iter().map(|r| r.cell_size).collect();
+    sizes.sort_by(|a, b| b.total_cmp(a));
+    sizes.dedup();
+    let mut ordered: Vec<&CampaignRun> = runs.iter().filter(|r| r.curve.len() > 1).collect();
+    ordered.sort_by(|a, b| {
+        (a.length_scale.is_some(), -a.cell_size)
+            .partial_cmp(&(b.length_scale.is_some(), -b.cell_size))
+            .unwrap_or(std::cmp::Ordering::Equal)
+    });
+    let series: Vec<Series> = ordered
         .iter()
-        .enumerate()
-        .filter(|(_, r)| r.curve.len() > 1)
-        .map(|(i, r)| Series {
+        .map(|r| Series {
             name: format!(
                 "{} h={:.2} mm",
                 if r.length_scale.is_some() {
@@ -373,7 +381,7 @@ fn write_outputs(out: &Path, runs: &[CampaignRun]) -> Result<(), CampaignError> 
             ),
             points: r.curve.iter().map(|(d, f)| (d * 1e3, *f)).collect(),
             dashed: r.length_scale.is_none(),
-            color: i / 2,
+            color: sizes.iter().position(|&h| h == r.cell_size).unwrap_or(0),
         })
         .collect();
     if !series.is_empty() {
@@ -392,6 +400,8 @@ fn write_outputs(out: &Path, runs: &[CampaignRun]) -> Result<(), CampaignError> 
             .iter()
             .filter(|r| r.length_scale.is_some() == nonlocal && !r.positions.is_empty())
             .collect();
+        let mut members = members;
+        members.sort_by(|a, b| b.cell_size.total_cmp(&a.cell_size));
         if members.is_empty() {
             continue;
         }
