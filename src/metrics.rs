@@ -4,12 +4,12 @@
 //! point positions and values, Voigt 4-vectors) and none of the engine's
 //! types, so the metrics can be computed from CSV output as well as in a run.
 //!
-//! * M1 – post-peak curve discrepancy [D42]: [`post_peak_discrepancy`],
+//! * M1 – post-peak curve discrepancy \[D42\]: [`post_peak_discrepancy`],
 //!   [`curve_discrepancy`], [`family_discrepancy`].
 //! * M2 – peak spread: [`peak`], [`peak_spread`].
 //! * M3 – brittleness: [`brittleness`].
 //! * M4 – shear-band width: [`shear_band_width`], [`shear_band_width_in`].
-//! * M5 – dissipated energy [D43]: [`Dissipation`], [`dissipation_increment`],
+//! * M5 – dissipated energy \[D43\]: [`Dissipation`], [`dissipation_increment`],
 //!   [`external_work`], [`elastic_energy`], [`energy_balance`].
 //!
 //! Curves must have non-decreasing abscissae (δ or t); they are interpolated
@@ -18,7 +18,7 @@
 
 use thiserror::Error;
 
-/// Number of sample points of the M1 discrepancy [D42].
+/// Number of sample points of the M1 discrepancy \[D42\].
 pub const M1_SAMPLES: usize = 101;
 
 /// Relative tolerance (of a curve's abscissa range) within which a sample
@@ -128,7 +128,7 @@ pub fn peak(curve: &[(f64, f64)]) -> Result<(f64, f64)> {
 }
 
 /// Relative L2 discrepancy of `curve` against `reference` on
-/// [`M1_SAMPLES`] equally spaced abscissae in `[x_start, x_end]` [D42]:
+/// [`M1_SAMPLES`] equally spaced abscissae in `[x_start, x_end]` \[D42\]:
 ///
 /// e = sqrt(Σ_j (F(x_j) − F_ref(x_j))²) / sqrt(Σ_j F_ref(x_j)²)
 ///
@@ -165,7 +165,7 @@ pub fn curve_discrepancy(
     Ok((num / den).sqrt())
 }
 
-/// M1 post-peak discrepancy e_h [D42]: [`curve_discrepancy`] on
+/// M1 post-peak discrepancy e_h \[D42\]: [`curve_discrepancy`] on
 /// `[δ_peak,ref, delta_end]`, δ_peak,ref being the abscissa of the
 /// reference curve's peak ([`peak`]).
 pub fn post_peak_discrepancy(
@@ -177,7 +177,7 @@ pub fn post_peak_discrepancy(
     curve_discrepancy(curve, reference, d_peak, delta_end)
 }
 
-/// M1 family value S = max_h e_h [D42] over `curves` (the reference itself
+/// M1 family value S = max_h e_h \[D42\] over `curves` (the reference itself
 /// may be among them; it contributes 0).
 pub fn family_discrepancy(
     curves: &[&[(f64, f64)]],
@@ -293,7 +293,7 @@ pub fn clip_outliers(values: &[f64], quantile: f64) -> Vec<f64> {
 
 /// M4 shear-band width (DESIGN §9) over all material points.
 ///
-/// `positions` and `eps_q` (εq of [D8]) per MP, `h` the cell size, `l_s`
+/// `positions` and `eps_q` (εq of \[D8\]) per MP, `h` the cell size, `l_s`
 /// the nonlocal length (0 for local runs). See [`shear_band_width_in`].
 pub fn shear_band_width(
     positions: &[[f64; 2]],
@@ -532,11 +532,11 @@ fn median(v: &mut [f64]) -> f64 {
 // M5: energies
 // ---------------------------------------------------------------------------
 
-/// A 4×4 compliance matrix in the Voigt order of [D2] (engineering shear).
+/// A 4×4 compliance matrix in the Voigt order of \[D2\] (engineering shear).
 pub type Compliance = [[f64; 4]; 4];
 
 /// Isotropic compliance C = D⁻¹ for the 4-component plane-strain Voigt
-/// storage [D2] (σzz tracked, engineering shear γxy): C = (1/E)·
+/// storage \[D2\] (σzz tracked, engineering shear γxy): C = (1/E)·
 /// [[1, −ν, −ν, 0], [−ν, 1, −ν, 0], [−ν, −ν, 1, 0], [0, 0, 0, 2(1+ν)]].
 pub fn isotropic_compliance(e: f64, nu: f64) -> Compliance {
     let a = 1.0 / e;
@@ -573,13 +573,13 @@ fn dot4(a: &[f64; 4], b: &[f64; 4]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3]
 }
 
-/// One step's dissipation increment [D43]:
+/// One step's dissipation increment \[D43\]:
 ///
 /// ΔD = Σ_p V_p(n) · ½(σ_p(n+1) + σ_p^R(n)) · Δε^p_p,
 /// Δε^p = Δε − C(σ(n+1) − σ^R(n)),
 ///
-/// with Voigt dot products (engineering shear, [D2]). `volumes` = V_p(n),
-/// `stress_new` = σ(n+1) (constitutive stress, before double mapping [D38]),
+/// with Voigt dot products (engineering shear, \[D2\]). `volumes` = V_p(n),
+/// `stress_new` = σ(n+1) (constitutive stress, before double mapping \[D38\]),
 /// `stress_rot_old` = σ^R(n) (the rotated start-of-step stress), `dstrain`
 /// = the step's strain increment Δε.
 pub fn dissipation_increment(
@@ -629,7 +629,7 @@ pub fn dissipation_increment(
     Ok(d)
 }
 
-/// M5 accumulator of the dissipated energy D(δ) [D43]: the engine calls
+/// M5 accumulator of the dissipated energy D(δ) \[D43\]: the engine calls
 /// [`Dissipation::add_step`] once per converged step; the history of
 /// `(load parameter, D)` pairs is kept for output.
 #[derive(Debug, Clone, Default)]

@@ -1,9 +1,9 @@
-//! Nonlocal averaging over material points (DESIGN §6, [D33]–[D36]; paper eq. 6).
+//! Nonlocal averaging over material points (DESIGN §6, \[D33\]–\[D36\]; paper eq. 6).
 //!
 //! The paper replaces the local equivalent plastic strain by its nonlocal counterpart
 //! (paper eq. 6), `ε̄(x) = ∫ w(x, ξ) ε(ξ) dξ`, with the Galavi–Schweiger radial weight
-//! [`weight`] ([D33]). Discretised with the material-point (MP) volumes as quadrature weights
-//! and renormalised so that a uniform field is reproduced also near free surfaces ([D34]):
+//! [`weight`] (\[D33\]). Discretised with the material-point (MP) volumes as quadrature weights
+//! and renormalised so that a uniform field is reproduced also near free surfaces (\[D34\]):
 //!
 //! ```text
 //!     W_pq = w(|x_p − x_q|) V_q / Σ_s w(|x_p − x_s|) V_s,    |x_p − x_q| ≤ R_c = cutoff · l_s
@@ -11,7 +11,7 @@
 //!
 //! where the sums run over MPs of the same group (material) only. The engine applies the
 //! operator to the increment of the local equivalent plastic strain, `κ̄_p = κ̄_p(n) +
-//! Σ_q W_pq Δκ_q` ([D35]), once per Newton iteration with the lagged increments ([D36]); this
+//! Σ_q W_pq Δκ_q` (\[D35\]), once per Newton iteration with the lagged increments (\[D36\]); this
 //! module only provides the linear operator `field ↦ W · field` ([`NonlocalAverager::average`]).
 //!
 //! # Implementation
@@ -46,10 +46,10 @@ const BIN_SAFETY: f64 = 1.0 + 1e-9;
 /// Minimum number of output MPs per rayon task.
 const MIN_CHUNK: usize = 64;
 
-/// Parameters of the nonlocal averaging (DESIGN §6, [D33]–[D34]; paper eq. 6).
+/// Parameters of the nonlocal averaging (DESIGN §6, \[D33\]–\[D34\]; paper eq. 6).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct NonlocalParameters {
-    /// Material length scale `l_s` (m) of the weight [D33]; must be finite and `> 0`.
+    /// Material length scale `l_s` (m) of the weight \[D33\]; must be finite and `> 0`.
     pub length_scale: f64,
     /// Cutoff radius in units of `l_s`: `R_c = cutoff_factor · l_s` (default 3, DESIGN §6);
     /// must be finite and `> 0`.
@@ -89,7 +89,7 @@ impl NonlocalParameters {
 /// Errors of the nonlocal averaging (invalid parameters or inconsistent inputs).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum NonlocalError {
-    /// `l_s` is not finite or not strictly positive ([D33]).
+    /// `l_s` is not finite or not strictly positive (\[D33\]).
     #[error("nonlocal length scale must be finite and > 0, got {0}")]
     InvalidLengthScale(f64),
     /// The cutoff factor is not finite or not strictly positive (DESIGN §6).
@@ -137,7 +137,7 @@ pub enum NonlocalError {
     },
 }
 
-/// Galavi–Schweiger weight [D33]: `w(r) = (r / l_s²) · exp(−(r/l_s)²)` (paper eq. 6, DESIGN §6).
+/// Galavi–Schweiger weight \[D33\]: `w(r) = (r / l_s²) · exp(−(r/l_s)²)` (paper eq. 6, DESIGN §6).
 ///
 /// Zero at `r = 0` (an MP never weights itself), maximal at `r = l_s/√2`; no cutoff is applied
 /// here (the cutoff belongs to [`NonlocalAverager`]).
@@ -146,7 +146,7 @@ pub fn weight(r: f64, length_scale: f64) -> f64 {
     (r / (length_scale * length_scale)) * (-(u * u)).exp()
 }
 
-/// The kernel used by every sum of this module: [D33] evaluated from `r²` and `1/l_s²`.
+/// The kernel used by every sum of this module: \[D33\] evaluated from `r²` and `1/l_s²`.
 /// One shared definition keeps denominators and numerators bit-consistent.
 #[inline(always)]
 fn kernel(r2: f64, inv_l2: f64) -> f64 {
@@ -224,8 +224,8 @@ impl SourceList {
     }
 }
 
-/// Nonlocal averaging operator `W` of [D34] over a fixed set of MPs (start-of-step positions
-/// and volumes), applied as in [D35]/[D36] (paper eq. 6).
+/// Nonlocal averaging operator `W` of \[D34\] over a fixed set of MPs (start-of-step positions
+/// and volumes), applied as in \[D35\]/\[D36\] (paper eq. 6).
 ///
 /// Built once per step by [`NonlocalAverager::new`] (bins and denominators); every
 /// [`NonlocalAverager::average`] call then costs one pass over the pairs `(p, q)` with
@@ -253,7 +253,7 @@ pub struct NonlocalAverager {
 }
 
 impl NonlocalAverager {
-    /// Builds the operator [D34] from start-of-step positions `x_q`, volumes `V_q` and a group
+    /// Builds the operator \[D34\] from start-of-step positions `x_q`, volumes `V_q` and a group
     /// (material) id per MP; only MPs of the same group average together (DESIGN §6).
     ///
     /// Sorts the MPs into a cell-linked list with bins of size `R_c` and computes the weight
@@ -349,7 +349,7 @@ impl NonlocalAverager {
         &self.params
     }
 
-    /// Denominators `Σ_s w(|x_p − x_s|) V_s` of [D34], in the original MP order (0 for an
+    /// Denominators `Σ_s w(|x_p − x_s|) V_s` of \[D34\], in the original MP order (0 for an
     /// isolated MP, whose `W_pp = 1`).
     pub fn denominators(&self) -> Vec<f64> {
         let mut d = vec![0.0; self.len()];
@@ -359,8 +359,8 @@ impl NonlocalAverager {
         d
     }
 
-    /// Applies the operator of [D34]: `out_p = Σ_q W_pq field_q` for a field given at every MP
-    /// (original order), as used by [D35]/[D36] with `field = Δκ` (paper eq. 6).
+    /// Applies the operator of \[D34\]: `out_p = Σ_q W_pq field_q` for a field given at every MP
+    /// (original order), as used by \[D35\]/\[D36\] with `field = Δκ` (paper eq. 6).
     ///
     /// Only sources with `field_q ≠ 0` are visited (they are compacted first, then every
     /// output entry gathers from them), so the cost scales with the number of nonzero sources'
@@ -423,7 +423,7 @@ impl NonlocalAverager {
         Ok(())
     }
 
-    /// `O(N²)` brute-force reference of the same operator [D34] (tests and benchmark): for
+    /// `O(N²)` brute-force reference of the same operator \[D34\] (tests and benchmark): for
     /// every MP `p`, loops over all MPs `q` of the same group within `R_c`, accumulating both
     /// the denominator and the numerator; isolated MPs keep their own value (`W_pp = 1`).
     /// Parallel over `p`, each `out_p` summed in index order (deterministic).
@@ -478,7 +478,7 @@ impl NonlocalAverager {
 
     /// Statistics of the number of same-group neighbours within `R_c` (the MP itself
     /// excluded): `(min, mean, max)` over all MPs; `(0, 0.0, 0)` if empty. Useful to check
-    /// the resolution rule of DESIGN §6 (`h ≲ 0.2 l_s`) and to predict the cost of [D36].
+    /// the resolution rule of DESIGN §6 (`h ≲ 0.2 l_s`) and to predict the cost of \[D36\].
     pub fn neighbour_count_stats(&self) -> (usize, f64, usize) {
         self.stats
     }

@@ -4,7 +4,7 @@
 //!   solid = nonlocal, one colour per mesh, legend), inputs for the M1–M3
 //!   metrics of [`crate::metrics`];
 //! * [`plot_field`] / [`plot_field_panels`]: material points drawn as filled
-//!   squares coloured by a value (εq of [D8], κ̄ …), a contour-like picture
+//!   squares coloured by a value (εq of \[D8\], κ̄ …), a contour-like picture
 //!   as in Figs. 4–5, several meshes side by side with one shared colour bar.
 //!
 //! Text uses DejaVu Sans compiled in from the `dejavu` crate and rendered by

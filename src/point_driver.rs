@@ -249,7 +249,7 @@ fn record(
     }
 }
 
-/// Generic homogeneous path from σ0 = −confinement·[1,1,1,0]: the `driven` strain component
+/// Generic homogeneous path from σ0 = −confinement·(1,1,1,0): the `driven` strain component
 /// follows `targets` (total values), the `free` components hold σ_i = −confinement.
 fn run_path(
     model: &Hmc,
@@ -308,7 +308,7 @@ fn run_path(
 
 /// Plane-strain biaxial test (DESIGN §8.1 homogeneous reference): εzz = γxy = 0,
 /// σxx = −confinement (kPa) held, εyy follows `axial_strains` (total values, negative in
-/// compression). Initial stress −confinement·[1,1,1,0].
+/// compression). Initial stress −confinement·(1,1,1,0).
 pub fn run_biaxial(
     model: &Hmc,
     confinement: f64,
@@ -329,7 +329,7 @@ pub fn run_triaxial(
 }
 
 /// Simple shear: γxy follows `shear_strains`, εxx = εyy = εzz = 0, from
-/// σ0 = −confinement·[1,1,1,0].
+/// σ0 = −confinement·(1,1,1,0).
 pub fn run_simple_shear(
     model: &Hmc,
     confinement: f64,

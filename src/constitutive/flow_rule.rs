@@ -18,7 +18,7 @@ pub struct PressureScaledFlow {
 }
 
 impl PressureScaledFlow {
-    /// m = f_σ + (1 − ω) tanφ ∂p/∂σ, ∂p/∂σ = −⅓[1,1,1,0] (DESIGN D26, D31).
+    /// m = f_σ + (1 − ω) tanφ ∂p/∂σ, ∂p/∂σ = −⅓·(1,1,1,0) (DESIGN D26, D31).
     #[inline]
     pub fn direction<T: Real>(&self, yield_gradient: &[T; 4], tan_friction: T) -> [T; 4] {
         let shift = tan_friction * ((1.0 - self.omega) / 3.0);

@@ -52,43 +52,43 @@ fn default_density() -> f64 {
 #[derive(Clone, Copy, Debug, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct HmcParameters {
-    /// [`E`] Young's modulus, kPa (DESIGN D22).
+    /// `E`: Young's modulus, kPa (DESIGN D22).
     #[serde(rename = "E")]
     pub youngs_modulus: f64,
-    /// [`nu`] Poisson's ratio (DESIGN D22).
+    /// `nu`: Poisson's ratio (DESIGN D22).
     #[serde(rename = "nu")]
     pub poisson_ratio: f64,
-    /// [`density`] mass density, t/m³ (default 2.0).
+    /// `density`: mass density, t/m³ (default 2.0).
     #[serde(default = "default_density")]
     pub density: f64,
-    /// [`phi_ini`] initial asymptotic friction angle φ*_ini, degrees (must equal φ_peak, DESIGN §5.5).
+    /// `phi_ini`: initial asymptotic friction angle φ*_ini, degrees (must equal φ_peak, DESIGN §5.5).
     #[serde(rename = "phi_ini")]
     pub friction_angle_ini: f64,
-    /// [`phi_peak`] peak asymptotic friction angle φ*_peak, degrees (DESIGN D28).
+    /// `phi_peak`: peak asymptotic friction angle φ*_peak, degrees (DESIGN D28).
     #[serde(rename = "phi_peak")]
     pub friction_angle_peak: f64,
-    /// [`phi_res`] residual friction angle φ*_res, degrees (DESIGN D28).
+    /// `phi_res`: residual friction angle φ*_res, degrees (DESIGN D28).
     #[serde(rename = "phi_res")]
     pub friction_angle_res: f64,
-    /// [`c_ini`] initial (= peak) asymptotic cohesion c*_ini, kPa (paper eq. 4).
+    /// `c_ini`: initial (= peak) asymptotic cohesion c*_ini, kPa (paper eq. 4).
     #[serde(rename = "c_ini")]
     pub cohesion_ini: f64,
-    /// [`c_post`] post-rupture asymptotic cohesion c*_post, kPa (paper eq. 4).
+    /// `c_post`: post-rupture asymptotic cohesion c*_post, kPa (paper eq. 4).
     #[serde(rename = "c_post")]
     pub cohesion_post: f64,
-    /// [`pt_ini`] initial tensile strength p_t,ini, kPa (DESIGN D23, D28).
+    /// `pt_ini`: initial tensile strength p_t,ini, kPa (DESIGN D23, D28).
     #[serde(rename = "pt_ini")]
     pub tensile_strength_ini: f64,
-    /// [`pt_post`] post-rupture tensile strength p_t,post, kPa (DESIGN D28).
+    /// `pt_post`: post-rupture tensile strength p_t,post, kPa (DESIGN D28).
     #[serde(rename = "pt_post")]
     pub tensile_strength_post: f64,
-    /// [`b_post`] post-rupture softening rate (dimensionless, paper eq. 4).
+    /// `b_post`: post-rupture softening rate (dimensionless, paper eq. 4).
     #[serde(rename = "b_post")]
     pub softening_rate_post: f64,
-    /// [`b_res`] residual softening rate (dimensionless, paper eq. 4).
+    /// `b_res`: residual softening rate (dimensionless, paper eq. 4).
     #[serde(rename = "b_res")]
     pub softening_rate_res: f64,
-    /// [`omega`] non-associativity constant ω (DESIGN D26).
+    /// `omega`: non-associativity constant ω (DESIGN D26).
     pub omega: f64,
 }
 
@@ -737,7 +737,7 @@ impl Hmc {
         })
     }
 
-    /// Tip return σ = p_t [1,1,1,0], Δε^p = Δε − C(σ − σ_n), Δκ = ‖Δε^p‖ε, D_alg = 0 (DESIGN §5.6 step 4).
+    /// Tip return σ = p_t (1,1,1,0), Δε^p = Δε − C(σ − σ_n), Δκ = ‖Δε^p‖ε, D_alg = 0 (DESIGN §5.6 step 4).
     fn tip_return(
         &self,
         stress_n: &Voigt,
@@ -942,7 +942,7 @@ impl ConstitutiveModel for Hmc {
     }
 
     /// DESIGN D39: a smoothed stress outside the surface is scaled back onto it at
-    /// fixed p and θ (deviator scaled), or set to the tip p_t·[1,1,1,0] when the
+    /// fixed p and θ (deviator scaled), or set to the tip p_t·(1,1,1,0) when the
     /// pressure lies beyond the apex. The strength is taken at κ̄ (nonlocal) or κ.
     fn project_to_surface(
         &self,
@@ -1276,7 +1276,7 @@ mod tests {
         }
     }
 
-    /// Isotropic tension beyond the tip returns to the tip σ = p_t[1,1,1,0] with D_alg = 0.
+    /// Isotropic tension beyond the tip returns to the tip σ = p_t(1,1,1,0) with D_alg = 0.
     #[test]
     fn tip_return_in_tension() {
         let m = model(|p| {
@@ -1306,7 +1306,7 @@ mod tests {
 
     /// Without softening, one increment and 100 increments of the same proportional strain (10× the
     /// elastic limit) agree within 1 % (relative to ‖σ‖∞). Paths: isochoric triaxial compression and
-    /// extension strain (θ = ±30° throughout) from σ0 = −1000[1,1,1,0] kPa, where the surface is close to
+    /// extension strain (θ = ±30° throughout) from σ0 = −1000(1,1,1,0) kPa, where the surface is close to
     /// its straight asymptotic cone and backward Euler is exact for a straight cone (constant normal).
     /// On strongly curved parts of the hyperbola the one-step closest-point projection differs more
     /// (it is only first-order accurate in the path); see the softening test for the order.

@@ -386,7 +386,7 @@ impl Simulation {
     /// The next step's linearisation at a given free-dof displacement increment
     /// (verification access, e.g. finite-difference checks of the tangent):
     /// returns the residual R = f_ext + f_pen − f_int − M a at the free dofs and
-    /// the assembled tangent (DESIGN D16–D17, incl. the [D19] term), without
+    /// the assembled tangent (DESIGN D16–D17, incl. the \[D19\] term), without
     /// changing the state. `free_increment` has one entry per free dof; its
     /// length must equal the number of unknowns (see [`Simulation::unknowns`]).
     pub fn linearize(
