@@ -49,6 +49,8 @@ pub struct CampaignRun {
     pub eps_q: Vec<f64>,
     /// The error that stopped the run, if any.
     pub error: Option<String>,
+    /// Plastic dissipation at the last step (monitor `dissipation`, D43), kJ/m.
+    pub dissipation: Option<f64>,
     /// Wall time, s.
     pub wall_seconds: f64,
     /// Per-stage profile table.
@@ -95,6 +97,19 @@ fn read_curve(path: &Path) -> Vec<(f64, f64)> {
             ))
         })
         .collect()
+}
+
+/// Last value of column `name` of a CSV file.
+fn last_value(path: &Path, name: &str) -> Option<f64> {
+    let mut reader = csv::Reader::from_path(path).ok()?;
+    let column = reader.headers().ok()?.iter().position(|h| h == name)?;
+    reader
+        .records()
+        .filter_map(|r| r.ok())
+        .last()?
+        .get(column)?
+        .parse()
+        .ok()
 }
 
 /// Run every scene of `dir` (validated first, all of them, before anything
@@ -162,6 +177,7 @@ fn run_one(name: &str, scene: Scene, out: &Path) -> CampaignRun {
         positions: Vec::new(),
         eps_q: Vec::new(),
         error: None,
+        dissipation: None,
         wall_seconds: 0.0,
         profile: String::new(),
     };
@@ -176,6 +192,7 @@ fn run_one(name: &str, scene: Scene, out: &Path) -> CampaignRun {
         }
     }
     run.curve = read_curve(&out.join("curve.csv"));
+    run.dissipation = last_value(&out.join("curve.csv"), "dissipation");
     run.wall_seconds = start.elapsed().as_secs_f64();
     run
 }
@@ -295,8 +312,8 @@ fn write_outputs(out: &Path, runs: &[CampaignRun]) -> Result<(), CampaignError> 
     // metrics
     let m = compute_metrics(runs);
     let metrics_path = out.join("metrics.csv");
-    let mut csv = String::from("run,family,cell_size,length_scale,status,wall_seconds,initial_slope,peak_delta,peak_load,final_load,M1_discrepancy,M2_peak_spread,M3_brittleness,M4_band_width,external_work\n");
-    let mut md = String::from("# Mesh-objectivity report\n\nReference of each family: its finest completed mesh (DESIGN §9). δ in mm, loads in kN/m, band width w in mm.\n\n| run | h (mm) | status | wall (s) | slope (kN/m/m) | peak F | δ_peak | F_end | β (M3) | M1 e_h | M2 | w (mm) | w/l_s |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    let mut csv = String::from("run,family,cell_size,length_scale,status,wall_seconds,initial_slope,peak_delta,peak_load,final_load,M1_discrepancy,M2_peak_spread,M3_brittleness,M4_band_width,external_work,M5_dissipation\n");
+    let mut md = String::from("# Mesh-objectivity report\n\nReference of each family: its finest completed mesh (DESIGN §9). δ in mm, loads in kN/m, band width w in mm.\n\n| run | h (mm) | status | wall (s) | slope (kN/m/m) | peak F | δ_peak | F_end | β (M3) | M1 e_h | M2 | w (mm) | w/l_s | D (kJ/m, M5) |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     for (r, mm) in runs.iter().zip(&m) {
         let family = if r.length_scale.is_some() {
             "nonlocal"
@@ -310,7 +327,7 @@ fn write_outputs(out: &Path, runs: &[CampaignRun]) -> Result<(), CampaignError> 
         };
         let _ = writeln!(
             csv,
-            "{},{family},{:e},{},{status},{:.2},{:.1},{:e},{:e},{:e},{},{},{},{},{}",
+            "{},{family},{:e},{},{status},{:.2},{:.1},{:e},{:e},{:e},{},{},{},{},{},{}",
             r.name,
             r.cell_size,
             r.length_scale.map(|l| l.to_string()).unwrap_or_default(),
@@ -324,6 +341,7 @@ fn write_outputs(out: &Path, runs: &[CampaignRun]) -> Result<(), CampaignError> 
             fmt_opt(mm.brittleness, 1.0, 5),
             fmt_opt(mm.band_width, 1.0, 6),
             fmt_opt(mm.external_work, 1.0, 6),
+            fmt_opt(r.dissipation, 1.0, 6),
         );
         let ratio = match (mm.band_width, r.length_scale) {
             (Some(w), Some(l)) => format!("{:.2}", w / l),
@@ -331,7 +349,7 @@ fn write_outputs(out: &Path, runs: &[CampaignRun]) -> Result<(), CampaignError> 
         };
         let _ = writeln!(
             md,
-            "| {} | {:.3} | {status} | {:.1} | {:.0} | {:.3} | {:.3} | {:.3} | {} | {} | {} | {} | {ratio} |",
+            "| {} | {:.3} | {status} | {:.1} | {:.0} | {:.3} | {:.3} | {:.3} | {} | {} | {} | {} | {ratio} | {} |",
             r.name,
             r.cell_size * 1e3,
             r.wall_seconds,
@@ -343,6 +361,7 @@ fn write_outputs(out: &Path, runs: &[CampaignRun]) -> Result<(), CampaignError> 
             fmt_opt(mm.discrepancy, 1.0, 4),
             fmt_opt(mm.peak_spread, 1.0, 4),
             fmt_opt(mm.band_width, 1e3, 2),
+            fmt_opt(r.dissipation, 1.0, 4),
         );
     }
     for r in runs.iter().filter(|r| r.error.is_some()) {

@@ -118,6 +118,7 @@ impl Monitor {
                 .iter()
                 .map(|s| s.plastic_strain_eq)
                 .fold(0.0, f64::max),
+            (_, MonitorKind::DissipatedEnergy) => sim.dissipated_energy,
             (_, MonitorKind::Gravity) => sim.scene.loads.gravity_at(sim.time),
             _ => f64::NAN,
         };

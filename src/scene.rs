@@ -656,6 +656,8 @@ pub enum MonitorKind {
     StrainEnergy,
     /// Maximum equivalent plastic strain over all material points.
     MaxPlasticStrain,
+    /// Accumulated plastic dissipation (DESIGN D43, M5), kJ/m.
+    DissipatedEnergy,
     /// Current gravity, m/s².
     Gravity,
 }

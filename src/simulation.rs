@@ -100,6 +100,8 @@ pub struct Simulation {
     /// ‖R‖ per Newton iteration of the last converged (sub-)step, kN/m, and the
     /// reference force of DESIGN D18 it was compared with.
     pub last_residuals: (Vec<f64>, f64),
+    /// Accumulated plastic dissipation D (DESIGN D43), kJ per metre run.
+    pub dissipated_energy: f64,
     /// Stage timings.
     pub profile: Profile,
     /// Linear-solver usage counts.
@@ -222,6 +224,7 @@ impl Simulation {
             reaction: vec![[0.0; 2]; n_nodes],
             last_increment: vec![[0.0; 2]; n_nodes],
             last_residuals: (Vec::new(), 0.0),
+            dissipated_energy: 0.0,
             profile: Profile::default(),
             solver_usage: SolverUsage::default(),
             solver: DirectSolver::new(policy),

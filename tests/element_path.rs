@@ -5,6 +5,8 @@
 //! * The engine reproduces the material-point driver's σyy history, fed with the
 //!   engine's own strain history, within 0.5 % of the peak stress.
 //! * First yield at Δσyy = −552.26 kPa (DESIGN §5.6) within 0.1 %.
+//! * The plastic dissipation accumulated by the engine (D43) equals the
+//!   driver's path integral within 0.5 %.
 //! * Newton with the consistent tangent converges quadratically on a softening
 //!   step: r_{k+1}/r_k² (residuals normalised by the D18 reference force) stays
 //!   ≤ 100 for every iteration whose new residual is above round-off (> 1e−11;
@@ -13,6 +15,7 @@
 mod common;
 
 use mpm_geo::constitutive::hmc::{Hmc, HmcParameters};
+use mpm_geo::constitutive::LinearElastic;
 use mpm_geo::point_driver::run_biaxial;
 
 #[test]
@@ -20,6 +23,7 @@ fn engine_reproduces_the_driver_and_first_yield() {
     let mut sim = common::simulation("hmc/element_path.toml", &[]);
     let mut strains = Vec::new();
     let mut stresses = Vec::new();
+    let mut volumes = vec![sim.particles.volume.iter().sum::<f64>()];
     while !sim.finished() {
         sim.step_once().unwrap_or_else(|e| panic!("{e}"));
         // all four points carry the same homogeneous state
@@ -32,6 +36,7 @@ fn engine_reproduces_the_driver_and_first_yield() {
         }
         strains.push(p.strain[0][1]);
         stresses.push(p.stress[0][1]);
+        volumes.push(p.volume.iter().sum::<f64>());
     }
     let driver = run_biaxial(&Hmc::new(HmcParameters::table1()).unwrap(), 100.0, &strains).unwrap();
     let driver_syy: Vec<f64> = driver.iter().skip(1).map(|r| r.stress[1]).collect();
@@ -47,6 +52,25 @@ fn engine_reproduces_the_driver_and_first_yield() {
         worst / peak
     );
     assert!(worst <= 5e-3 * peak);
+    // M5 (DESIGN D43): the engine's dissipation equals the driver's path integral
+    // Σ_n V(n) ½(σ_n + σ_{n+1})·(Δε − C Δσ) with the engine's volumes, within 0.5 %.
+    let compliance = mpm_geo::simulation::invert4(&LinearElastic::new(20000.0, 0.2).stiffness());
+    let mut dissipation = 0.0;
+    for n in 0..driver.len() - 1 {
+        let (a, b) = (&driver[n], &driver[n + 1]);
+        let ds: [f64; 4] = std::array::from_fn(|k| b.stress[k] - a.stress[k]);
+        let elastic = mpm_geo::constitutive::mat4_mul_vec(&compliance, &ds);
+        let work: f64 = (0..4)
+            .map(|k| 0.5 * (a.stress[k] + b.stress[k]) * (b.strain[k] - a.strain[k] - elastic[k]))
+            .sum();
+        dissipation += volumes[n] * work;
+    }
+    println!(
+        "element path: dissipation engine {:.6e} vs driver {dissipation:.6e} kJ/m",
+        sim.dissipated_energy
+    );
+    assert!(dissipation > 0.0);
+    assert!((sim.dissipated_energy / dissipation - 1.0).abs() <= 5e-3);
     let first_yield = peak - 100.0;
     println!("element path: first yield Δσyy = −{first_yield:.3} kPa (DESIGN −552.26)");
     assert!((first_yield / 552.26 - 1.0).abs() <= 1e-3);

@@ -252,6 +252,7 @@ impl Simulation {
                 source,
             })?;
         let start = std::time::Instant::now();
+        self.dissipated_energy += self.step_dissipation(&trial);
         let (stress, state) = self
             .finalize_stresses(&bins, &shapes, &trial, nonlocal.as_mut())
             .map_err(|e| RunError::NonFinite {

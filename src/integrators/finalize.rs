@@ -22,6 +22,30 @@ impl Simulation {
         }
     }
 
+    /// Plastic dissipation of the converged step (DESIGN D43, M5):
+    /// Σ_p V_p(n) · ½(σ_p(n+1) + σ_p^R(n)) · Δε^p_p with Δε^p = Δε − C(σ(n+1) − σ^R(n)),
+    /// using the constitutive stresses before double mapping; elastic materials
+    /// contribute nothing. kJ per metre run.
+    pub(crate) fn step_dissipation(&self, trial: &TrialStresses) -> f64 {
+        let p = &self.particles;
+        (0..p.len())
+            .filter(|&i| !self.materials[p.material[i] as usize].is_elastic())
+            .map(|i| {
+                let (de, _) = crate::transfer::strain_and_spin(&trial.gradient[i]);
+                let (s1, s0) = (&trial.stress[i], &trial.rotated[i]);
+                let ds = [s1[0] - s0[0], s1[1] - s0[1], s1[2] - s0[2], s1[3] - s0[3]];
+                let elastic = crate::constitutive::mat4_mul_vec(
+                    &self.compliances[p.material[i] as usize],
+                    &ds,
+                );
+                (0..4)
+                    .map(|k| 0.5 * (s1[k] + s0[k]) * (de[k] - elastic[k]))
+                    .sum::<f64>()
+                    * p.volume[i]
+            })
+            .sum()
+    }
+
     /// Stresses and states to commit for the converged trial state.
     pub(crate) fn finalize_stresses(
         &self,

@@ -674,6 +674,7 @@ impl Simulation {
                 ));
             }
         }
+        self.dissipated_energy += self.step_dissipation(trial);
         let (stress, state) = self
             .finalize_stresses(&sg.bins, &sg.shapes, trial, nonlocal)
             .map_err(|e| StepFailure::NonFinite(format!("nonlocal average: {e}"), Vec::new()))?;
