@@ -16,6 +16,10 @@ pub enum Stage {
     P2G,
     /// Constitutive stress update at the material points.
     StressUpdate,
+    /// Nonlocal weights and averaging (DESIGN §6).
+    Nonlocal,
+    /// Double mapping of the stresses (DESIGN §7).
+    Smoothing,
     /// Tangent assembly (cell blocks and CSC values).
     Assembly,
     /// Sparse factorisation (symbolic + numeric).
@@ -30,13 +34,15 @@ pub enum Stage {
 
 impl Stage {
     /// All stages in report order.
-    pub const ALL: [Stage; 8] = [
+    pub const ALL: [Stage; 10] = [
         Stage::Setup,
         Stage::P2G,
         Stage::StressUpdate,
+        Stage::Nonlocal,
         Stage::Assembly,
         Stage::Factorisation,
         Stage::Solve,
+        Stage::Smoothing,
         Stage::G2P,
         Stage::Output,
     ];
@@ -47,6 +53,8 @@ impl Stage {
             Stage::Setup => "setup",
             Stage::P2G => "p2g",
             Stage::StressUpdate => "stress_update",
+            Stage::Nonlocal => "nonlocal",
+            Stage::Smoothing => "double_mapping",
             Stage::Assembly => "assembly",
             Stage::Factorisation => "factorisation",
             Stage::Solve => "solve",
@@ -59,7 +67,7 @@ impl Stage {
 /// Accumulated call counts and seconds per stage.
 #[derive(Debug, Default)]
 pub struct Profile {
-    entries: [Cell<(u64, f64)>; 8],
+    entries: [Cell<(u64, f64)>; 10],
 }
 
 /// One row of the profile.

@@ -68,6 +68,7 @@ impl Simulation {
         };
         let mut stress = trial.stress.clone();
         let mode = self.double_mapping();
+        let start = std::time::Instant::now();
         if mode != DoubleMapping::Off {
             double_map(
                 mode,
@@ -81,6 +82,12 @@ impl Simulation {
                 &self.particles.material,
                 &state,
                 kappa_bar.as_deref(),
+            );
+        }
+        if mode != DoubleMapping::Off {
+            self.profile.add(
+                crate::profile::Stage::Smoothing,
+                start.elapsed().as_secs_f64(),
             );
         }
         Ok((stress, state))

@@ -498,13 +498,18 @@ impl Simulation {
         let mut du = self.initial_increment(&sg, t, dt, &vec![0.0; sg.dofs.n_free]);
         let settings = self.scene.solver.clone();
         let max_iterations = self.scene.max_iterations();
-        let mut nonlocal =
-            match &self.scene.nonlocal {
-                Some(spec) => Some(NonlocalStep::new(spec, &self.particles, false).map_err(
-                    |e| StepFailure::NonFinite(format!("nonlocal weights: {e}"), Vec::new()),
-                )?),
-                None => None,
-            };
+        let mut nonlocal = match &self.scene.nonlocal {
+            Some(spec) => Some(
+                self.profile
+                    .time(Stage::Nonlocal, || {
+                        NonlocalStep::new(spec, &self.particles, false)
+                    })
+                    .map_err(|e| {
+                        StepFailure::NonFinite(format!("nonlocal weights: {e}"), Vec::new())
+                    })?,
+            ),
+            None => None,
+        };
         let mut trial = TrialStresses::default();
         let mut res = self.evaluate(&sg, &du, nonlocal.as_ref(), t1, dt, &mut trial)?;
         let mut history = Vec::new();
@@ -529,8 +534,11 @@ impl Simulation {
                 || res.norm <= 1e-2 * settings.tolerance_force * res.reference;
             // DESIGN D18, third criterion (nonlocal): κ̄ lagged by one iteration has settled.
             let kappa_ok = match nonlocal.as_mut() {
-                Some(nl) => nl
-                    .iterate(&self.particles, |p| trial.state[p].plastic_strain_eq)
+                Some(nl) => self
+                    .profile
+                    .time(Stage::Nonlocal, || {
+                        nl.iterate(&self.particles, |p| trial.state[p].plastic_strain_eq)
+                    })
                     .map_err(|e| {
                         StepFailure::NonFinite(format!("nonlocal average: {e}"), history.clone())
                     })?,
