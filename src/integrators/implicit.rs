@@ -350,7 +350,7 @@ impl Simulation {
             diag
         });
         let Some((_, assembler)) = self.assembler.as_ref() else {
-            unreachable!("assembler set above")
+            return Err(StepFailure::Solver("no sparsity pattern was built".into()));
         };
         let matrix = assembler
             .assemble_with_diagonal(&blocks, diagonal.as_deref())
