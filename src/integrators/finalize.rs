@@ -28,22 +28,34 @@ impl Simulation {
     /// contribute nothing. kJ per metre run.
     pub(crate) fn step_dissipation(&self, trial: &TrialStresses) -> f64 {
         let p = &self.particles;
-        (0..p.len())
-            .filter(|&i| !self.materials[p.material[i] as usize].is_elastic())
+        // elastic points dissipate nothing: give them zero weight
+        let volumes: Vec<f64> = (0..p.len())
             .map(|i| {
-                let (de, _) = crate::transfer::strain_and_spin(&trial.gradient[i]);
-                let (s1, s0) = (&trial.stress[i], &trial.rotated[i]);
-                let ds = [s1[0] - s0[0], s1[1] - s0[1], s1[2] - s0[2], s1[3] - s0[3]];
-                let elastic = crate::constitutive::mat4_mul_vec(
-                    &self.compliances[p.material[i] as usize],
-                    &ds,
-                );
-                (0..4)
-                    .map(|k| 0.5 * (s1[k] + s0[k]) * (de[k] - elastic[k]))
-                    .sum::<f64>()
-                    * p.volume[i]
+                if self.materials[p.material[i] as usize].is_elastic() {
+                    0.0
+                } else {
+                    p.volume[i]
+                }
             })
-            .sum()
+            .collect();
+        let strain: Vec<Voigt> = trial
+            .gradient
+            .iter()
+            .map(|l| crate::transfer::strain_and_spin(l).0)
+            .collect();
+        let compliance: Vec<crate::constitutive::Mat4> = p
+            .material
+            .iter()
+            .map(|&m| self.compliances[m as usize])
+            .collect();
+        crate::metrics::dissipation_increment(
+            &volumes,
+            &trial.stress,
+            &trial.rotated,
+            &strain,
+            crate::metrics::ComplianceSource::PerPoint(&compliance),
+        )
+        .unwrap_or(f64::NAN)
     }
 
     /// Stresses and states to commit for the converged trial state.
