@@ -11,6 +11,8 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
+use crate::constitutive::ConstitutiveModel;
+
 /// One problem found in a scene: the field path (`grid.cell_size`,
 /// `body[0].box`, …) and what is wrong with it.
 #[derive(Debug, Clone, PartialEq)]
@@ -1069,9 +1071,10 @@ impl Scene {
         self.materials
             .values()
             .map(|m| {
-                let (e, nu, rho) = (m.youngs_modulus(), m.poisson_ratio(), m.density());
-                let modulus = e * (1.0 - nu) / ((1.0 + nu) * (1.0 - 2.0 * nu));
-                self.grid.cell_size / (modulus / rho).sqrt()
+                let modulus =
+                    crate::constitutive::LinearElastic::new(m.youngs_modulus(), m.poisson_ratio())
+                        .p_wave_modulus();
+                self.grid.cell_size / (modulus / m.density()).sqrt()
             })
             .filter(|v| v.is_finite() && *v > 0.0)
             .min_by(f64::total_cmp)

@@ -7,7 +7,7 @@ use std::sync::Arc;
 use mpm_solvers::{DirectSolver, SolverPolicy};
 
 use crate::bc::{Constraints, DrivenPoints, TractionPoints};
-use crate::constitutive::{self, ConstitutiveModel, LinearElastic, Mat4};
+use crate::constitutive::{ConstitutiveModel, LinearElastic, Mat4};
 use crate::error::RunError;
 use crate::grid::Grid;
 use crate::monitor::Monitor;
@@ -303,15 +303,18 @@ impl Simulation {
     /// Elastic strain energy Σ ½ V_p σ_pᵀ C σ_p, kJ per metre run (C = D⁻¹ of the
     /// particle's material).
     pub fn strain_energy(&self) -> f64 {
-        let compliances = &self.compliances;
         let p = &self.particles;
-        (0..p.len())
-            .map(|i| {
-                let s = &p.stress[i];
-                let cs = constitutive::mat4_mul_vec(&compliances[p.material[i] as usize], s);
-                0.5 * p.volume[i] * (0..4).map(|k| s[k] * cs[k]).sum::<f64>()
-            })
-            .sum()
+        let compliance: Vec<Mat4> = p
+            .material
+            .iter()
+            .map(|&m| self.compliances[m as usize])
+            .collect();
+        crate::metrics::elastic_energy(
+            &p.volume,
+            &p.stress,
+            crate::metrics::ComplianceSource::PerPoint(&compliance),
+        )
+        .unwrap_or(f64::NAN)
     }
 }
 

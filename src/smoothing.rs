@@ -46,15 +46,16 @@ pub fn double_map(
     state: &[PointState],
     strength_kappa: Option<&[f64]>,
 ) {
+    // `Auto` is resolved by the caller (`Simulation::double_mapping`).
+    if matches!(mode, DoubleMapping::Off | DoubleMapping::Auto) {
+        return;
+    }
     let base = |p: usize| -> Voigt {
         match mode {
             DoubleMapping::Increment => rotated[p],
             _ => [0.0; 4],
         }
     };
-    if matches!(mode, DoubleMapping::Off | DoubleMapping::Auto) {
-        return;
-    }
     // D37: Δσ̂_i = Σ_p N_ip m_p Δσ_p / Σ_p N_ip m_p
     let weighted = transfer::scatter::<5, _>(grid, bins, |p| {
         let s = &shapes[p];
@@ -104,9 +105,9 @@ mod tests {
     use super::*;
     use crate::constitutive::LinearElastic;
 
-    /// A uniform stress increment and a linear total-stress field are left
-    /// unchanged (the operator reproduces what the bilinear nodes can represent
-    /// only for uniform fields; a uniform field is exact to round-off).
+    /// A uniform stress increment on top of a varying start stress is left
+    /// unchanged to round-off (1e−12): the mass-weighted nodal projection
+    /// reproduces uniform fields exactly.
     #[test]
     fn uniform_increment_is_unchanged_and_mass_weighting_is_exact() {
         let grid = Grid {

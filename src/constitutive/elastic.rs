@@ -126,10 +126,15 @@ mod tests {
         }
     }
 
-    /// Uniaxial stress: with σyy = σzz = 0 imposed through C, εxx = σ/E.
+    /// The P-wave (constrained) modulus K + 4G/3 equals E(1−ν)/((1+ν)(1−2ν)),
+    /// and D11; for ν = 0 it is E (the bar of DESIGN §8.4).
     #[test]
-    fn one_dimensional_modulus_with_zero_poisson() {
-        let law = LinearElastic::new(1000.0, 0.0);
-        assert!((law.p_wave_modulus() - 1000.0).abs() < 1e-9);
+    fn p_wave_modulus_is_the_constrained_modulus() {
+        for (e, nu) in [(1000.0, 0.0), (20_000.0, 0.2), (50_000.0, 0.45)] {
+            let law = LinearElastic::new(e, nu);
+            let expected = e * (1.0 - nu) / ((1.0 + nu) * (1.0 - 2.0 * nu));
+            assert!((law.p_wave_modulus() / expected - 1.0).abs() < 1e-13);
+            assert!((law.stiffness()[0][0] / expected - 1.0).abs() < 1e-13);
+        }
     }
 }

@@ -410,17 +410,9 @@ impl Simulation {
         }
         let du = self.initial_increment(&sg, t, dt, free_increment);
         let mut trial = TrialStresses::default();
-        evaluate_stresses(
-            &self.particles,
-            &self.materials,
-            &sg.shapes,
-            &du,
-            None,
-            self.spin_compliances(),
-            &mut trial,
-        )
-        .map_err(|(p, e)| self.failure_to_error(StepFailure::Constitutive(p, e), t + dt, 0))?;
-        let res = self.residual(&sg, &trial, &du, t + dt, dt);
+        let res = self
+            .evaluate(&sg, &du, None, t + dt, dt, &mut trial)
+            .map_err(|f| self.failure_to_error(f, t + dt, 0))?;
         let matrix = self
             .assemble_tangent(&sg, &trial, dt)
             .map_err(|f| self.failure_to_error(f, t + dt, 0))?;
