@@ -152,6 +152,11 @@ pub struct SmoothingSpec {
     /// `auto` (on for softening materials), `off`, `increment` or `total` (DESIGN §7).
     #[serde(default)]
     pub double_mapping: crate::smoothing::DoubleMapping,
+    /// Restore the internal forces of the unsmoothed stresses after smoothing
+    /// (default false, the paper's double mapping; see
+    /// `smoothing::restore_internal_forces`).
+    #[serde(default)]
+    pub restore_forces: bool,
 }
 
 /// The time integration scheme.

@@ -3,10 +3,11 @@
 //! stresses (D37–D39).
 
 use super::{NonlocalStep, TrialStresses};
+use crate::bc::DofMap;
 use crate::constitutive::{PointState, Voigt};
 use crate::grid::ShapeAt;
 use crate::simulation::Simulation;
-use crate::smoothing::{double_map, DoubleMapping};
+use crate::smoothing::{double_map, DoubleMapping, Equilibrium, MappingFrame};
 use crate::transfer::ParticleBins;
 
 impl Simulation {
@@ -85,19 +86,29 @@ impl Simulation {
         let mode = self.double_mapping();
         let start = std::time::Instant::now();
         if mode != DoubleMapping::Off {
-            double_map(
-                mode,
-                &self.grid,
+            let frame = MappingFrame {
+                grid: &self.grid,
                 bins,
                 shapes,
-                &self.particles.mass,
+                mass: &self.particles.mass,
+            };
+            let dofs = DofMap::new(bins, &self.constraints);
+            let equilibrium = self.scene.smoothing.restore_forces.then_some(Equilibrium {
+                volume: &self.particles.volume,
+                dofs: &dofs,
+            });
+            double_map(
+                mode,
+                &frame,
+                equilibrium,
                 &trial.rotated,
                 &mut stress,
                 &self.materials,
                 &self.particles.material,
                 &state,
                 kappa_bar.as_deref(),
-            );
+            )
+            .map_err(|e| format!("double mapping: {e}"))?;
         }
         if mode != DoubleMapping::Off {
             self.profile.add(
