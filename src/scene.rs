@@ -261,6 +261,10 @@ pub struct SolverSpec {
     pub cfl: f64,
     /// Explicit: local (Cundall) damping α_d of DESIGN D21, in [0, 1).
     pub damping: f64,
+    /// Implicit dynamic: Newmark γ in [0.5, 1], with β = (γ + ½)²/4. The
+    /// default ½ is the trapezoidal rule of paper eq. 2 (D15, no numerical
+    /// damping); γ > ½ damps the highest frequencies.
+    pub newmark_gamma: f64,
 }
 
 impl Default for SolverSpec {
@@ -275,6 +279,7 @@ impl Default for SolverSpec {
             penalty_factor: None,
             cfl: 0.5,
             damping: 0.0,
+            newmark_gamma: 0.5,
         }
     }
 }
@@ -1056,6 +1061,12 @@ impl Scene {
             "solver.damping",
             s.damping >= 0.0 && s.damping < 1.0,
             format!("must lie in [0, 1) (got {})", s.damping),
+        );
+        check(
+            e,
+            "solver.newmark_gamma",
+            (0.5..=1.0).contains(&s.newmark_gamma),
+            format!("must lie in [0.5, 1] (got {})", s.newmark_gamma),
         );
         if self.scene.analysis == AnalysisKind::Explicit {
             if let Some(dt) = self.scene.dt {

@@ -45,6 +45,14 @@ pub(crate) enum StepFailure {
 type LineSearchResult = (Vec<[f64; 2]>, TrialStresses, Residual, f64);
 
 /// Start-of-step nodal quantities of a (sub-)step.
+/// Newmark parameters (paper eq. 2 uses γ = ½, β = ¼).
+pub(crate) struct Newmark {
+    /// γ: weight of a_{n+1} in the velocity update.
+    pub gamma: f64,
+    /// β: weight of a_{n+1} in the displacement update.
+    pub beta: f64,
+}
+
 struct StepGrid {
     shapes: Vec<ShapeAt>,
     bins: ParticleBins,
@@ -237,9 +245,22 @@ impl Simulation {
         })
     }
 
-    /// Newmark acceleration a_{n+1} = (4/Δt²) Δu − (4/Δt) v_n − a_n (DESIGN D15) at grid dof `d`.
-    fn newmark_acceleration(sg: &StepGrid, du: &[[f64; 2]], dt: f64, node: usize, c: usize) -> f64 {
-        4.0 / (dt * dt) * du[node][c] - 4.0 / dt * sg.velocity[node][c] - sg.acceleration[node][c]
+    /// Newmark acceleration at grid dof (`node`, `c`):
+    /// a_{n+1} = (Δu − Δt v_n − Δt²(½ − β) a_n) / (β Δt²); for the trapezoidal
+    /// rule (β = ¼) this is D15, (4/Δt²) Δu − (4/Δt) v_n − a_n.
+    fn newmark_acceleration(
+        sg: &StepGrid,
+        du: &[[f64; 2]],
+        dt: f64,
+        newmark: &Newmark,
+        node: usize,
+        c: usize,
+    ) -> f64 {
+        let beta = newmark.beta;
+        (du[node][c]
+            - dt * sg.velocity[node][c]
+            - dt * dt * (0.5 - beta) * sg.acceleration[node][c])
+            / (beta * dt * dt)
     }
 
     /// Residual R = f_ext + f_pen − f_int − M a (DESIGN D16) and its norms (D18).
@@ -259,6 +280,7 @@ impl Simulation {
         let mut penalty = vec![[0.0; 2]; grid.node_count()];
         self.driven.add_forces(p, &sg.shapes, du, t1, &mut penalty);
         let dynamic = self.dynamic();
+        let newmark = self.newmark();
         let mut residual = vec![[0.0; 2]; grid.node_count()];
         let (mut norm2, mut ext2, mut int2, mut inertia2) = (0.0, 0.0, 0.0, 0.0);
         for node in 0..grid.node_count() {
@@ -267,7 +289,7 @@ impl Simulation {
             }
             for c in 0..2 {
                 let inertia = if dynamic {
-                    sg.mass[node] * Self::newmark_acceleration(sg, du, dt, node, c)
+                    sg.mass[node] * Self::newmark_acceleration(sg, du, dt, &newmark, node, c)
                 } else {
                     0.0
                 };
@@ -297,6 +319,17 @@ impl Simulation {
     /// unsymmetric geometric term and converge linearly under large rotations.
     fn spin_compliances(&self) -> Option<&[crate::constitutive::Mat4]> {
         (!self.symmetric_tangent).then_some(self.compliances.as_slice())
+    }
+
+    /// Newmark parameters of the dynamic implicit scheme: γ from the scene,
+    /// β = (γ + ½)²/4 (unconditionally stable; γ = ½ is the trapezoidal rule of
+    /// paper eq. 2, γ > ½ damps the highest frequencies).
+    pub(crate) fn newmark(&self) -> Newmark {
+        let gamma = self.scene.solver.newmark_gamma;
+        Newmark {
+            gamma,
+            beta: 0.25 * (gamma + 0.5) * (gamma + 0.5),
+        }
     }
 
     /// Largest Young's modulus of the materials, kPa.
@@ -340,11 +373,12 @@ impl Simulation {
             }
         }
         self.driven.add_stiffness(&sg.shapes, &sg.bins, &mut blocks);
+        let beta = self.newmark().beta;
         let diagonal = self.dynamic().then(|| {
             let mut diag = vec![0.0; n];
             for (d, &index) in sg.dofs.index.iter().enumerate() {
                 if index != NONE {
-                    diag[index as usize] = 4.0 / (dt * dt) * sg.mass[d / 2];
+                    diag[index as usize] = sg.mass[d / 2] / (beta * dt * dt);
                 }
             }
             diag
@@ -680,20 +714,22 @@ impl Simulation {
             .map_err(|e| StepFailure::NonFinite(format!("nonlocal average: {e}"), Vec::new()))?;
         // Reactions at the nodes (support forces), −R.
         self.reaction = res.residual.iter().map(|r| [-r[0], -r[1]]).collect();
+        let newmark = self.newmark();
         let p = &mut self.particles;
         if dynamic {
             let mut a_new = vec![[0.0; 2]; self.grid.node_count()];
             for node in 0..a_new.len() {
                 if sg.bins.node_active[node] {
                     for c in 0..2 {
-                        a_new[node][c] = Self::newmark_acceleration(sg, du, dt, node, c);
+                        a_new[node][c] = Self::newmark_acceleration(sg, du, dt, &newmark, node, c);
                     }
                 }
             }
+            let gamma = newmark.gamma;
             for i in 0..n {
                 let a = transfer::interpolate(&sg.shapes[i], &a_new);
                 for c in 0..2 {
-                    p.velocity[i][c] += 0.5 * dt * (p.acceleration[i][c] + a[c]);
+                    p.velocity[i][c] += dt * ((1.0 - gamma) * p.acceleration[i][c] + gamma * a[c]);
                 }
                 p.acceleration[i] = a;
             }
