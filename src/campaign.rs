@@ -47,6 +47,9 @@ pub struct CampaignRun {
     pub positions: Vec<[f64; 2]>,
     /// Final deviatoric strain εq (DESIGN D8) per point.
     pub eps_q: Vec<f64>,
+    /// Final nonlocal equivalent plastic strain κ̄ (D35) per point (nonlocal
+    /// runs only; empty otherwise).
+    pub kappa_bar: Vec<f64>,
     /// The error that stopped the run, if any.
     pub error: Option<String>,
     /// Plastic dissipation at the last step (monitor `dissipation`, D43), kJ/m.
@@ -176,6 +179,7 @@ fn run_one(name: &str, scene: Scene, out: &Path) -> CampaignRun {
         curve: Vec::new(),
         positions: Vec::new(),
         eps_q: Vec::new(),
+        kappa_bar: Vec::new(),
         error: None,
         dissipation: None,
         wall_seconds: 0.0,
@@ -187,6 +191,13 @@ fn run_one(name: &str, scene: Scene, out: &Path) -> CampaignRun {
             let p = &outcome.simulation.particles;
             run.positions = p.position.clone();
             run.eps_q = p.def_grad.iter().map(deviatoric_hencky_strain).collect();
+            if run.length_scale.is_some() {
+                run.kappa_bar = p
+                    .state
+                    .iter()
+                    .map(|s| s.plastic_strain_eq_nonlocal)
+                    .collect();
+            }
             run.error = outcome.error.map(|e| e.to_string());
             run.profile = outcome.simulation.profile.table(outcome.wall_seconds);
         }
@@ -215,6 +226,9 @@ pub struct RunMetrics {
     pub brittleness: Option<f64>,
     /// M4 band width, m.
     pub band_width: Option<f64>,
+    /// M4 applied to the nonlocal variable κ̄ instead of εq (nonlocal runs), m:
+    /// the width of the regularised softening zone (the εq band lies inside it).
+    pub band_width_kappa_bar: Option<f64>,
     /// External work W = ∫F dδ, kJ/m.
     pub external_work: Option<f64>,
 }
@@ -255,6 +269,12 @@ pub fn compute_metrics(runs: &[CampaignRun]) -> Vec<RunMetrics> {
                 )
                 .ok()
                 .map(|b| b.width);
+            }
+            if let (false, Some(l_s)) = (run.kappa_bar.is_empty(), run.length_scale) {
+                m.band_width_kappa_bar =
+                    metrics::shear_band_width(&run.positions, &run.kappa_bar, run.cell_size, l_s)
+                        .ok()
+                        .map(|b| b.width);
             }
             m.external_work = metrics::external_work(&run.curve).ok();
             m
@@ -312,8 +332,8 @@ fn write_outputs(out: &Path, runs: &[CampaignRun]) -> Result<(), CampaignError> 
     // metrics
     let m = compute_metrics(runs);
     let metrics_path = out.join("metrics.csv");
-    let mut csv = String::from("run,family,cell_size,length_scale,status,wall_seconds,initial_slope,peak_delta,peak_load,final_load,M1_discrepancy,M2_peak_spread,M3_brittleness,M4_band_width,external_work,M5_dissipation\n");
-    let mut md = String::from("# Mesh-objectivity report\n\nReference of each family: its finest completed mesh (DESIGN §9). δ in mm, loads in kN/m, band width w in mm.\n\n| run | h (mm) | status | wall (s) | slope (kN/m/m) | peak F | δ_peak | F_end | β (M3) | M1 e_h | M2 | w (mm) | w/l_s | D (kJ/m, M5) |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    let mut csv = String::from("run,family,cell_size,length_scale,status,wall_seconds,initial_slope,peak_delta,peak_load,final_load,M1_discrepancy,M2_peak_spread,M3_brittleness,M4_band_width,M4_band_width_kappa_bar,external_work,M5_dissipation\n");
+    let mut md = String::from("# Mesh-objectivity report\n\nReference of each family: its finest completed mesh (DESIGN §9). δ in mm, loads in kN/m, band width w (M4 on εq) and w_κ̄ (M4 on the nonlocal variable κ̄) in mm.\n\n| run | h (mm) | status | wall (s) | slope (kN/m/m) | peak F | δ_peak | F_end | β (M3) | M1 e_h | M2 | w (mm) | w/l_s | w_κ̄ (mm) | D (kJ/m, M5) |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     for (r, mm) in runs.iter().zip(&m) {
         let family = if r.length_scale.is_some() {
             "nonlocal"
@@ -327,7 +347,7 @@ fn write_outputs(out: &Path, runs: &[CampaignRun]) -> Result<(), CampaignError> 
         };
         let _ = writeln!(
             csv,
-            "{},{family},{:e},{},{status},{:.2},{:.1},{:e},{:e},{:e},{},{},{},{},{},{}",
+            "{},{family},{:e},{},{status},{:.2},{:.1},{:e},{:e},{:e},{},{},{},{},{},{},{}",
             r.name,
             r.cell_size,
             r.length_scale.map(|l| l.to_string()).unwrap_or_default(),
@@ -340,6 +360,7 @@ fn write_outputs(out: &Path, runs: &[CampaignRun]) -> Result<(), CampaignError> 
             fmt_opt(mm.peak_spread, 1.0, 5),
             fmt_opt(mm.brittleness, 1.0, 5),
             fmt_opt(mm.band_width, 1.0, 6),
+            fmt_opt(mm.band_width_kappa_bar, 1.0, 6),
             fmt_opt(mm.external_work, 1.0, 6),
             fmt_opt(r.dissipation, 1.0, 6),
         );
@@ -349,7 +370,7 @@ fn write_outputs(out: &Path, runs: &[CampaignRun]) -> Result<(), CampaignError> 
         };
         let _ = writeln!(
             md,
-            "| {} | {:.3} | {status} | {:.1} | {:.0} | {:.3} | {:.3} | {:.3} | {} | {} | {} | {} | {ratio} | {} |",
+            "| {} | {:.3} | {status} | {:.1} | {:.0} | {:.3} | {:.3} | {:.3} | {} | {} | {} | {} | {ratio} | {} | {} |",
             r.name,
             r.cell_size * 1e3,
             r.wall_seconds,
@@ -361,6 +382,7 @@ fn write_outputs(out: &Path, runs: &[CampaignRun]) -> Result<(), CampaignError> 
             fmt_opt(mm.discrepancy, 1.0, 4),
             fmt_opt(mm.peak_spread, 1.0, 4),
             fmt_opt(mm.band_width, 1e3, 2),
+            fmt_opt(mm.band_width_kappa_bar, 1e3, 2),
             fmt_opt(r.dissipation, 1.0, 4),
         );
     }
