@@ -22,7 +22,12 @@
 //!   three bins `bin_x − 1 ..= bin_x + 1` of one bin row of one group form a single contiguous
 //!   slice, found by binary search. Memory is `O(N)` whatever the spread of the points.
 //! * The denominators `Σ_s w V_s` are computed once in [`NonlocalAverager::new`] (all pairs:
-//!   no pair list of all MPs is stored, neighbour counts reach ~7000 per MP, DESIGN §6).
+//!   no pair list of all MPs is stored, neighbour counts reach ~7000 per MP, DESIGN §6), by a
+//!   symmetric pass that evaluates the kernel once per unordered pair: the key-ordered MPs are
+//!   cut into tiles of ≤ 128 MPs of one bin row, every pair of nearby tiles is a parallel task
+//!   with private partial sums for both tiles, and the partials are added per MP in a fixed
+//!   tile-pair order. The same pass gives the numerators of a mostly nonzero field without
+//!   cache.
 //! * Weight cache for \[D36\]: the weights are fixed within a step while `average` runs once
 //!   per Newton iteration, and only the plastic MPs (`Δκ_q ≠ 0`) are sources.
 //!   [`NonlocalAverager::cache_sources`] stores `w(|x_p − x_q|) V_q` for a source set (the
@@ -42,10 +47,10 @@
 //!   interleaved partial sums per row; on-the-fly rows `dy = −1, 0, 1`, then sorted order): the
 //!   result is bit-identical for any number of rayon threads, and equals the uncached
 //!   evaluation up to summation order (tested to 1e−12 relative to `max|field|`).
-//! * Without a cache and for a field that is nonzero everywhere, the numerator visits the
-//!   sources in exactly the order used for the denominator, with the term `w · (V_q f_q)`
-//!   against `w · V_q`; a field equal to 1 is thus reproduced bit-exactly and any uniform field
-//!   to a few ulps.
+//! * Without a cache and for a field nonzero at more than half of the MPs, the numerator is
+//!   computed by the symmetric pass of the denominators, in exactly their order, with the term
+//!   `w · (V_q f_q)` against `w · V_q`; a field equal to 1 is thus reproduced bit-exactly and
+//!   any uniform field to a few ulps.
 
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -71,6 +76,9 @@ const MAX_BLOCKS: usize = 8;
 
 /// Receivers per chunk of a cache block (unit of parallel work of the cached average).
 const CACHE_CHUNK: usize = 128;
+
+/// MPs per tile of the symmetric pair pass ([`SymmetricPlan`]).
+const TILE: usize = 128;
 
 /// Slot marker of an MP that is not cached.
 const NO_SLOT: u32 = u32::MAX;
@@ -287,6 +295,8 @@ pub struct NonlocalAverager {
     counts_sorted: Vec<u32>,
     /// Cached weights of the step (empty until [`NonlocalAverager::cache_sources`]).
     cache: WeightCache,
+    /// Tiles of the symmetric pair pass (denominators, dense uncached numerators).
+    plan: SymmetricPlan,
 }
 
 /// Weights `w(|x_p − x_q|) V_q` of \[D34\] cached for a set of sources (the MPs plastic in the
@@ -411,21 +421,8 @@ impl NonlocalAverager {
             sorted.push(key_of(i), positions[i][0], positions[i][1], volumes[i]);
         }
 
-        let results: Vec<(f64, usize)> = (0..n)
-            .into_par_iter()
-            .with_min_len(MIN_CHUNK)
-            .map(|k| {
-                let (px, py) = (sorted.x[k], sorted.y[k]);
-                let mut den = 0.0;
-                let mut count = 0usize;
-                sorted.for_each_neighbour(sorted.keys[k], px, py, rc2, |_, r2, v| {
-                    den += kernel(r2, inv_l2) * v;
-                    count += 1;
-                });
-                // The MP itself is always found (r = 0) and is not its own neighbour.
-                (den, count - 1)
-            })
-            .collect();
+        let plan = SymmetricPlan::new(&sorted, rc2);
+        let results = plan.sums(&sorted, &sorted.s, rc2, inv_l2);
         let denominators_sorted: Vec<f64> = results.iter().map(|r| r.0).collect();
         let counts_sorted: Vec<u32> = results
             .iter()
@@ -455,6 +452,7 @@ impl NonlocalAverager {
                 budget: DEFAULT_PAIR_BUDGET,
                 ..WeightCache::default()
             },
+            plan,
         })
     }
 
@@ -574,7 +572,26 @@ impl NonlocalAverager {
             num / den
         };
         let mut out_sorted = vec![0.0; n];
-        if cached {
+        if !cached && 2 * sources.keys.len() > n {
+            // Mostly nonzero field: the symmetric pass (each kernel once per unordered pair)
+            // is cheaper than gathering every source per receiver. Its summation order is that
+            // of the denominators, so a field of ones is reproduced bit-exactly.
+            let s: Vec<f64> = self
+                .order
+                .iter()
+                .zip(&self.sorted.s)
+                .map(|(&i, &v)| v * field[i])
+                .collect();
+            let sums = self.plan.sums(&self.sorted, &s, rc2, inv_l2);
+            for (k, (o, (num, _))) in out_sorted.iter_mut().zip(sums).enumerate() {
+                let den = self.denominators_sorted[k];
+                *o = if den == 0.0 {
+                    field[self.order[k]]
+                } else {
+                    num / den
+                };
+            }
+        } else if cached {
             out_sorted
                 .par_chunks_mut(CACHE_CHUNK)
                 .enumerate()
@@ -805,6 +822,160 @@ impl NonlocalAverager {
     /// Bin size of the cell-linked list (`R_c` enlarged by a relative 1e−9) and the bin origin.
     pub fn bin_geometry(&self) -> (f64, [f64; 2]) {
         (self.bin, self.origin)
+    }
+}
+
+/// A run of at most [`TILE`] consecutive MPs (key order) of one group and bin row, with its
+/// bounding box ([`SymmetricPlan`]).
+#[derive(Debug, Clone)]
+struct Tile {
+    lo: usize,
+    hi: usize,
+    group: u16,
+    by: i64,
+    min: [f64; 2],
+    max: [f64; 2],
+}
+
+/// Partial sums of one tile pair `(I, J)`: `Σ w V` and counts for the MPs of `I` and of `J`.
+type TilePartial = (Vec<f64>, Vec<u32>, Vec<f64>, Vec<u32>);
+
+/// Tiles and interacting tile pairs of the symmetric pair pass ([`SymmetricPlan::sums`]).
+#[derive(Debug, Clone, Default)]
+struct SymmetricPlan {
+    tiles: Vec<Tile>,
+    /// Tile pairs `(I, J)`, `I ≤ J`, in lexicographic order.
+    pairs: Vec<(usize, usize)>,
+    /// Per tile, its `(pair, is_second_tile)` entries in pair order.
+    touches: Vec<Vec<(usize, bool)>>,
+}
+
+impl SymmetricPlan {
+    /// Cuts the key-ordered MPs into tiles ([`Tile`]) and lists every pair of tiles `I ≤ J` of
+    /// the same group in the same or the next bin row whose bounding boxes are within `R_c`.
+    /// The box test is a rounding-monotone lower bound of every computed `r²`, and bins are
+    /// `≥ R_c`, so the pairs cover exactly the pairs of the cell list.
+    fn new(sorted: &SourceList, rc2: f64) -> Self {
+        let n = sorted.keys.len();
+        let mut tiles: Vec<Tile> = Vec::with_capacity(n / TILE + 1);
+        let mut lo = 0;
+        while lo < n {
+            let (group, by) = (sorted.keys[lo].group, sorted.keys[lo].by);
+            let mut hi = lo + 1;
+            while hi < n
+                && hi - lo < TILE
+                && sorted.keys[hi].group == group
+                && sorted.keys[hi].by == by
+            {
+                hi += 1;
+            }
+            let mut min = [f64::INFINITY; 2];
+            let mut max = [f64::NEG_INFINITY; 2];
+            for k in lo..hi {
+                min = [min[0].min(sorted.x[k]), min[1].min(sorted.y[k])];
+                max = [max[0].max(sorted.x[k]), max[1].max(sorted.y[k])];
+            }
+            tiles.push(Tile {
+                lo,
+                hi,
+                group,
+                by,
+                min,
+                max,
+            });
+            lo = hi;
+        }
+        let near = |a: &Tile, b: &Tile| {
+            let gx = (b.min[0] - a.max[0]).max(a.min[0] - b.max[0]).max(0.0);
+            let gy = (b.min[1] - a.max[1]).max(a.min[1] - b.max[1]).max(0.0);
+            gx * gx + gy * gy <= rc2
+        };
+        let tiles_ref = &tiles;
+        let pairs: Vec<(usize, usize)> = (0..tiles.len())
+            .into_par_iter()
+            .flat_map_iter(|i| {
+                let a = &tiles_ref[i];
+                tiles_ref[i..]
+                    .iter()
+                    .enumerate()
+                    .take_while(move |(_, b)| b.group == a.group && b.by <= a.by + 1)
+                    .filter(move |(_, b)| near(a, b))
+                    .map(move |(d, _)| (i, i + d))
+            })
+            .collect();
+        let mut touches: Vec<Vec<(usize, bool)>> = vec![Vec::new(); tiles.len()];
+        for (e, &(i, j)) in pairs.iter().enumerate() {
+            touches[i].push((e, false));
+            touches[j].push((e, true));
+        }
+        Self {
+            tiles,
+            pairs,
+            touches,
+        }
+    }
+
+    /// `(Σ_q kernel(r_pq²) s_q, count)` over all same-group `q ≠ p` within `R_c`, for every MP
+    /// `p` (key order), evaluating the kernel once per unordered pair: `s = V` gives the
+    /// denominators of \[D34\] and the neighbour counts, `s = V f` the numerators.
+    ///
+    /// Every tile pair is one parallel task that adds `w s_q` to `p` and `w s_p` to `q` in
+    /// private partial arrays; the partials are then summed per MP in tile-pair order. The
+    /// summation order is fixed (independent of the number of rayon threads) and the same for
+    /// every `s`, so `s = V · 1` reproduces the denominators bit-exactly.
+    fn sums(&self, sorted: &SourceList, s: &[f64], rc2: f64, inv_l2: f64) -> Vec<(f64, usize)> {
+        let tiles = &self.tiles;
+        let partials: Vec<TilePartial> = self
+            .pairs
+            .par_iter()
+            .map(|&(i, j)| {
+                let (a, b) = (&tiles[i], &tiles[j]);
+                let mut da = vec![0.0; a.hi - a.lo];
+                let mut ca = vec![0u32; a.hi - a.lo];
+                let mut db = vec![0.0; b.hi - b.lo];
+                let mut cb = vec![0u32; b.hi - b.lo];
+                for p in a.lo..a.hi {
+                    let (px, py, sp) = (sorted.x[p], sorted.y[p], s[p]);
+                    let start = if i == j { p + 1 } else { b.lo };
+                    let (mut acc, mut count) = (0.0, 0u32);
+                    for q in start..b.hi {
+                        let dx = px - sorted.x[q];
+                        let dy = py - sorted.y[q];
+                        let r2 = dx * dx + dy * dy;
+                        if r2 <= rc2 {
+                            let w = kernel(r2, inv_l2);
+                            acc += w * s[q];
+                            count += 1;
+                            db[q - b.lo] += w * sp;
+                            cb[q - b.lo] += 1;
+                        }
+                    }
+                    da[p - a.lo] = acc;
+                    ca[p - a.lo] = count;
+                }
+                (da, ca, db, cb)
+            })
+            .collect();
+        let per_tile: Vec<Vec<(f64, usize)>> = tiles
+            .par_iter()
+            .zip(&self.touches)
+            .map(|(t, list)| {
+                let mut out = vec![(0.0, 0usize); t.hi - t.lo];
+                for &(e, second) in list {
+                    let (d, c) = if second {
+                        (&partials[e].2, &partials[e].3)
+                    } else {
+                        (&partials[e].0, &partials[e].1)
+                    };
+                    for (o, (dv, cv)) in out.iter_mut().zip(d.iter().zip(c)) {
+                        o.0 += dv;
+                        o.1 += *cv as usize;
+                    }
+                }
+                out
+            })
+            .collect();
+        per_tile.into_iter().flatten().collect()
     }
 }
 

@@ -805,7 +805,8 @@ fn nonlocal_cache_budget_exceeded_still_correct() {
     assert_close(&a, &b, &field, "zero budget");
 }
 
-/// Bit-identical with 1 and 2 threads, cache built and applied inside each pool.
+/// Bit-identical with 1 and 2 threads, cache built and applied inside each pool; also the
+/// uncached dense path (symmetric tile pass).
 #[test]
 fn nonlocal_cached_deterministic_across_thread_counts() {
     let mut rng = Rng(24);
@@ -835,6 +836,7 @@ fn nonlocal_cached_deterministic_across_thread_counts() {
             }
         })
         .collect();
+    let dense: Vec<f64> = pos.iter().map(|p| 1.0 + 0.1 * p[0] - 0.05 * p[1]).collect();
     let params = NonlocalParameters::new(0.15);
     let run = |threads: usize| {
         let pool = rayon::ThreadPoolBuilder::new()
@@ -848,14 +850,18 @@ fn nonlocal_cached_deterministic_across_thread_counts() {
             nl.average(&band, &mut o1).unwrap();
             let mut o2 = vec![0.0; pos.len()];
             nl.average(&wider, &mut o2).unwrap();
-            (o1, o2, nl.cache_stats())
+            // Dense field without cache: the symmetric tile pass.
+            let mut o3 = vec![0.0; pos.len()];
+            nl.average_uncached(&dense, &mut o3).unwrap();
+            (o1, o2, o3, nl.cache_stats())
         })
     };
-    let (a1, a2, s1) = run(1);
-    let (b1, b2, s2) = run(2);
+    let (a1, a2, a3, s1) = run(1);
+    let (b1, b2, b3, s2) = run(2);
     let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
     assert_eq!(bits(&a1), bits(&b1));
     assert_eq!(bits(&a2), bits(&b2));
+    assert_eq!(bits(&a3), bits(&b3));
     assert_eq!(s1, s2);
     assert!(a2.iter().any(|&v| v != 0.0));
 }
