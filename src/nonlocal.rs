@@ -21,9 +21,9 @@
 //!   stored without a dense grid: MPs are sorted by the key `(group, bin_y, bin_x)`, so that the
 //!   three bins `bin_x − 1 ..= bin_x + 1` of one bin row of one group form a single contiguous
 //!   slice, found by binary search. Memory is `O(N)` whatever the spread of the points.
-//! * The denominators `Σ_s w V_s` are computed once in [`NonlocalAverager::new`] (all pairs:
-//!   no pair list of all MPs is stored, neighbour counts reach ~7000 per MP, DESIGN §6), by a
-//!   symmetric pass that evaluates the kernel once per unordered pair: the key-ordered MPs are
+//! * The denominators `Σ_s w V_s` are computed once per operator, at the first call with a
+//!   nonzero field (so never in an elastic step), over all pairs (no pair list of all MPs is
+//!   stored: neighbour counts reach ~7000 per MP, DESIGN §6), by a symmetric pass that evaluates the kernel once per unordered pair: the key-ordered MPs are
 //!   cut into tiles of ≤ 128 MPs of one bin row, every pair of nearby tiles is a parallel task
 //!   with private partial sums for both tiles, and the partials are added per MP in a fixed
 //!   tile-pair order. The same pass gives the numerators of a mostly nonzero field without
@@ -54,6 +54,7 @@
 
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use std::sync::OnceLock;
 
 /// Default cutoff factor: `R_c = 3 l_s` (DESIGN §6 / decision log item 12). Beyond `3 l_s` the
 /// area-weighted tail of [`weight`] holds 4.4e−4 of its integral.
@@ -265,7 +266,7 @@ impl SourceList {
 /// Nonlocal averaging operator `W` of \[D34\] over a fixed set of MPs (start-of-step positions
 /// and volumes), applied as in \[D35\]/\[D36\] (paper eq. 6).
 ///
-/// Built once per step by [`NonlocalAverager::new`] (bins and denominators). Optionally
+/// Built once per step by [`NonlocalAverager::new`] (bins; denominators at first use). Optionally
 /// [`NonlocalAverager::cache_sources`] stores the weights of the step's plastic sources; every
 /// [`NonlocalAverager::average`] call then costs one multiply-add per cached pair plus one
 /// kernel evaluation per pair `(p, q)` with `q` uncached, `field_q ≠ 0` and
@@ -285,18 +286,25 @@ pub struct NonlocalAverager {
     sorted: SourceList,
     /// `order[k]` = original index of the `k`-th MP in key order.
     order: Vec<usize>,
-    /// Original-indexed field values are read in key order through `order`; the denominators
-    /// below are in key order as well.
-    denominators_sorted: Vec<f64>,
-    /// Neighbour count statistics (min, mean, max) over all MPs.
-    stats: (usize, f64, usize),
-    /// Number of same-group neighbours within `R_c` of every MP (key order, itself excluded):
-    /// an upper bound of the cached pairs a source adds (budget check).
-    counts_sorted: Vec<u32>,
+    /// Denominators, neighbour counts and the symmetric pass plan, computed at the first call
+    /// that needs them (a step whose fields are all zero, e.g. elastic, never does).
+    weights: OnceLock<Weights>,
     /// Cached weights of the step (empty until [`NonlocalAverager::cache_sources`]).
     cache: WeightCache,
+}
+
+/// The `O(N · n_nb)` part of [`NonlocalAverager`] (\[D34\] denominators), in key order.
+#[derive(Debug, Clone)]
+struct Weights {
     /// Tiles of the symmetric pair pass (denominators, dense uncached numerators).
     plan: SymmetricPlan,
+    /// `Σ_s w(|x_p − x_s|) V_s`; 0 for an isolated MP.
+    den: Vec<f64>,
+    /// Number of same-group neighbours within `R_c` of every MP (itself excluded): an upper
+    /// bound of the cached pairs a source adds (budget check).
+    counts: Vec<u32>,
+    /// Neighbour count statistics (min, mean, max) over all MPs.
+    stats: (usize, f64, usize),
 }
 
 /// Weights `w(|x_p − x_q|) V_q` of \[D34\] cached for a set of sources (the MPs plastic in the
@@ -380,10 +388,11 @@ impl NonlocalAverager {
     /// Builds the operator \[D34\] from start-of-step positions `x_q`, volumes `V_q` and a group
     /// (material) id per MP; only MPs of the same group average together (DESIGN §6).
     ///
-    /// Sorts the MPs into a cell-linked list with bins of size `R_c` and computes the weight
-    /// denominators `Σ_s w(|x_p − x_s|) V_s` (sum over same-group MPs within `R_c`). An MP
-    /// whose denominator is 0 (isolated, or only zero-volume/coincident neighbours) gets
-    /// `W_pp = 1`, i.e. keeps its own value.
+    /// Sorts the MPs into a cell-linked list with bins of size `R_c`. The weight denominators
+    /// `Σ_s w(|x_p − x_s|) V_s` (sum over same-group MPs within `R_c`) are computed once, at
+    /// the first call that needs them (an all-zero field, e.g. Δκ of an elastic step, does
+    /// not). An MP whose denominator is 0 (isolated, or only zero-volume/coincident
+    /// neighbours) gets `W_pp = 1`, i.e. keeps its own value.
     ///
     /// # Errors
     /// [`NonlocalError`] if `l_s` or the cutoff factor is not finite and positive, if the
@@ -421,21 +430,6 @@ impl NonlocalAverager {
             sorted.push(key_of(i), positions[i][0], positions[i][1], volumes[i]);
         }
 
-        let plan = SymmetricPlan::new(&sorted, rc2);
-        let results = plan.sums(&sorted, &sorted.s, rc2, inv_l2);
-        let denominators_sorted: Vec<f64> = results.iter().map(|r| r.0).collect();
-        let counts_sorted: Vec<u32> = results
-            .iter()
-            .map(|r| u32::try_from(r.1).unwrap_or(u32::MAX))
-            .collect();
-        let stats = if n == 0 {
-            (0, 0.0, 0)
-        } else {
-            let min = results.iter().map(|r| r.1).min().unwrap_or(0);
-            let max = results.iter().map(|r| r.1).max().unwrap_or(0);
-            let mean = results.iter().map(|r| r.1 as f64).sum::<f64>() / n as f64;
-            (min, mean, max)
-        };
         Ok(Self {
             params: *params,
             rc2,
@@ -444,15 +438,40 @@ impl NonlocalAverager {
             origin,
             sorted,
             order,
-            denominators_sorted,
-            stats,
-            counts_sorted,
+            weights: OnceLock::new(),
             cache: WeightCache {
                 slot_of: vec![NO_SLOT; n],
                 budget: DEFAULT_PAIR_BUDGET,
                 ..WeightCache::default()
             },
-            plan,
+        })
+    }
+
+    /// Denominators and neighbour counts (symmetric pass, [`SymmetricPlan`]), computed once.
+    fn weights(&self) -> &Weights {
+        self.weights.get_or_init(|| {
+            let n = self.len();
+            let plan = SymmetricPlan::new(&self.sorted, self.rc2);
+            let results = plan.sums(&self.sorted, &self.sorted.s, self.rc2, self.inv_l2);
+            let den: Vec<f64> = results.iter().map(|r| r.0).collect();
+            let counts: Vec<u32> = results
+                .iter()
+                .map(|r| u32::try_from(r.1).unwrap_or(u32::MAX))
+                .collect();
+            let stats = if n == 0 {
+                (0, 0.0, 0)
+            } else {
+                let min = results.iter().map(|r| r.1).min().unwrap_or(0);
+                let max = results.iter().map(|r| r.1).max().unwrap_or(0);
+                let mean = results.iter().map(|r| r.1 as f64).sum::<f64>() / n as f64;
+                (min, mean, max)
+            };
+            Weights {
+                plan,
+                den,
+                counts,
+                stats,
+            }
         })
     }
 
@@ -476,7 +495,7 @@ impl NonlocalAverager {
     pub fn denominators(&self) -> Vec<f64> {
         let mut d = vec![0.0; self.len()];
         for (k, &i) in self.order.iter().enumerate() {
-            d[i] = self.denominators_sorted[k];
+            d[i] = self.weights().den[k];
         }
         d
     }
@@ -528,8 +547,14 @@ impl NonlocalAverager {
         use_cache: bool,
     ) -> Result<(), NonlocalError> {
         self.check_field(field, out.len())?;
+        if field.iter().all(|&f| f == 0.0) {
+            // W · 0 = 0 (isolated MPs keep their own value, 0): no weights needed.
+            out.fill(0.0);
+            return Ok(());
+        }
         let n = self.len();
         let cache = &self.cache;
+        let weights = self.weights();
         let cached = use_cache && !cache.blocks.is_empty();
         // Field values of the cached sources, by slot.
         let slot_field: Vec<f64> = if cached {
@@ -557,7 +582,7 @@ impl NonlocalAverager {
         let (rc2, inv_l2) = (self.rc2, self.inv_l2);
         // One output entry: cached blocks in order, then the on-the-fly sources.
         let entry = |k: usize, cached_num: f64| -> f64 {
-            let den = self.denominators_sorted[k];
+            let den = weights.den[k];
             if den == 0.0 {
                 return field[self.order[k]];
             }
@@ -582,9 +607,9 @@ impl NonlocalAverager {
                 .zip(&self.sorted.s)
                 .map(|(&i, &v)| v * field[i])
                 .collect();
-            let sums = self.plan.sums(&self.sorted, &s, rc2, inv_l2);
+            let sums = weights.plan.sums(&self.sorted, &s, rc2, inv_l2);
             for (k, (o, (num, _))) in out_sorted.iter_mut().zip(sums).enumerate() {
-                let den = self.denominators_sorted[k];
+                let den = weights.den[k];
                 *o = if den == 0.0 {
                     field[self.order[k]]
                 } else {
@@ -649,7 +674,7 @@ impl NonlocalAverager {
         let mut admitted = SourceList::with_capacity(new.len());
         let mut admitted_slots = Vec::with_capacity(new.len());
         for &k in &new {
-            let c = self.counts_sorted[k] as usize;
+            let c = self.weights().counts[k] as usize;
             if c <= room {
                 room -= c;
                 let slot = self.cache.slot_key.len() as u32;
@@ -678,6 +703,7 @@ impl NonlocalAverager {
     fn build_block(&self, list: &SourceList, slots: &[u32]) -> CacheBlock {
         let n = self.len();
         let inv_l2 = self.inv_l2;
+        let counts = &self.weights().counts;
         let chunks = (0..n.div_ceil(CACHE_CHUNK))
             .into_par_iter()
             .map(|c| {
@@ -686,7 +712,7 @@ impl NonlocalAverager {
                 // sources in `list` (+25 %), to avoid most reallocations.
                 let expect = rows
                     .clone()
-                    .map(|k| self.counts_sorted[k] as usize)
+                    .map(|k| counts[k] as usize)
                     .sum::<usize>()
                     .saturating_mul(list.keys.len())
                     / n.max(1);
@@ -717,7 +743,7 @@ impl NonlocalAverager {
     /// `R_c`, `r > 0` (`w(0) = 0`); none for an isolated receiver (`W_pp = 1`).
     #[inline]
     fn visit_block_row(&self, list: &SourceList, k: usize, mut f: impl FnMut(usize, f64, f64)) {
-        if self.denominators_sorted[k] == 0.0 {
+        if self.weights().den[k] == 0.0 {
             return;
         }
         list.for_each_neighbour(
@@ -816,7 +842,7 @@ impl NonlocalAverager {
     /// excluded): `(min, mean, max)` over all MPs; `(0, 0.0, 0)` if empty. Useful to check
     /// the resolution rule of DESIGN §6 (`h ≲ 0.2 l_s`) and to predict the cost of \[D36\].
     pub fn neighbour_count_stats(&self) -> (usize, f64, usize) {
-        self.stats
+        self.weights().stats
     }
 
     /// Bin size of the cell-linked list (`R_c` enlarged by a relative 1e−9) and the bin origin.

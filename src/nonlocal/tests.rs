@@ -878,3 +878,25 @@ fn nonlocal_cache_sources_validates_length() {
     let mut empty = NonlocalAverager::new(&NonlocalParameters::new(1.0), &[], &[], &[]).unwrap();
     assert_eq!(empty.cache_sources(&[]).unwrap(), 0);
 }
+
+/// An all-zero field (Δκ of an elastic step) averages to zero without computing the
+/// denominators; they are computed at the first nonzero field.
+#[test]
+fn nonlocal_zero_field_needs_no_denominators() {
+    let mut rng = Rng(25);
+    let (pos, vol, grp) = cache_cloud(&mut rng, 500);
+    let n = pos.len();
+    let params = NonlocalParameters::new(0.3);
+    let mut nl = NonlocalAverager::new(&params, &pos, &vol, &grp).unwrap();
+    let mut out = vec![1.0; n];
+    assert_eq!(nl.cache_sources(&vec![0.0; n]).unwrap(), 0);
+    nl.average(&vec![0.0; n], &mut out).unwrap();
+    assert!(out.iter().all(|&o| o == 0.0));
+    assert!(nl.weights.get().is_none());
+    let field = sparse_field(&mut rng, n, 0.2);
+    let mut b = vec![0.0; n];
+    nl.average(&field, &mut out).unwrap();
+    assert!(nl.weights.get().is_some());
+    NonlocalAverager::average_brute_force(&params, &pos, &vol, &grp, &field, &mut b).unwrap();
+    assert_close(&out, &b, &field, "after zero field");
+}
