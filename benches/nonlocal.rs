@@ -1,7 +1,16 @@
 //! Criterion benchmark of the nonlocal averaging operator (DESIGN §6, [D33]–[D36]; paper
-//! eq. 6): constructor (bins + denominators [D34]), `average` with a sparse (10 % band) and a
-//! dense field, and the O(N²) brute-force reference, at 10k and 50k MPs on a regular
-//! 2×2-Gauss-point lattice with l_s = 3 h (≈ 10³ neighbours within R_c = 3 l_s).
+//! eq. 6) at 10k and 50k MPs on a regular 2×2-Gauss-point lattice with l_s = 3 h (≈ 10³
+//! neighbours within R_c = 3 l_s):
+//!
+//! * `new`: constructor (bins) plus the denominators [D34] (computed at first use), once per
+//!   step;
+//! * `new_cache_sparse` / `new_cache_dense`: constructor plus the weight cache of the field's
+//!   sources (`cache_sources`), i.e. the per-step build cost with caching;
+//! * `average_sparse` / `average_dense`: one `average` with the cache of that field (the
+//!   per-Newton-iteration cost, [D36]), sparse = 10 % band, dense = nonzero everywhere;
+//! * `uncached_sparse` / `uncached_dense`: `average_uncached` (every nonzero source evaluated
+//!   on the fly, the evaluation before caching);
+//! * `brute_force`: the O(N²) reference pass (sparse field).
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use mpm_geo::nonlocal::{NonlocalAverager, NonlocalParameters};
@@ -76,14 +85,40 @@ fn bench_nonlocal(c: &mut Criterion) {
         );
         let mut out = vec![0.0; n];
         group.bench_function(BenchmarkId::new("new", n), |b| {
-            b.iter(|| NonlocalAverager::new(&s.params, black_box(&s.pos), &s.vol, &s.grp).unwrap())
+            b.iter(|| {
+                let nl =
+                    NonlocalAverager::new(&s.params, black_box(&s.pos), &s.vol, &s.grp).unwrap();
+                nl.neighbour_count_stats(); // forces the denominators
+                nl
+            })
         });
-        group.bench_function(BenchmarkId::new("average_sparse", n), |b| {
-            b.iter(|| nl.average(black_box(&s.sparse), &mut out).unwrap())
-        });
-        group.bench_function(BenchmarkId::new("average_dense", n), |b| {
-            b.iter(|| nl.average(black_box(&s.dense), &mut out).unwrap())
-        });
+        for (name, field) in [("sparse", &s.sparse), ("dense", &s.dense)] {
+            group.bench_function(BenchmarkId::new(format!("new_cache_{name}"), n), |b| {
+                b.iter(|| {
+                    let mut nl =
+                        NonlocalAverager::new(&s.params, black_box(&s.pos), &s.vol, &s.grp)
+                            .unwrap();
+                    nl.cache_sources(field).unwrap();
+                    nl
+                })
+            });
+            let mut cached = nl.clone();
+            cached.cache_sources(field).unwrap();
+            let stats = cached.cache_stats();
+            eprintln!(
+                "N = {n}, {name} field: {} cached sources, {} cached pairs ({:.0} MiB)",
+                stats.sources,
+                stats.pairs,
+                stats.pairs as f64 * 12.0 / (1024.0 * 1024.0)
+            );
+            group.bench_function(BenchmarkId::new(format!("average_{name}"), n), |b| {
+                b.iter(|| cached.average(black_box(field), &mut out).unwrap())
+            });
+            drop(cached);
+            group.bench_function(BenchmarkId::new(format!("uncached_{name}"), n), |b| {
+                b.iter(|| nl.average_uncached(black_box(field), &mut out).unwrap())
+            });
+        }
         group.bench_function(BenchmarkId::new("brute_force", n), |b| {
             b.iter(|| {
                 NonlocalAverager::average_brute_force(

@@ -18,6 +18,10 @@ pub struct NonlocalStep {
     tolerance: f64,
     scratch_increment: Vec<f64>,
     scratch_average: Vec<f64>,
+    /// Increments `scratch_average` was computed from (valid if `memo_valid`): the commit
+    /// after convergence repeats the last iteration's increments and reuses its result.
+    memo_increment: Vec<f64>,
+    memo_valid: bool,
 }
 
 impl NonlocalStep {
@@ -57,6 +61,8 @@ impl NonlocalStep {
             tolerance: spec.tolerance,
             scratch_increment: vec![0.0; n],
             scratch_average: vec![0.0; n],
+            memo_increment: vec![0.0; n],
+            memo_valid: false,
         })
     }
 
@@ -66,6 +72,11 @@ impl NonlocalStep {
     }
 
     /// κ̄(n) + Σ_q W_pq Δκ_q for the local increments Δκ = κ(trial) − κ(n) (D35).
+    ///
+    /// In `iteration` mode (D36: one average per Newton iteration, weights fixed within the
+    /// step) the weights of the plastic sources are cached at their first appearance in the
+    /// step and reused by later iterations; a call with the same increments as the previous
+    /// one (the commit after convergence) reuses its result.
     fn averaged(
         &mut self,
         particles: &Particles,
@@ -74,12 +85,28 @@ impl NonlocalStep {
         for (p, inc) in self.scratch_increment.iter_mut().enumerate() {
             *inc = trial_kappa(p) - particles.state[p].plastic_strain_eq;
         }
+        let same = self.memo_valid
+            && self
+                .scratch_increment
+                .iter()
+                .zip(&self.memo_increment)
+                .all(|(a, b)| a.to_bits() == b.to_bits());
+        if same {
+            return Ok(&self.scratch_average);
+        }
+        if self.update == NonlocalUpdate::Iteration {
+            self.averager
+                .cache_sources(&self.scratch_increment)
+                .map_err(|e| e.to_string())?;
+        }
         self.averager
             .average(&self.scratch_increment, &mut self.scratch_average)
             .map_err(|e| e.to_string())?;
         for (avg, start) in self.scratch_average.iter_mut().zip(&self.start) {
             *avg += start;
         }
+        self.memo_increment.copy_from_slice(&self.scratch_increment);
+        self.memo_valid = true;
         Ok(&self.scratch_average)
     }
 

@@ -606,3 +606,297 @@ fn nonlocal_neighbour_count_stats_on_lattice() {
     assert_eq!(min, 10);
     assert!(mean > min as f64 && mean < max as f64);
 }
+
+// ---------------------------------------------------------------------------------------------
+// 7. Cached weights ([D36]: one average per Newton iteration with weights fixed in the step).
+// ---------------------------------------------------------------------------------------------
+
+/// Random cloud of 3 groups plus an isolated MP and a cluster with zero volumes crossing bin
+/// boundaries (the layout of `nonlocal_cell_list_matches_brute_force`).
+fn cache_cloud(rng: &mut Rng, n: usize) -> (Vec<[f64; 2]>, Vec<f64>, Vec<u16>) {
+    let (mut pos, mut vol, mut grp) = random_cloud(rng, n, 6.0, 4.0, 3);
+    pos.push([100.0, -50.0]);
+    vol.push(0.01);
+    grp.push(1);
+    for k in 0..50 {
+        pos.push([2.0 + 1e-3 * k as f64, 2.0 - 1e-3 * k as f64]);
+        vol.push(1e-3 * (k % 3) as f64);
+        grp.push(2);
+    }
+    (pos, vol, grp)
+}
+
+/// A field nonzero on a random fraction `share` of the MPs.
+fn sparse_field(rng: &mut Rng, n: usize, share: f64) -> Vec<f64> {
+    (0..n)
+        .map(|_| {
+            if rng.uniform() < share {
+                rng.range(-1.0, 2.0)
+            } else {
+                0.0
+            }
+        })
+        .collect()
+}
+
+/// `|a − b| ≤ 1e−12 · max|field|` entrywise: cached and uncached (or brute-force) sums hold
+/// the same terms in different orders (cached rows use four interleaved partial sums).
+fn assert_close(a: &[f64], b: &[f64], field: &[f64], what: &str) {
+    let scale = field.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    for (p, (x, y)) in a.iter().zip(b).enumerate() {
+        assert!(
+            (x - y).abs() <= 1e-12 * scale,
+            "{what}, p = {p}: {x} vs {y}"
+        );
+    }
+}
+
+/// Tolerance 1e−12 relative to max|field| (as the cell-list test).
+#[test]
+fn nonlocal_cached_matches_brute_force() {
+    let mut rng = Rng(21);
+    let (pos, vol, grp) = cache_cloud(&mut rng, 3000);
+    let n = pos.len();
+    let sparse = sparse_field(&mut rng, n, 0.2);
+    let dense: Vec<f64> = (0..n).map(|_| rng.range(-1.0, 2.0)).collect();
+    for ls in [0.05, 0.2, 0.7] {
+        for cutoff in [3.0, 1.3] {
+            let params = NonlocalParameters {
+                length_scale: ls,
+                cutoff_factor: cutoff,
+            };
+            for field in [&sparse, &dense] {
+                let mut nl = NonlocalAverager::new(&params, &pos, &vol, &grp).unwrap();
+                let added = nl.cache_sources(field).unwrap();
+                let nonzero = field.iter().filter(|&&v| v != 0.0).count();
+                assert_eq!(added, nonzero);
+                let stats = nl.cache_stats();
+                assert_eq!((stats.sources, stats.blocks), (nonzero, 1));
+                assert!(stats.pairs > 0);
+                let mut a = vec![0.0; n];
+                let mut b = vec![0.0; n];
+                nl.average(field, &mut a).unwrap();
+                NonlocalAverager::average_brute_force(&params, &pos, &vol, &grp, field, &mut b)
+                    .unwrap();
+                assert_close(&a, &b, field, "cached vs brute force");
+                // The isolated MP keeps its own value (W_pp = 1) also through the cache.
+                assert_eq!(a[3000], field[3000]);
+            }
+        }
+    }
+}
+
+/// The source set changes between calls: new sources outside the cache (evaluated on the
+/// fly, or cached as a further block), cached sources dropping out (zero), a set too small to
+/// be worth a block; every result equals the uncached evaluation and brute force to 1e−12
+/// relative to max|field|.
+#[test]
+fn nonlocal_cached_equals_uncached_when_sources_change() {
+    let mut rng = Rng(22);
+    let (pos, vol, grp) = cache_cloud(&mut rng, 4000);
+    let n = pos.len();
+    let params = NonlocalParameters::new(0.2);
+    let mut nl = NonlocalAverager::new(&params, &pos, &vol, &grp).unwrap();
+    let first = sparse_field(&mut rng, n, 0.15);
+    nl.cache_sources(&first).unwrap();
+    let cached_sources = nl.cache_stats().sources;
+    // Half of the cached sources drop out, new sources appear elsewhere.
+    let second: Vec<f64> = (0..n)
+        .map(|i| {
+            if first[i] != 0.0 {
+                if rng.uniform() < 0.5 {
+                    0.0
+                } else {
+                    first[i] * 1.5
+                }
+            } else if rng.uniform() < 0.1 {
+                rng.range(0.0, 1.0)
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let check = |nl: &NonlocalAverager, field: &[f64], what: &str| {
+        let mut a = vec![0.0; n];
+        let mut u = vec![0.0; n];
+        let mut b = vec![0.0; n];
+        nl.average(field, &mut a).unwrap();
+        nl.average_uncached(field, &mut u).unwrap();
+        NonlocalAverager::average_brute_force(&params, &pos, &vol, &grp, field, &mut b).unwrap();
+        assert_close(&a, &u, field, what);
+        assert_close(&a, &b, field, what);
+    };
+    check(&nl, &first, "first field");
+    check(&nl, &second, "second field, new sources on the fly");
+    // Cache the new sources as a second block.
+    let added = nl.cache_sources(&second).unwrap();
+    let new_sources = (0..n)
+        .filter(|&i| second[i] != 0.0 && first[i] == 0.0)
+        .count();
+    assert_eq!(added, new_sources);
+    assert_eq!(nl.cache_stats().blocks, 2);
+    assert_eq!(nl.cache_stats().sources, cached_sources + new_sources);
+    check(&nl, &second, "second field, two blocks");
+    // Three new sources only: below the block threshold, evaluated on the fly.
+    let mut third = second.clone();
+    let mut extra = 0;
+    for i in 0..n {
+        if first[i] == 0.0 && second[i] == 0.0 && extra < 3 {
+            third[i] = 0.7;
+            extra += 1;
+        }
+    }
+    assert_eq!(nl.cache_sources(&third).unwrap(), 0);
+    assert_eq!(nl.cache_stats().blocks, 2);
+    check(&nl, &third, "third field, small set on the fly");
+    // All-zero field: zero output except isolated MPs (their own value, 0).
+    check(&nl, &vec![0.0; n], "zero field");
+    // Clearing the cache falls back to the uncached path.
+    nl.clear_cache();
+    assert_eq!(nl.cache_stats().pairs, 0);
+    check(&nl, &third, "after clear_cache");
+}
+
+/// Budget smaller than the candidates' pairs: only a part is cached (in key order), the rest
+/// is evaluated on the fly; the result is unchanged (1e−12 relative to max|field|). A zero
+/// budget caches nothing.
+#[test]
+fn nonlocal_cache_budget_exceeded_still_correct() {
+    let mut rng = Rng(23);
+    let (pos, vol, grp) = cache_cloud(&mut rng, 3000);
+    let n = pos.len();
+    let params = NonlocalParameters::new(0.2);
+    let field = sparse_field(&mut rng, n, 0.3);
+    let nonzero = field.iter().filter(|&&v| v != 0.0).count();
+    let mut full = NonlocalAverager::new(&params, &pos, &vol, &grp).unwrap();
+    full.cache_sources(&field).unwrap();
+    let all_pairs = full.cache_stats().pairs;
+    assert_eq!(full.cache_stats().budget, DEFAULT_PAIR_BUDGET);
+
+    let mut nl = NonlocalAverager::new(&params, &pos, &vol, &grp).unwrap();
+    nl.set_pair_budget(all_pairs / 3);
+    let added = nl.cache_sources(&field).unwrap();
+    let stats = nl.cache_stats();
+    assert!(added > 0 && added < nonzero, "added {added} of {nonzero}");
+    assert!(stats.pairs <= all_pairs / 3 && stats.pairs > 0);
+    let mut a = vec![0.0; n];
+    let mut b = vec![0.0; n];
+    nl.average(&field, &mut a).unwrap();
+    NonlocalAverager::average_brute_force(&params, &pos, &vol, &grp, &field, &mut b).unwrap();
+    assert_close(&a, &b, &field, "budget exceeded");
+    // The budget is used up: nothing more is cached.
+    let more: Vec<f64> = field
+        .iter()
+        .map(|&v| if v == 0.0 { 0.5 } else { v })
+        .collect();
+    let before = nl.cache_stats().pairs;
+    nl.cache_sources(&more).unwrap();
+    assert!(nl.cache_stats().pairs <= all_pairs / 3 && nl.cache_stats().pairs >= before);
+    nl.average(&more, &mut a).unwrap();
+    NonlocalAverager::average_brute_force(&params, &pos, &vol, &grp, &more, &mut b).unwrap();
+    assert_close(&a, &b, &more, "budget exceeded, second set");
+
+    let mut none = NonlocalAverager::new(&params, &pos, &vol, &grp).unwrap();
+    none.set_pair_budget(0);
+    assert_eq!(none.cache_sources(&field).unwrap(), 0);
+    assert_eq!(none.cache_stats().pairs, 0);
+    none.average(&field, &mut a).unwrap();
+    NonlocalAverager::average_brute_force(&params, &pos, &vol, &grp, &field, &mut b).unwrap();
+    assert_close(&a, &b, &field, "zero budget");
+}
+
+/// Bit-identical with 1 and 2 threads, cache built and applied inside each pool; also the
+/// uncached dense path (symmetric tile pass).
+#[test]
+fn nonlocal_cached_deterministic_across_thread_counts() {
+    let mut rng = Rng(24);
+    let (pos, vol, grp) = random_cloud(&mut rng, 20_000, 10.0, 10.0, 2);
+    let band: Vec<f64> = pos
+        .iter()
+        .map(|p| {
+            if (p[0] - p[1]).abs() < 1.0 {
+                rng.range(0.0, 1e-3)
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    // Second iterate: the band widens (new sources on the fly) and a part drops out.
+    let wider: Vec<f64> = pos
+        .iter()
+        .zip(&band)
+        .map(|(p, &b)| {
+            let d = (p[0] - p[1]).abs();
+            if d < 0.3 {
+                0.0
+            } else if d < 1.3 {
+                b + 2e-4
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let dense: Vec<f64> = pos.iter().map(|p| 1.0 + 0.1 * p[0] - 0.05 * p[1]).collect();
+    let params = NonlocalParameters::new(0.15);
+    let run = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            let mut nl = NonlocalAverager::new(&params, &pos, &vol, &grp).unwrap();
+            nl.cache_sources(&band).unwrap();
+            let mut o1 = vec![0.0; pos.len()];
+            nl.average(&band, &mut o1).unwrap();
+            let mut o2 = vec![0.0; pos.len()];
+            nl.average(&wider, &mut o2).unwrap();
+            // Dense field without cache: the symmetric tile pass.
+            let mut o3 = vec![0.0; pos.len()];
+            nl.average_uncached(&dense, &mut o3).unwrap();
+            (o1, o2, o3, nl.cache_stats())
+        })
+    };
+    let (a1, a2, a3, s1) = run(1);
+    let (b1, b2, b3, s2) = run(2);
+    let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    assert_eq!(bits(&a1), bits(&b1));
+    assert_eq!(bits(&a2), bits(&b2));
+    assert_eq!(bits(&a3), bits(&b3));
+    assert_eq!(s1, s2);
+    assert!(a2.iter().any(|&v| v != 0.0));
+}
+
+#[test]
+fn nonlocal_cache_sources_validates_length() {
+    let pos = [[0.0, 0.0], [1.0, 0.0]];
+    let mut nl =
+        NonlocalAverager::new(&NonlocalParameters::new(1.0), &pos, &[1.0, 1.0], &[0, 0]).unwrap();
+    assert!(matches!(
+        nl.cache_sources(&[1.0]),
+        Err(NonlocalError::FieldLengthMismatch { .. })
+    ));
+    let mut empty = NonlocalAverager::new(&NonlocalParameters::new(1.0), &[], &[], &[]).unwrap();
+    assert_eq!(empty.cache_sources(&[]).unwrap(), 0);
+}
+
+/// An all-zero field (Δκ of an elastic step) averages to zero without computing the
+/// denominators; they are computed at the first nonzero field.
+#[test]
+fn nonlocal_zero_field_needs_no_denominators() {
+    let mut rng = Rng(25);
+    let (pos, vol, grp) = cache_cloud(&mut rng, 500);
+    let n = pos.len();
+    let params = NonlocalParameters::new(0.3);
+    let mut nl = NonlocalAverager::new(&params, &pos, &vol, &grp).unwrap();
+    let mut out = vec![1.0; n];
+    assert_eq!(nl.cache_sources(&vec![0.0; n]).unwrap(), 0);
+    nl.average(&vec![0.0; n], &mut out).unwrap();
+    assert!(out.iter().all(|&o| o == 0.0));
+    assert!(nl.weights.get().is_none());
+    let field = sparse_field(&mut rng, n, 0.2);
+    let mut b = vec![0.0; n];
+    nl.average(&field, &mut out).unwrap();
+    assert!(nl.weights.get().is_some());
+    NonlocalAverager::average_brute_force(&params, &pos, &vol, &grp, &field, &mut b).unwrap();
+    assert_close(&out, &b, &field, "after zero field");
+}
