@@ -1,9 +1,11 @@
 //! Double mapping of stresses (DESIGN §7, paper §2.1: González Acosta et al.
 //! 2020): the converged stress increment of a step is mapped mass-weighted to
-//! the nodes and interpolated back, which removes the cell-crossing stress
-//! oscillations of the MPM. Applied once per converged step, after the
-//! constitutive update and before the points move; state variables (κ, κ̄)
-//! are not smoothed.
+//! the nodes and interpolated back, which reduces the cell-crossing stress
+//! oscillations of the MPM (on `validation/elastic/soft_column.toml` it halves
+//! their RMS). Applied once per converged step, after the constitutive update
+//! and before the points move; state variables (κ, κ̄) are not smoothed.
+//! The smoothed state is no longer in equilibrium; [`restore_internal_forces`]
+//! (optional) gives the internal forces back.
 
 use std::sync::Arc;
 
@@ -158,8 +160,8 @@ pub fn double_map(
 const EQUILIBRIUM_REGULARISATION: f64 = 1e-10;
 
 /// Restore the internal forces of the unsmoothed stresses after smoothing, with
-/// the smallest change of the smoothed field (a choice beyond DESIGN §7, see
-/// the module note in `docs/scene.md`).
+/// the smallest change of the smoothed field (an option beyond DESIGN §7,
+/// `[smoothing] restore_forces`; measured effects in `docs/scene.md`).
 ///
 /// The internal force at the free dofs is f = G σ with G σ = Σ_p V_p B_pᵀ σ_p
 /// (DESIGN D11). Smoothing σ → σ̂ changes f, so the converged step would no

@@ -44,7 +44,6 @@ pub(crate) enum StepFailure {
 /// A line-search outcome: increment, its stresses and residual, step length α.
 type LineSearchResult = (Vec<[f64; 2]>, TrialStresses, Residual, f64);
 
-/// Start-of-step nodal quantities of a (sub-)step.
 /// Newmark parameters (paper eq. 2 uses γ = ½, β = ¼).
 pub(crate) struct Newmark {
     /// γ: weight of a_{n+1} in the velocity update.
@@ -53,6 +52,7 @@ pub(crate) struct Newmark {
     pub beta: f64,
 }
 
+/// Start-of-step nodal quantities of a (sub-)step.
 struct StepGrid {
     shapes: Vec<ShapeAt>,
     bins: ParticleBins,
