@@ -16,7 +16,8 @@ use crate::transfer::{self, ParticleBins};
 
 impl Simulation {
     /// Stable time step Δt = α_CFL · min_p h / (c_p + |v_p|) (DESIGN D20), and the
-    /// limit at α = 1. With driven points also Δt ≤ α·2·sqrt(m_i/k_i) at their nodes.
+    /// limit at α = 1. At nodes tied to driven points the penalty limit
+    /// 2·sqrt(m_i/k_i) combines with it as 1/Δt² = 1/Δt_wave² + 1/Δt_pen².
     fn explicit_time_step(
         &self,
         nodal_mass: &[f64],
@@ -40,12 +41,20 @@ impl Simulation {
                     spring[s.nodes[a] as usize] += self.driven.stiffness[k] * s.n[a];
                 }
             }
+            // At a node tied by springs the material and spring frequencies add,
+            // ω² ≤ ω_wave² + k_i/m_i (Gershgorin on M⁻¹(K + K_pen)), so the two
+            // limits combine as 1/Δt² = 1/Δt_wave² + 1/Δt_pen².
+            let wave_limit = limit;
             for (node, &k) in spring.iter().enumerate() {
                 if k > 0.0 && nodal_mass[node] > 0.0 {
                     let penalty_limit = 2.0 * (nodal_mass[node] / k).sqrt();
-                    if penalty_limit < limit {
-                        limit = penalty_limit;
-                        reason = "penalty springs of driven points, DESIGN §4".into();
+                    let combined = 1.0
+                        / (1.0 / (wave_limit * wave_limit) + 1.0 / (penalty_limit * penalty_limit))
+                            .sqrt();
+                    if combined < limit {
+                        limit = combined;
+                        reason =
+                            "wave speed and penalty springs of driven points, DESIGN §4".into();
                     }
                 }
             }
