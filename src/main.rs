@@ -135,13 +135,14 @@ fn main() -> ExitCode {
                     let sim = &outcome.simulation;
                     eprintln!("{}", sim.profile.table(outcome.wall_seconds));
                     eprintln!(
-                        "steps {}  time {:.6e} s  Newton iterations {}  factorisations: Cholesky {} LU {}  halvings {}",
+                        "steps {}  time {:.6e} s  Newton iterations {}  factorisations: Cholesky {} LU {}  halvings {}  stagnated steps {}",
                         sim.step,
                         sim.time,
                         sim.solver_usage.newton_iterations,
                         sim.solver_usage.cholesky,
                         sim.solver_usage.lu,
-                        sim.solver_usage.halvings
+                        sim.solver_usage.halvings,
+                        sim.solver_usage.stagnated_steps
                     );
                     match outcome.error {
                         Some(e) => fail(

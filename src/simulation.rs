@@ -67,6 +67,9 @@ pub struct SolverUsage {
     pub newton_iterations: usize,
     /// Step halvings.
     pub halvings: usize,
+    /// Steps accepted on the force criterion alone because the residual had
+    /// stagnated (the energy criterion of D18 cannot be met by iterating).
+    pub stagnated_steps: usize,
 }
 
 /// A run in progress.
