@@ -58,6 +58,9 @@ pub struct CampaignRun {
     pub wall_seconds: f64,
     /// Per-stage profile table.
     pub profile: String,
+    /// 1 for the scene as written; K for its time-step refinement (K times the
+    /// steps, Δt / K), run with `--step-refinement K`.
+    pub step_factor: usize,
 }
 
 fn scenes_in(dir: &Path) -> Result<Vec<PathBuf>, CampaignError> {
@@ -117,12 +120,16 @@ fn last_value(path: &Path, name: &str) -> Option<f64> {
 
 /// Run every scene of `dir` (validated first, all of them, before anything
 /// runs), `jobs` at a time, into `out/<scene>/`, then write the combined
-/// outputs. Returns the runs in scene order.
+/// outputs. With `step_refinement = Some(K)` every scene is also run with K
+/// times the steps at Δt / K (into `out/<scene>_dtK/`) and the time-step
+/// discrepancy of each curve is reported (`step_convergence.csv`, report
+/// section). Returns the runs in scene order, refinements after the scenes.
 pub fn run_campaign(
     dir: &Path,
     out: &Path,
     jobs: usize,
     overrides: &[String],
+    step_refinement: Option<usize>,
 ) -> Result<Vec<CampaignRun>, CampaignError> {
     let paths = scenes_in(dir)?;
     let scenes: Vec<(String, Scene)> = paths
@@ -137,16 +144,28 @@ pub fn run_campaign(
                 .map_err(|e| CampaignError::Scene(e.to_string()))
         })
         .collect::<Result<_, _>>()?;
-    let queue = Mutex::new(scenes.into_iter().enumerate().collect::<Vec<_>>());
+    let mut variants: Vec<(String, Scene, usize)> = Vec::new();
+    if let Some(k) = step_refinement {
+        for (name, scene) in &scenes {
+            variants.push((format!("{name}_dt{k}"), refine_steps(name, scene, k)?, k));
+        }
+    }
+    let all: Vec<(String, Scene, usize)> = scenes
+        .into_iter()
+        .map(|(name, scene)| (name, scene, 1))
+        .chain(variants)
+        .collect();
+    // popped from the back: queue the longest runs (finest meshes, refinements) first
+    let queue = Mutex::new(all.into_iter().enumerate().collect::<Vec<_>>());
     let results = Mutex::new(Vec::new());
     std::thread::scope(|scope| {
         for _ in 0..jobs.max(1) {
             scope.spawn(|| loop {
                 let next = queue.lock().map(|mut q| q.pop()).unwrap_or(None);
-                let Some((index, (name, scene))) = next else {
+                let Some((index, (name, scene, factor))) = next else {
                     break;
                 };
-                let run = run_one(&name, scene, &out.join(&name));
+                let run = run_one(&name, scene, &out.join(&name), factor);
                 eprintln!(
                     "campaign: {name} finished in {:.1} s{}",
                     run.wall_seconds,
@@ -164,11 +183,146 @@ pub fn run_campaign(
     let mut runs: Vec<(usize, CampaignRun)> = results.into_inner().unwrap_or_default();
     runs.sort_by_key(|(i, _)| *i);
     let runs: Vec<CampaignRun> = runs.into_iter().map(|(_, r)| r).collect();
-    write_outputs(out, &runs)?;
+    let scenes_as_written: Vec<CampaignRun> = runs
+        .iter()
+        .filter(|r| r.step_factor == 1)
+        .cloned()
+        .collect();
+    write_outputs(out, &scenes_as_written)?;
+    if step_refinement.is_some() {
+        write_step_convergence(out, &runs)?;
+    }
     Ok(runs)
 }
 
-fn run_one(name: &str, scene: Scene, out: &Path) -> CampaignRun {
+/// Time-step convergence of one scene: its curve against the curve of its
+/// refinement (K times the steps), the more accurate one taken as reference.
+#[derive(Clone, Debug)]
+pub struct StepConvergence {
+    /// Scene name.
+    pub name: String,
+    /// K.
+    pub factor: usize,
+    /// Post-peak discrepancy \[D42\] of the scene's curve against the refined one.
+    pub discrepancy: Option<f64>,
+    /// Relative L2 discrepancy over the whole curve, δ from 0 to the end (the
+    /// D42 formula on [0, δ_end]).
+    pub whole_curve_discrepancy: Option<f64>,
+    /// Peak spread (M2) against the refined curve.
+    pub peak_spread: Option<f64>,
+    /// Load at the last step: as written, refined.
+    pub final_loads: (f64, f64),
+    /// Wall times, s: as written, refined.
+    pub wall_seconds: (f64, f64),
+}
+
+/// Pair every refined run with its scene and compare their curves.
+pub fn step_convergence(runs: &[CampaignRun]) -> Vec<StepConvergence> {
+    runs.iter()
+        .filter(|r| r.step_factor > 1)
+        .filter_map(|refined| {
+            let suffix = format!("_dt{}", refined.step_factor);
+            let name = refined.name.strip_suffix(&suffix)?;
+            let base = runs.iter().find(|r| r.step_factor == 1 && r.name == name)?;
+            let end = base
+                .curve
+                .last()
+                .map(|c| c.0)
+                .unwrap_or(0.0)
+                .min(refined.curve.last().map(|c| c.0).unwrap_or(0.0));
+            Some(StepConvergence {
+                name: name.to_string(),
+                factor: refined.step_factor,
+                discrepancy: metrics::post_peak_discrepancy(&base.curve, &refined.curve, end).ok(),
+                whole_curve_discrepancy: metrics::curve_discrepancy(
+                    &base.curve,
+                    &refined.curve,
+                    0.0,
+                    end,
+                )
+                .ok(),
+                peak_spread: metrics::peak_spread(&base.curve, &refined.curve).ok(),
+                final_loads: (
+                    base.curve.last().map(|c| c.1).unwrap_or(f64::NAN),
+                    refined.curve.last().map(|c| c.1).unwrap_or(f64::NAN),
+                ),
+                wall_seconds: (base.wall_seconds, refined.wall_seconds),
+            })
+        })
+        .collect()
+}
+
+/// `step_convergence.csv` and a section appended to `report.md`.
+fn write_step_convergence(out: &Path, runs: &[CampaignRun]) -> Result<(), CampaignError> {
+    let io = |p: &Path, e: &dyn std::fmt::Display| {
+        CampaignError::Output(p.display().to_string(), e.to_string())
+    };
+    let rows = step_convergence(runs);
+    let mut csv = String::from(
+        "run,step_factor,M1_step_discrepancy,whole_curve_step_discrepancy,M2_step_peak_spread,final_load,final_load_refined,wall_seconds,wall_seconds_refined\n",
+    );
+    let mut md = String::from(
+        "\n## Time-step convergence\n\nEach scene against the same scene with K times the steps at Δt / K (reference: the refined run). M1 and M2 as above.\n\n| run | K | M1 (step) | whole curve | M2 (step) | F_end | F_end (refined) | wall (s) | wall refined (s) |\n|---|---|---|---|---|---|---|---|---|\n",
+    );
+    for r in &rows {
+        let _ = writeln!(
+            csv,
+            "{},{},{},{},{},{:e},{:e},{:.2},{:.2}",
+            r.name,
+            r.factor,
+            fmt_opt(r.discrepancy, 1.0, 5),
+            fmt_sci(r.whole_curve_discrepancy),
+            fmt_opt(r.peak_spread, 1.0, 5),
+            r.final_loads.0,
+            r.final_loads.1,
+            r.wall_seconds.0,
+            r.wall_seconds.1
+        );
+        let _ = writeln!(
+            md,
+            "| {} | {} | {} | {} | {} | {:.3} | {:.3} | {:.1} | {:.1} |",
+            r.name,
+            r.factor,
+            fmt_opt(r.discrepancy, 1.0, 4),
+            fmt_sci(r.whole_curve_discrepancy),
+            fmt_opt(r.peak_spread, 1.0, 4),
+            r.final_loads.0,
+            r.final_loads.1,
+            r.wall_seconds.0,
+            r.wall_seconds.1
+        );
+    }
+    let path = out.join("step_convergence.csv");
+    std::fs::write(&path, csv).map_err(|e| io(&path, &e))?;
+    let report = out.join("report.md");
+    let mut text = std::fs::read_to_string(&report).map_err(|e| io(&report, &e))?;
+    text.push_str(&md);
+    std::fs::write(&report, text).map_err(|e| io(&report, &e))?;
+    Ok(())
+}
+
+/// The scene with K times the steps at Δt / K (loads are functions of time, so
+/// the loading path is the same); snapshot steps are scaled too.
+fn refine_steps(name: &str, scene: &Scene, k: usize) -> Result<Scene, CampaignError> {
+    if k < 2 {
+        return Err(CampaignError::Scene(format!(
+            "--step-refinement must be at least 2 (got {k})"
+        )));
+    }
+    let mut refined = scene.clone();
+    let analysis = &mut refined.scene;
+    let Some(steps) = analysis.steps else {
+        return Err(CampaignError::Scene(format!(
+            "{name}: --step-refinement needs implicit scenes with `scene.steps` (explicit runs choose their own step)"
+        )));
+    };
+    analysis.steps = Some(steps * k);
+    analysis.dt = Some(analysis.dt.unwrap_or(1.0) / k as f64);
+    refined.output.snapshots = scene.output.snapshots.iter().map(|s| s * k).collect();
+    Ok(refined)
+}
+
+fn run_one(name: &str, scene: Scene, out: &Path, step_factor: usize) -> CampaignRun {
     let cell_size = scene.grid.cell_size;
     let length_scale = scene.nonlocal.as_ref().map(|n| n.length_scale);
     let start = Instant::now();
@@ -184,6 +338,7 @@ fn run_one(name: &str, scene: Scene, out: &Path) -> CampaignRun {
         dissipation: None,
         wall_seconds: 0.0,
         profile: String::new(),
+        step_factor,
     };
     match run_scene(scene, out, false) {
         Err(e) => run.error = Some(e.to_string()),
@@ -299,6 +454,10 @@ fn fitted_slope(curve: &[(f64, f64)], from: f64, to: f64) -> f64 {
     let sxy: f64 = pts.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum();
     let sxx: f64 = pts.iter().map(|p| (p.0 - mx).powi(2)).sum();
     sxy / sxx
+}
+
+fn fmt_sci(v: Option<f64>) -> String {
+    v.map(|x| format!("{x:.3e}")).unwrap_or_else(|| "–".into())
 }
 
 fn fmt_opt(v: Option<f64>, scale: f64, digits: usize) -> String {

@@ -46,6 +46,10 @@ enum Command {
         /// Override a value in every scene (repeatable).
         #[arg(long = "set", value_name = "KEY=VALUE")]
         overrides: Vec<String>,
+        /// Also run every scene with K times the steps at Δt / K and report
+        /// the time-step discrepancy of each curve (step_convergence.csv).
+        #[arg(long, value_name = "K")]
+        step_refinement: Option<usize>,
     },
     /// Homogeneous test on one material point (biaxial, triaxial, simple shear) → CSV.
     Point(mpm_geo::point_driver::PointArgs),
@@ -67,13 +71,14 @@ fn main() -> ExitCode {
             out,
             jobs,
             overrides,
+            step_refinement,
         } => {
             let name = dir
                 .file_name()
                 .map(|s| s.to_string_lossy().into_owned())
                 .unwrap_or_else(|| "campaign".into());
             let out = out.unwrap_or_else(|| PathBuf::from("out").join(format!("campaign-{name}")));
-            match mpm_geo::campaign::run_campaign(&dir, &out, jobs, &overrides) {
+            match mpm_geo::campaign::run_campaign(&dir, &out, jobs, &overrides, step_refinement) {
                 Ok(runs) => {
                     let stopped = runs.iter().filter(|r| r.error.is_some()).count();
                     eprintln!(
