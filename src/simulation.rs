@@ -243,7 +243,35 @@ impl Simulation {
             .iter()
             .map(|m| Monitor::resolve(m, &sim))
             .collect();
+        sim.check_fixed_explicit_step()?;
         Ok(sim)
+    }
+
+    /// A fixed explicit `scene.dt` above the stability limit of the initial
+    /// state (wave speed and driven-point springs, DESIGN D20 and §4) is refused
+    /// before the run; later limit drops are caught during the run.
+    fn check_fixed_explicit_step(&self) -> Result<(), SceneError> {
+        let (AnalysisKind::Explicit, Some(dt)) = (self.analysis(), self.scene.scene.dt) else {
+            return Ok(());
+        };
+        let Ok(shapes) = crate::transfer::shapes_at(&self.grid, &self.particles.position) else {
+            return Ok(()); // points outside the grid are reported by the validation
+        };
+        let bins = crate::transfer::ParticleBins::new(&self.grid, &shapes);
+        let mass = crate::transfer::nodal_mass(&self.grid, &bins, &shapes, &self.particles.mass);
+        let (_, limit, reason) = self.explicit_time_step(&mass, &shapes);
+        if dt > limit {
+            return Err(SceneError::Invalid {
+                path: self.scene.scene.name.clone(),
+                errors: vec![FieldError {
+                    field: "scene.dt".into(),
+                    message: format!(
+                        "{dt} s exceeds the explicit stability limit {limit:.4e} s of the initial state ({reason})"
+                    ),
+                }],
+            });
+        }
+        Ok(())
     }
 
     /// The analysis type.

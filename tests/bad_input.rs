@@ -145,3 +145,33 @@ fn singular_system_stops_the_run_with_a_solver_error() {
     let curve = std::fs::read_to_string(out.join("curve.csv")).unwrap();
     assert_eq!(curve.lines().count(), 2, "header + step 0: {curve}");
 }
+
+/// A fixed explicit step that passes the wave-speed limit but not the limit
+/// with the platen's penalty springs (DESIGN §4) is refused by `check`, naming
+/// `scene.dt` (biaxial h = 1/300 m: wave limit 3.2e-5 s, combined 1.1e-5 s);
+/// 8e-6 s is accepted.
+#[test]
+fn explicit_step_above_the_penalty_limit_is_refused_before_the_run() {
+    let scene = common::validation("biaxial/local_h300.toml");
+    let explicit = [
+        "--set",
+        "scene.analysis=explicit",
+        "--set",
+        "scene.end_time=0.01",
+    ];
+    let mut args = vec!["check", scene.to_str().unwrap()];
+    args.extend_from_slice(&explicit);
+    let mut refused = args.clone();
+    refused.extend_from_slice(&["--set", "scene.dt=1.5e-5"]);
+    let (code, text) = mpm_geo(&refused);
+    assert_ne!(code, 0, "accepted: {text}");
+    assert!(
+        text.contains("scene.dt") && text.contains("penalty springs"),
+        "{text}"
+    );
+    assert!(!text.contains("panicked"), "{text}");
+    let mut accepted = args;
+    accepted.extend_from_slice(&["--set", "scene.dt=8e-6"]);
+    let (code, text) = mpm_geo(&accepted);
+    assert_eq!(code, 0, "{text}");
+}

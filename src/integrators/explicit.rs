@@ -18,7 +18,7 @@ impl Simulation {
     /// Stable time step Δt = α_CFL · min_p h / (c_p + |v_p|) (DESIGN D20), and the
     /// limit at α = 1. At nodes tied to driven points the penalty limit
     /// 2·sqrt(m_i/k_i) combines with it as 1/Δt² = 1/Δt_wave² + 1/Δt_pen².
-    fn explicit_time_step(
+    pub(crate) fn explicit_time_step(
         &self,
         nodal_mass: &[f64],
         shapes: &[crate::grid::ShapeAt],
