@@ -247,9 +247,10 @@ impl Simulation {
         Ok(sim)
     }
 
-    /// A fixed explicit `scene.dt` above the stability limit of the initial
-    /// state (wave speed and driven-point springs, DESIGN D20 and §4) is refused
-    /// before the run; later limit drops are caught during the run.
+    /// A fixed explicit `scene.dt` above the stability limit of the material
+    /// at rest in its initial configuration (wave speed and driven-point
+    /// springs, DESIGN D20 and §4) is refused before the run; the velocity term
+    /// h/(c + |v|) and later drops are checked every step during the run.
     fn check_fixed_explicit_step(&self) -> Result<(), SceneError> {
         let (AnalysisKind::Explicit, Some(dt)) = (self.analysis(), self.scene.scene.dt) else {
             return Ok(());
@@ -259,14 +260,14 @@ impl Simulation {
         };
         let bins = crate::transfer::ParticleBins::new(&self.grid, &shapes);
         let mass = crate::transfer::nodal_mass(&self.grid, &bins, &shapes, &self.particles.mass);
-        let (_, limit, reason) = self.explicit_time_step(&mass, &shapes);
+        let (_, limit, reason) = self.explicit_time_step(&mass, &shapes, false);
         if dt > limit {
             return Err(SceneError::Invalid {
                 path: self.scene.scene.name.clone(),
                 errors: vec![FieldError {
                     field: "scene.dt".into(),
                     message: format!(
-                        "{dt} s exceeds the explicit stability limit {limit:.4e} s of the initial state ({reason})"
+                        "{dt} s exceeds the explicit stability limit {limit:.4e} s of the initial configuration ({reason})"
                     ),
                 }],
             });

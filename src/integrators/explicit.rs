@@ -18,10 +18,13 @@ impl Simulation {
     /// Stable time step Δt = α_CFL · min_p h / (c_p + |v_p|) (DESIGN D20), and the
     /// limit at α = 1. At nodes tied to driven points the penalty limit
     /// 2·sqrt(m_i/k_i) combines with it as 1/Δt² = 1/Δt_wave² + 1/Δt_pen².
+    /// `with_velocity = false` gives the limit of the material at rest (the
+    /// check before the run; the velocity term is checked every step).
     pub(crate) fn explicit_time_step(
         &self,
         nodal_mass: &[f64],
         shapes: &[crate::grid::ShapeAt],
+        with_velocity: bool,
     ) -> (f64, f64, String) {
         let p = &self.particles;
         let h = self.grid.cell_size;
@@ -30,7 +33,11 @@ impl Simulation {
         for i in 0..p.len() {
             let density = p.mass[i] / p.volume[i];
             let c = (self.materials[p.material[i] as usize].p_wave_modulus() / density).sqrt();
-            let speed = (p.velocity[i][0].powi(2) + p.velocity[i][1].powi(2)).sqrt();
+            let speed = if with_velocity {
+                (p.velocity[i][0].powi(2) + p.velocity[i][1].powi(2)).sqrt()
+            } else {
+                0.0
+            };
             limit = limit.min(h / (c + speed));
         }
         if !self.driven.is_empty() {
@@ -128,7 +135,7 @@ impl Simulation {
         });
 
         // Time step, checked every step as the points move.
-        let (cfl_dt, limit, reason) = self.explicit_time_step(&mass, &shapes);
+        let (cfl_dt, limit, reason) = self.explicit_time_step(&mass, &shapes, true);
         let dt = match self.scene.scene.dt {
             Some(fixed) if fixed > limit => {
                 return Err(RunError::UnstableTimeStep {
