@@ -147,7 +147,8 @@ fn implicit_and_explicit_histories_agree() {
 /// frequency ω at step Δt the algorithmic damping ratio is (γ − ½)ωΔt/2 to
 /// leading order, so the energy of the bar's first mode decays as
 /// exp(−(γ − ½) ω² Δt t). At γ = 0.6 over 10 periods that predicts 17.9 %;
-/// the measured decay must match within 10 % of the logarithmic decrement,
+/// the measured decay must match within 2 % of the logarithmic decrement (the
+/// next-order term is O((ωΔt)²) ≈ 1e-3 and the P2G/G2P loss 5e-4 of 0.197),
 /// the energy must never increase, and the period stays within 1 %.
 #[test]
 fn newmark_gamma_above_half_damps_at_the_predicted_rate() {
@@ -174,7 +175,7 @@ fn newmark_gamma_above_half_damps_at_the_predicted_rate() {
     let measured = -(e.last().unwrap() / e[0]).ln();
     println!("γ = {gamma}: log energy decrement {measured:.4} (predicted {predicted:.4})");
     assert!(
-        (measured / predicted - 1.0).abs() <= 0.1,
+        (measured / predicted - 1.0).abs() <= 0.02,
         "decrement {measured} vs {predicted}"
     );
 }

@@ -92,10 +92,14 @@ impl Simulation {
                 shapes,
                 mass: &self.particles.mass,
             };
-            let dofs = DofMap::new(bins, &self.constraints);
-            let equilibrium = self.scene.smoothing.restore_forces.then_some(Equilibrium {
+            let dofs = self
+                .scene
+                .smoothing
+                .restore_forces
+                .then(|| DofMap::new(bins, &self.constraints));
+            let equilibrium = dofs.as_ref().map(|dofs| Equilibrium {
                 volume: &self.particles.volume,
-                dofs: &dofs,
+                dofs,
             });
             double_map(
                 mode,

@@ -414,23 +414,10 @@ fn nonlocal_weight_properties() {
 fn nonlocal_deterministic_across_thread_counts() {
     let mut rng = Rng(11);
     let (pos, vol, grp) = random_cloud(&mut rng, 20_000, 10.0, 10.0, 2);
-    let field: Vec<f64> = pos
-        .iter()
-        .map(|p| {
-            if (p[0] - p[1]).abs() < 1.0 {
-                rng.range(0.0, 1e-3)
-            } else {
-                0.0
-            }
-        })
-        .collect();
+    let field = diagonal_band(&mut rng, &pos);
     let params = NonlocalParameters::new(0.15);
     let run = |threads: usize| {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        pool.install(|| {
+        in_pool(threads, || {
             let nl = NonlocalAverager::new(&params, &pos, &vol, &grp).unwrap();
             let mut out = vec![0.0; pos.len()];
             nl.average(&field, &mut out).unwrap();
@@ -442,7 +429,6 @@ fn nonlocal_deterministic_across_thread_counts() {
     };
     let (d1, o1, b1, s1) = run(1);
     let (d2, o2, b2, s2) = run(2);
-    let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
     assert_eq!(bits(&d1), bits(&d2));
     assert_eq!(bits(&o1), bits(&o2));
     assert_eq!(bits(&b1), bits(&b2));
@@ -811,16 +797,7 @@ fn nonlocal_cache_budget_exceeded_still_correct() {
 fn nonlocal_cached_deterministic_across_thread_counts() {
     let mut rng = Rng(24);
     let (pos, vol, grp) = random_cloud(&mut rng, 20_000, 10.0, 10.0, 2);
-    let band: Vec<f64> = pos
-        .iter()
-        .map(|p| {
-            if (p[0] - p[1]).abs() < 1.0 {
-                rng.range(0.0, 1e-3)
-            } else {
-                0.0
-            }
-        })
-        .collect();
+    let band = diagonal_band(&mut rng, &pos);
     // Second iterate: the band widens (new sources on the fly) and a part drops out.
     let wider: Vec<f64> = pos
         .iter()
@@ -839,11 +816,7 @@ fn nonlocal_cached_deterministic_across_thread_counts() {
     let dense: Vec<f64> = pos.iter().map(|p| 1.0 + 0.1 * p[0] - 0.05 * p[1]).collect();
     let params = NonlocalParameters::new(0.15);
     let run = |threads: usize| {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        pool.install(|| {
+        in_pool(threads, || {
             let mut nl = NonlocalAverager::new(&params, &pos, &vol, &grp).unwrap();
             nl.cache_sources(&band).unwrap();
             let mut o1 = vec![0.0; pos.len()];
@@ -858,7 +831,6 @@ fn nonlocal_cached_deterministic_across_thread_counts() {
     };
     let (a1, a2, a3, s1) = run(1);
     let (b1, b2, b3, s2) = run(2);
-    let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
     assert_eq!(bits(&a1), bits(&b1));
     assert_eq!(bits(&a2), bits(&b2));
     assert_eq!(bits(&a3), bits(&b3));
@@ -899,4 +871,31 @@ fn nonlocal_zero_field_needs_no_denominators() {
     assert!(nl.weights.get().is_some());
     NonlocalAverager::average_brute_force(&params, &pos, &vol, &grp, &field, &mut b).unwrap();
     assert_close(&out, &b, &field, "after zero field");
+}
+
+/// A random field in [0, 1e-3) on the diagonal band |x − y| < 1, zero elsewhere.
+fn diagonal_band(rng: &mut Rng, pos: &[[f64; 2]]) -> Vec<f64> {
+    pos.iter()
+        .map(|p| {
+            if (p[0] - p[1]).abs() < 1.0 {
+                rng.range(0.0, 1e-3)
+            } else {
+                0.0
+            }
+        })
+        .collect()
+}
+
+/// Run `f` in a rayon pool of `threads` threads.
+fn in_pool<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> T {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap()
+        .install(f)
+}
+
+/// Bit patterns, for bit-identity assertions.
+fn bits(v: &[f64]) -> Vec<u64> {
+    v.iter().map(|x| x.to_bits()).collect()
 }
