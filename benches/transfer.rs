@@ -18,11 +18,7 @@ struct Cloud {
 fn cloud(particles: usize) -> Cloud {
     let cells_side = ((particles / 4) as f64).sqrt().ceil() as usize;
     let h = 0.01;
-    let grid = Grid {
-        origin: [0.0, 0.0],
-        cell_size: h,
-        cells: [cells_side + 2, cells_side + 2],
-    };
+    let grid = Grid::bilinear([0.0, 0.0], h, [cells_side + 2, cells_side + 2]);
     let g = 0.5 / 3f64.sqrt();
     let mut position = Vec::with_capacity(particles);
     'outer: for cj in 1..=cells_side {

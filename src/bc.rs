@@ -109,22 +109,29 @@ impl DofMap {
         Self { index, n_free }
     }
 
-    /// The 8 system indices of each active cell's dofs ([`NONE`] where constrained).
-    pub fn element_dofs(&self, grid: &Grid, bins: &ParticleBins) -> Vec<[u32; 8]> {
-        bins.active_cells
-            .iter()
-            .map(|&c| {
-                let (ci, cj) = grid.cell_ij(c as usize);
-                let nodes = grid.cell_nodes(ci, cj);
-                let mut dofs = [NONE; 8];
-                for a in 0..4 {
-                    for k in 0..2 {
-                        dofs[2 * a + k] = self.index[2 * nodes[a] as usize + k];
-                    }
-                }
-                dofs
-            })
-            .collect()
+    /// The system indices of every element's dofs ([`NONE`] where constrained
+    /// or outside the grid), in the order of `transfer::system_blocks`: each
+    /// active cell's node patch (row-major), then each GIMP-reached cell's four
+    /// nodes (row-major).
+    pub fn element_dofs(&self, grid: &Grid, bins: &ParticleBins) -> Vec<Vec<u32>> {
+        let dofs_of = |nodes: &[Option<u32>]| -> Vec<u32> {
+            nodes
+                .iter()
+                .flat_map(|node| {
+                    (0..2).map(move |k| node.map_or(NONE, |n| self.index[2 * n as usize + k]))
+                })
+                .collect()
+        };
+        let patches = bins.active_cells.iter().map(|&c| {
+            let (ci, cj) = grid.cell_ij(c as usize);
+            dofs_of(&grid.patch_nodes(ci, cj))
+        });
+        let reached = bins.reached_cells.iter().map(|&c| {
+            let (ci, cj) = grid.cell_ij(c as usize);
+            let [ll, lr, ur, ul] = grid.cell_nodes(ci, cj);
+            dofs_of(&[Some(ll), Some(lr), Some(ul), Some(ur)])
+        });
+        patches.chain(reached).collect()
     }
 }
 
@@ -245,7 +252,7 @@ impl TractionPoints {
         for (s, shape) in shapes.iter().enumerate() {
             let (n, len) = self.normal_and_length(s);
             let magnitude = self.pressure[s] * len;
-            for a in 0..4 {
+            for a in shape.support() {
                 let node = shape.nodes[a] as usize;
                 force[node][0] -= magnitude * n[0] * shape.n[a];
                 force[node][1] -= magnitude * n[1] * shape.n[a];
@@ -356,7 +363,7 @@ impl DrivenPoints {
             let p = self.particle[k];
             let gap = self.gap(k, particles, &shapes[p], du, t);
             let s = &shapes[p];
-            for a in 0..4 {
+            for a in s.support() {
                 let node = s.nodes[a] as usize;
                 force[node][0] += self.stiffness[k] * s.n[a] * gap[0];
                 force[node][1] += self.stiffness[k] * s.n[a] * gap[1];
@@ -382,16 +389,25 @@ impl DrivenPoints {
         ]
     }
 
-    /// Add K_pen = Σ k_p N_p N_pᵀ ⊗ I₂ (DESIGN D41) into the cell blocks (indexed by cell slot).
-    pub fn add_stiffness(&self, shapes: &[ShapeAt], bins: &ParticleBins, blocks: &mut [[f64; 64]]) {
+    /// Add K_pen = Σ k_p N_p N_pᵀ ⊗ I₂ (DESIGN D41) into the patch blocks of
+    /// the active cells (indexed by cell slot, `dofs` per block row).
+    pub fn add_stiffness(
+        &self,
+        shapes: &[ShapeAt],
+        bins: &ParticleBins,
+        dofs: usize,
+        blocks: &mut [Vec<f64>],
+    ) {
         for k in 0..self.len() {
             let s = &shapes[self.particle[k]];
-            let slot = bins.cell_slot[s.cell as usize] as usize;
-            for a in 0..4 {
-                for b in 0..4 {
+            let block = &mut blocks[bins.cell_slot[s.cell as usize] as usize];
+            for a in s.support() {
+                let row = 2 * s.local[a] as usize;
+                for b in s.support() {
+                    let col = 2 * s.local[b] as usize;
                     let kab = self.stiffness[k] * s.n[a] * s.n[b];
-                    blocks[slot][(2 * a) * 8 + 2 * b] += kab;
-                    blocks[slot][(2 * a + 1) * 8 + 2 * b + 1] += kab;
+                    block[row * dofs + col] += kab;
+                    block[(row + 1) * dofs + col + 1] += kab;
                 }
             }
         }

@@ -1,7 +1,29 @@
 //! The fixed regular background grid (DESIGN §2): square cells of side `h`,
-//! bilinear 4-node cells, node numbering, cell lookup.
+//! node numbering, cell lookup, and the shape functions of a point: bilinear
+//! (DESIGN D9, the paper's) or uGIMP (particle-domain averaged, an option that
+//! removes the cell-crossing error of D9).
 
 use crate::shape;
+
+/// Largest number of grid nodes a point's shape functions reach (3 × 3 for GIMP).
+pub const MAX_SUPPORT: usize = 9;
+
+/// Which shape functions connect points and nodes.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub enum ShapeFunctions {
+    /// Bilinear N_a of the cell that holds the point (DESIGN D9); the support
+    /// is the cell's 4 nodes and ∇N jumps when a point crosses a cell edge.
+    #[default]
+    Bilinear,
+    /// uGIMP (Bardenhagen & Kober 2004): N and ∇N averaged over a square
+    /// particle domain of half-width `half_width` (m), clipped to the grid
+    /// ([`shape::gimp_1d`]). Continuous gradients across cell edges; a point
+    /// within `half_width` of a grid line also reaches the nodes beyond it.
+    Gimp {
+        /// Half-width l_p of the particle domain, m (h/(2·points per cell)).
+        half_width: f64,
+    },
+}
 
 /// A regular grid of `cells[0] × cells[1]` square cells of side `cell_size` (m),
 /// lower-left corner at `origin`. Node `(i, j)` has index `j·(cells[0]+1) + i`;
@@ -14,24 +36,48 @@ pub struct Grid {
     pub cell_size: f64,
     /// Number of cells along x and y.
     pub cells: [usize; 2],
+    /// Shape functions of the material points.
+    pub shape_functions: ShapeFunctions,
 }
 
-/// Where a point sits in the grid: its cell, the cell's four global node
-/// indices (local order of [`shape::NODE_SIGNS`]) and the shape function
-/// values and gradients there.
+/// Where a point sits in the grid: its cell, the nodes its shape functions
+/// reach (the first `count` entries), their places in the cell's node patch
+/// ([`Grid::patch_nodes`]), and the values and gradients there.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct ShapeAt {
-    /// Cell index.
+    /// Index of the cell that holds the point.
     pub cell: u32,
-    /// Global node indices of the cell's corners.
-    pub nodes: [u32; 4],
+    /// Number of nodes in the support.
+    pub count: u8,
+    /// Global node indices.
+    pub nodes: [u32; MAX_SUPPORT],
+    /// Place of each node in the patch of `cell`, row-major (`j·side + i`).
+    pub local: [u8; MAX_SUPPORT],
     /// N_a(x).
-    pub n: [f64; 4],
+    pub n: [f64; MAX_SUPPORT],
     /// ∇N_a(x), 1/m.
-    pub dn: [[f64; 2]; 4],
+    pub dn: [[f64; 2]; MAX_SUPPORT],
+}
+
+impl ShapeAt {
+    /// Indices `0..count` of the support.
+    #[inline]
+    pub fn support(&self) -> std::ops::Range<usize> {
+        0..self.count as usize
+    }
 }
 
 impl Grid {
+    /// A grid with bilinear shape functions.
+    pub fn bilinear(origin: [f64; 2], cell_size: f64, cells: [usize; 2]) -> Self {
+        Self {
+            origin,
+            cell_size,
+            cells,
+            shape_functions: ShapeFunctions::Bilinear,
+        }
+    }
+
     /// Number of grid nodes.
     pub fn node_count(&self) -> usize {
         (self.cells[0] + 1) * (self.cells[1] + 1)
@@ -78,6 +124,45 @@ impl Grid {
         ]
     }
 
+    /// Side of the node patch of a cell: the nodes any point of the cell can
+    /// reach (2 bilinear, 4 GIMP).
+    pub fn patch_side(&self) -> usize {
+        match self.shape_functions {
+            ShapeFunctions::Bilinear => 2,
+            ShapeFunctions::Gimp { .. } => 4,
+        }
+    }
+
+    /// Grid indices of the lower-left node of the patch of cell `(ci, cj)`
+    /// (may lie outside the grid for GIMP boundary cells).
+    pub fn patch_origin(&self, ci: usize, cj: usize) -> (isize, isize) {
+        let offset = (self.patch_side() / 2 - 1) as isize;
+        (ci as isize - offset, cj as isize - offset)
+    }
+
+    /// Global node indices of the patch of cell `(ci, cj)`, row-major, with
+    /// `None` for places outside the grid.
+    pub fn patch_nodes(&self, ci: usize, cj: usize) -> Vec<Option<u32>> {
+        let side = self.patch_side() as isize;
+        let (i0, j0) = self.patch_origin(ci, cj);
+        let (nx, ny) = (self.cells[0] as isize + 1, self.cells[1] as isize + 1);
+        let mut nodes = Vec::with_capacity((side * side) as usize);
+        for j in j0..j0 + side {
+            for i in i0..i0 + side {
+                let inside = (0..nx).contains(&i) && (0..ny).contains(&j);
+                nodes.push(inside.then_some((j * nx + i) as u32));
+            }
+        }
+        nodes
+    }
+
+    /// Place of node `(i, j)` in the patch of cell `(ci, cj)`.
+    fn patch_place(&self, ci: usize, cj: usize, i: usize, j: usize) -> u8 {
+        let (i0, j0) = self.patch_origin(ci, cj);
+        let side = self.patch_side() as isize;
+        ((j as isize - j0) * side + (i as isize - i0)) as u8
+    }
+
     /// Whether `x` lies inside the grid (boundary included).
     pub fn contains(&self, x: [f64; 2]) -> bool {
         let max = self.extent_max();
@@ -101,24 +186,71 @@ impl Grid {
         Some((ci, cj))
     }
 
-    /// Shape functions of the cell `(ci, cj)` evaluated at `x` (DESIGN D9).
+    /// Bilinear shape functions of the cell `(ci, cj)` evaluated at `x`
+    /// (DESIGN D9), whatever the grid's point shape functions (traction
+    /// points use these: they are boundary quadrature points, not volumes).
     pub fn shape_in_cell(&self, ci: usize, cj: usize, x: [f64; 2]) -> ShapeAt {
         let h = self.cell_size;
         let xc = self.origin[0] + (ci as f64 + 0.5) * h;
         let yc = self.origin[1] + (cj as f64 + 0.5) * h;
         let xi = 2.0 * (x[0] - xc) / h;
         let eta = 2.0 * (x[1] - yc) / h;
-        ShapeAt {
+        let n = shape::values(xi, eta);
+        let dn = shape::gradients(xi, eta, h);
+        let nodes = self.cell_nodes(ci, cj);
+        let mut s = ShapeAt {
             cell: (cj * self.cells[0] + ci) as u32,
-            nodes: self.cell_nodes(ci, cj),
-            n: shape::values(xi, eta),
-            dn: shape::gradients(xi, eta, h),
+            count: 4,
+            ..ShapeAt::default()
+        };
+        for (a, sign) in shape::NODE_SIGNS.iter().enumerate() {
+            let (i, j) = (ci + (sign[0] > 0.0) as usize, cj + (sign[1] > 0.0) as usize);
+            s.nodes[a] = nodes[a];
+            s.local[a] = self.patch_place(ci, cj, i, j);
+            s.n[a] = n[a];
+            s.dn[a] = dn[a];
         }
+        s
     }
 
-    /// Shape functions at `x` in the cell that contains it; `None` outside the grid.
+    /// uGIMP shape functions at `x` of the cell `(ci, cj)` that holds it: the
+    /// tensor product of [`shape::gimp_1d`] along x and y.
+    fn gimp_in_cell(&self, ci: usize, cj: usize, x: [f64; 2], half_width: f64) -> ShapeAt {
+        let h = self.cell_size;
+        let along =
+            |d: usize| shape::gimp_1d(self.origin[d], h, self.cells[d] + 1, x[d], half_width);
+        let (gx, gy) = (along(0), along(1));
+        let nx = self.cells[0] + 1;
+        let mut s = ShapeAt {
+            cell: (cj * self.cells[0] + ci) as u32,
+            ..ShapeAt::default()
+        };
+        let mut a = 0;
+        for ky in 0..gy.count {
+            for kx in 0..gx.count {
+                let (i, j) = (gx.node[kx], gy.node[ky]);
+                s.nodes[a] = (j * nx + i) as u32;
+                s.local[a] = self.patch_place(ci, cj, i, j);
+                s.n[a] = gx.weight[kx] * gy.weight[ky];
+                s.dn[a] = [
+                    gx.gradient[kx] * gy.weight[ky],
+                    gx.weight[kx] * gy.gradient[ky],
+                ];
+                a += 1;
+            }
+        }
+        s.count = a as u8;
+        s
+    }
+
+    /// Shape functions of a material point at `x` (the grid's
+    /// [`ShapeFunctions`]); `None` outside the grid.
     pub fn shape_at(&self, x: [f64; 2]) -> Option<ShapeAt> {
-        self.locate(x).map(|(ci, cj)| self.shape_in_cell(ci, cj, x))
+        let (ci, cj) = self.locate(x)?;
+        Some(match self.shape_functions {
+            ShapeFunctions::Bilinear => self.shape_in_cell(ci, cj, x),
+            ShapeFunctions::Gimp { half_width } => self.gimp_in_cell(ci, cj, x, half_width),
+        })
     }
 
     /// Cell `(ci, cj)` from a cell index.
@@ -132,11 +264,7 @@ mod tests {
     use super::*;
 
     fn grid() -> Grid {
-        Grid {
-            origin: [1.0, -2.0],
-            cell_size: 0.5,
-            cells: [4, 3],
-        }
+        Grid::bilinear([1.0, -2.0], 0.5, [4, 3])
     }
 
     /// Interpolating node coordinates reproduces the point (linear completeness).
@@ -146,7 +274,7 @@ mod tests {
         for &x in &[[1.1, -1.9], [2.74, -0.6], [3.0, -0.5], [1.0, -2.0]] {
             let s = g.shape_at(x).expect("inside");
             let mut y = [0.0; 2];
-            for a in 0..4 {
+            for a in s.support() {
                 let xn = g.node_position(s.nodes[a] as usize);
                 y[0] += s.n[a] * xn[0];
                 y[1] += s.n[a] * xn[1];

@@ -209,6 +209,22 @@ pub struct GridSpec {
     /// `gauss` (Gauss–Legendre positions, DESIGN §2) or `uniform` (sub-cell centres).
     #[serde(default)]
     pub point_layout: PointLayout,
+    /// `bilinear` (DESIGN D9, the paper's) or `gimp` (uGIMP: shape functions
+    /// averaged over each point's square domain of side h/points_per_cell;
+    /// needs `point_layout = "uniform"`).
+    #[serde(default)]
+    pub shape_functions: ShapeFunctionChoice,
+}
+
+/// Shape functions of the material points.
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum ShapeFunctionChoice {
+    /// Bilinear shape functions of the holding cell (DESIGN D9).
+    #[default]
+    Bilinear,
+    /// Generalised interpolation material point (uGIMP): no cell-crossing error.
+    Gimp,
 }
 
 fn default_points_per_cell() -> usize {
@@ -986,6 +1002,15 @@ impl Scene {
             "grid.points_per_cell",
             (1..=4).contains(&g.points_per_cell),
             format!("must be 1, 2, 3 or 4 (got {})", g.points_per_cell),
+        );
+        check(
+            e,
+            "grid.point_layout",
+            g.shape_functions == ShapeFunctionChoice::Bilinear
+                || g.point_layout == PointLayout::Uniform,
+            "shape_functions = \"gimp\" needs point_layout = \"uniform\" \
+             (the point domains must tile the cells)"
+                .to_string(),
         );
         if e.len() == before {
             for (c, axis) in ["x", "y"].iter().enumerate() {

@@ -28,6 +28,80 @@ pub fn gradients(xi: f64, eta: f64, h: f64) -> [[f64; 2]; 4] {
     dn
 }
 
+/// uGIMP shape functions along one grid direction (Bardenhagen & Kober 2004):
+/// the particle domain [x_p − l_p, x_p + l_p], clipped to the grid [a, b], and
+/// for each node k whose hat function N_k reaches it with positive length
+///
+///   S_k = (1/(b − a)) ∫_a^b N_k dx,    S'_k = (1/(b − a)) ∫_a^b N_k' dx = (N_k(b) − N_k(a))/(b − a).
+///
+/// Σ S_k = 1, Σ S'_k = 0 and Σ S'_k x_k = 1 hold exactly (the hats sum to 1 on
+/// the grid); Σ S_k x_k = (a + b)/2, which is x_p unless the domain is clipped.
+/// Both are continuous in x_p, so nothing jumps when a point crosses a cell edge.
+/// `origin`, `h`, `nodes`: first node, spacing and node count along the direction.
+pub fn gimp_1d(origin: f64, h: f64, nodes: usize, xp: f64, half_width: f64) -> Gimp1d {
+    let end = origin + (nodes - 1) as f64 * h;
+    let a = (xp - half_width).max(origin);
+    let b = (xp + half_width).min(end);
+    let length = b - a;
+    let first = (((a - origin) / h).floor().max(0.0) as usize).min(nodes - 1);
+    let last = (((b - origin) / h).ceil().max(0.0) as usize).min(nodes - 1);
+    let mut out = Gimp1d::default();
+    for k in first..=last.min(first + 2) {
+        let xk = origin + k as f64 * h;
+        let (sa, sb) = ((a - xk) / h, (b - xk) / h);
+        let (weight, gradient) = if length > 0.0 {
+            (
+                h * (hat_integral(sb) - hat_integral(sa)) / length,
+                (hat(sb) - hat(sa)) / length,
+            )
+        } else {
+            // a point domain (l_p = 0) is the bilinear hat itself
+            let slope = if sa < 0.0 { 1.0 / h } else { -1.0 / h };
+            (hat(sa), if sa.abs() < 1.0 { slope } else { 0.0 })
+        };
+        if weight > 0.0 {
+            out.node[out.count] = k;
+            out.weight[out.count] = weight;
+            out.gradient[out.count] = gradient;
+            out.count += 1;
+        }
+    }
+    out
+}
+
+/// Result of [`gimp_1d`]: the first `count` nodes, weights S_k and gradients S'_k (1/m).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Gimp1d {
+    /// Number of nodes reached (≤ 3 for l_p ≤ h/2).
+    pub count: usize,
+    /// Node indices along the direction.
+    pub node: [usize; 3],
+    /// S_k.
+    pub weight: [f64; 3],
+    /// S'_k, 1/m.
+    pub gradient: [f64; 3],
+}
+
+/// The 1-D hat N(s) = max(0, 1 − |s|) in units of h.
+#[inline]
+fn hat(s: f64) -> f64 {
+    (1.0 - s.abs()).max(0.0)
+}
+
+/// ∫_{−∞}^{s} N(t) dt of the unit hat.
+#[inline]
+fn hat_integral(s: f64) -> f64 {
+    if s <= -1.0 {
+        0.0
+    } else if s <= 0.0 {
+        0.5 * (1.0 + s) * (1.0 + s)
+    } else if s <= 1.0 {
+        1.0 - 0.5 * (1.0 - s) * (1.0 - s)
+    } else {
+        1.0
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -55,5 +129,65 @@ mod tests {
             assert!((jac[0][0] - 1.0).abs() < 1e-14 && (jac[1][1] - 1.0).abs() < 1e-14);
             assert!(jac[0][1].abs() < 1e-14 && jac[1][0].abs() < 1e-14);
         }
+    }
+
+    /// GIMP along one direction: partition of unity, linear completeness of
+    /// the gradient, x_p reproduced when the domain is not clipped, the
+    /// gradient equal to the finite difference of the weights, continuity
+    /// across a grid line, and the bilinear hat recovered for l_p → 0.
+    #[test]
+    fn gimp_1d_completeness_and_continuity() {
+        let (origin, h, nodes, lp) = (-0.3, 0.2, 8, 0.05);
+        for &xp in &[-0.3, -0.27, -0.12, -0.1001, -0.1, 0.0437, 0.97, 1.1] {
+            let g = gimp_1d(origin, h, nodes, xp, lp);
+            let xk = |k: usize| origin + k as f64 * h;
+            let sum: f64 = g.weight[..g.count].iter().sum();
+            let gsum: f64 = g.gradient[..g.count].iter().sum();
+            let gx: f64 = (0..g.count).map(|k| g.gradient[k] * xk(g.node[k])).sum();
+            let x: f64 = (0..g.count).map(|k| g.weight[k] * xk(g.node[k])).sum();
+            assert!((sum - 1.0).abs() < 1e-14 && gsum.abs() < 1e-12, "{xp}");
+            assert!((gx - 1.0).abs() < 1e-12, "{xp}: {gx}");
+            let clipped = xp - lp < origin || xp + lp > origin + 7.0 * h;
+            if !clipped {
+                assert!((x - xp).abs() < 1e-14, "{xp}: {x}");
+            }
+            // central difference of the weights (away from the clipped ends)
+            if !clipped && xp - lp - 1e-6 > origin {
+                let step = 1e-7;
+                let (gp, gm) = (
+                    gimp_1d(origin, h, nodes, xp + step, lp),
+                    gimp_1d(origin, h, nodes, xp - step, lp),
+                );
+                let weight_of = |g: &Gimp1d, node: usize| {
+                    (0..g.count)
+                        .find(|&k| g.node[k] == node)
+                        .map_or(0.0, |k| g.weight[k])
+                };
+                for k in 0..g.count {
+                    let fd = (weight_of(&gp, g.node[k]) - weight_of(&gm, g.node[k])) / (2.0 * step);
+                    assert!(
+                        (fd - g.gradient[k]).abs() < 1e-6,
+                        "{xp}: {fd} vs {}",
+                        g.gradient[k]
+                    );
+                }
+            }
+        }
+        // a point 1e-12 either side of the grid line x = −0.1 has the same weights
+        let (l, r) = (
+            gimp_1d(origin, h, nodes, -0.1 - 1e-12, lp),
+            gimp_1d(origin, h, nodes, -0.1 + 1e-12, lp),
+        );
+        assert_eq!(l.count, 3);
+        for k in 0..3 {
+            assert_eq!(l.node[k], r.node[k]);
+            assert!((l.weight[k] - r.weight[k]).abs() < 1e-10);
+            assert!((l.gradient[k] - r.gradient[k]).abs() < 1e-8);
+        }
+        // l_p = 0 is the bilinear hat: weights 0.7 / 0.3 and gradients ∓1/h
+        let g = gimp_1d(origin, h, nodes, origin + 0.3 * h, 0.0);
+        assert_eq!(g.count, 2);
+        assert!((g.weight[0] - 0.7).abs() < 1e-14 && (g.weight[1] - 0.3).abs() < 1e-14);
+        assert!((g.gradient[0] + 1.0 / h).abs() < 1e-12 && (g.gradient[1] - 1.0 / h).abs() < 1e-12);
     }
 }

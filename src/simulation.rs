@@ -9,13 +9,13 @@ use mpm_solvers::{DirectSolver, SolverPolicy};
 use crate::bc::{Constraints, DrivenPoints, TractionPoints};
 use crate::constitutive::{ConstitutiveModel, LinearElastic, Mat4};
 use crate::error::RunError;
-use crate::grid::Grid;
+use crate::grid::{Grid, ShapeFunctions};
 use crate::monitor::Monitor;
 use crate::particles::Particles;
 use crate::profile::Profile;
 use crate::scene::{
     AnalysisKind, FieldError, LinearSolverChoice, MaterialSpec, PointLayout, Scene, SceneError,
-    VelocityProfile,
+    ShapeFunctionChoice, VelocityProfile,
 };
 use crate::transfer;
 
@@ -110,7 +110,7 @@ pub struct Simulation {
     /// Linear-solver usage counts.
     pub solver_usage: SolverUsage,
     pub(crate) solver: DirectSolver,
-    pub(crate) assembler: Option<(Vec<[u32; 8]>, mpm_solvers::Assembler)>,
+    pub(crate) assembler: Option<(Vec<Vec<u32>>, mpm_solvers::Assembler)>,
     /// ε_bg · K_cell^el (DESIGN D19), added to every active cell's tangent block.
     pub(crate) background_block: [f64; 64],
     /// True when every material has a symmetric tangent (Cholesky allowed).
@@ -153,10 +153,17 @@ impl Simulation {
     /// once points are seeded (a body with no point, a platen touching none) are
     /// reported as field errors.
     pub fn new(scene: Scene) -> Result<Self, SceneError> {
+        let shape_functions = match scene.grid.shape_functions {
+            ShapeFunctionChoice::Bilinear => ShapeFunctions::Bilinear,
+            ShapeFunctionChoice::Gimp => ShapeFunctions::Gimp {
+                half_width: 0.5 * scene.grid.cell_size / scene.grid.points_per_cell as f64,
+            },
+        };
         let grid = Grid {
             origin: scene.grid.origin,
             cell_size: scene.grid.cell_size,
             cells: scene.grid_cells(),
+            shape_functions,
         };
         let material_names: Vec<String> = scene.materials.keys().cloned().collect();
         let mut errors = Vec::new();
@@ -363,8 +370,9 @@ pub fn invert4(m: &Mat4) -> Mat4 {
     out
 }
 
-/// ε_bg times the 2×2-Gauss elastic stiffness of a full cell with the stiffest
-/// material's E and its ν (DESIGN D19).
+/// ε_bg times the 2×2-Gauss bilinear elastic stiffness of a full cell with the
+/// stiffest material's E and its ν (DESIGN D19), over the cell's nodes in
+/// row-major order (see `transfer::system_blocks`).
 fn background_block(scene: &Scene, grid: &Grid) -> [f64; 64] {
     let mut block = [0.0; 64];
     let reference = scene
@@ -376,6 +384,7 @@ fn background_block(scene: &Scene, grid: &Grid) -> [f64; 64] {
     };
     let d = LinearElastic::new(reference.youngs_modulus(), reference.poisson_ratio()).stiffness();
     let h = grid.cell_size;
+    let grid = Grid::bilinear(grid.origin, h, grid.cells);
     let g = 0.5 / 3f64.sqrt();
     for (gx, gy) in [(-g, -g), (g, -g), (g, g), (-g, g)] {
         let x = [
@@ -383,7 +392,7 @@ fn background_block(scene: &Scene, grid: &Grid) -> [f64; 64] {
             grid.origin[1] + (0.5 + gy) * h,
         ];
         let shape = grid.shape_in_cell(0, 0, x);
-        transfer::add_particle_stiffness(&mut block, &shape, 0.25 * h * h, &d);
+        transfer::add_particle_stiffness(&mut block, 8, &shape, 0.25 * h * h, &d);
     }
     block
         .iter_mut()

@@ -15,7 +15,7 @@ use mpm_solvers::{Assembler, DirectSolver, SolverError, SolverOptions, SolverPol
 
 use crate::bc::DofMap;
 use crate::constitutive::{ConstitutiveModel, Mat4, PointState, Voigt};
-use crate::grid::{Grid, ShapeAt};
+use crate::grid::{Grid, ShapeAt, MAX_SUPPORT};
 use crate::transfer::{self, ParticleBins, NONE};
 
 /// What restores equilibrium after smoothing: the point volumes V_p(n) and the
@@ -59,11 +59,11 @@ pub struct MappingFrame<'a> {
 /// v̂_i = Σ_p N_ip m_p v_p / Σ_p N_ip m_p of a point field of Voigt vectors
 /// (zero at inactive nodes).
 pub fn project_to_nodes(frame: &MappingFrame, value: impl Fn(usize) -> Voigt + Sync) -> Vec<Voigt> {
-    let weighted = transfer::scatter::<5, _>(frame.grid, frame.bins, |p| {
+    let weighted = transfer::scatter::<5, _>(frame.grid, frame.bins, frame.shapes, |p| {
         let s = &frame.shapes[p];
         let v = value(p);
-        let mut c = [[0.0; 5]; 4];
-        for a in 0..4 {
+        let mut c = [[0.0; 5]; MAX_SUPPORT];
+        for a in s.support() {
             let w = s.n[a] * frame.mass[p];
             for k in 0..4 {
                 c[a][k] = w * v[k];
@@ -130,7 +130,7 @@ pub fn double_map(
         .map(|p| {
             let s = &frame.shapes[p];
             let mut smoothed = base(p);
-            for a in 0..4 {
+            for a in s.support() {
                 let v = &nodal[s.nodes[a] as usize];
                 for k in 0..4 {
                     smoothed[k] += s.n[a] * v[k];
@@ -206,12 +206,14 @@ pub fn restore_internal_forces(
     ];
     let identities = vec![identity; volume.len()];
     let blocks = transfer::cell_stiffness_blocks(
+        frame.grid,
         frame.bins,
         frame.shapes,
         &volume_squared,
         &identities,
         None,
     );
+    let blocks = transfer::system_blocks(frame.grid, frame.bins, blocks, None);
     let element_dofs = dofs.element_dofs(frame.grid, frame.bins);
     let assembler = Assembler::new(n, &element_dofs)?;
     let mut gram = assembler.assemble(&blocks)?;
@@ -263,11 +265,7 @@ mod tests {
     }
 
     fn cloud() -> Cloud {
-        let grid = Grid {
-            origin: [0.0, 0.0],
-            cell_size: 0.5,
-            cells: [3, 3],
-        };
+        let grid = Grid::bilinear([0.0, 0.0], 0.5, [3, 3]);
         let positions: Vec<[f64; 2]> = (0..36)
             .map(|i| {
                 let (a, b) = ((i % 6) as f64, (i / 6) as f64);
@@ -355,7 +353,7 @@ mod tests {
             .iter()
             .map(|s| {
                 let mut v = [0.0; 4];
-                for a in 0..4 {
+                for a in s.support() {
                     for k in 0..4 {
                         v[k] += s.n[a] * nodal[s.nodes[a] as usize][k];
                     }

@@ -9,7 +9,7 @@
 use rayon::prelude::*;
 
 use crate::constitutive::{Mat4, Voigt};
-use crate::grid::{Grid, ShapeAt};
+use crate::grid::{Grid, ShapeAt, MAX_SUPPORT};
 
 /// Sentinel for "no slot" in index maps.
 pub const NONE: u32 = u32::MAX;
@@ -38,9 +38,13 @@ pub fn shapes_at(grid: &Grid, positions: &[[f64; 2]]) -> Result<Vec<ShapeAt>, Ou
         .collect()
 }
 
-/// Particles binned by cell (stable counting sort), the active cells and the
-/// active nodes (DESIGN §2: a cell is active if it holds ≥ 1 point; a node is
-/// active if it belongs to an active cell).
+/// Largest node patch of a cell (4 × 4 for GIMP).
+pub const MAX_PATCH: usize = 16;
+
+/// Particles binned by cell, the active cells and the active nodes (DESIGN §2:
+/// a cell is active if it holds ≥ 1 point; a node is active if some point's
+/// shape functions reach it: the nodes of the active cells, and for GIMP also
+/// those of the cells that a point's domain overlaps across a cell edge).
 #[derive(Clone, Debug, Default)]
 pub struct ParticleBins {
     /// `order[cell_start[c]..cell_start[c+1]]` are the particles of cell `c`, in index order.
@@ -49,6 +53,9 @@ pub struct ParticleBins {
     pub order: Vec<u32>,
     /// Indices of the active cells, increasing.
     pub active_cells: Vec<u32>,
+    /// Cells that hold no point but that some point's GIMP domain overlaps,
+    /// increasing (always empty for bilinear shape functions).
+    pub reached_cells: Vec<u32>,
     /// For every cell, its slot in `active_cells`, or [`NONE`].
     pub cell_slot: Vec<u32>,
     /// For every grid node, whether it is active.
@@ -74,13 +81,23 @@ impl ParticleBins {
             order[next[c] as usize] = p as u32;
             next[c] += 1;
         }
+        let mut reached = vec![false; n_cells];
+        for s in shapes {
+            mark_cells_reached(grid, s, &mut reached);
+        }
         let mut active_cells = Vec::new();
+        let mut reached_cells = Vec::new();
         let mut cell_slot = vec![NONE; n_cells];
         let mut node_active = vec![false; grid.node_count()];
         for c in 0..n_cells {
-            if cell_start[c + 1] > cell_start[c] {
+            let holds_points = cell_start[c + 1] > cell_start[c];
+            if holds_points {
                 cell_slot[c] = active_cells.len() as u32;
                 active_cells.push(c as u32);
+            } else if reached[c] {
+                reached_cells.push(c as u32);
+            }
+            if holds_points || reached[c] {
                 let (ci, cj) = grid.cell_ij(c);
                 for n in grid.cell_nodes(ci, cj) {
                     node_active[n as usize] = true;
@@ -91,6 +108,7 @@ impl ParticleBins {
             cell_start,
             order,
             active_cells,
+            reached_cells,
             cell_slot,
             node_active,
         }
@@ -102,27 +120,53 @@ impl ParticleBins {
     }
 }
 
+/// Mark the cells spanned by the support of `s` (the cells between its lowest
+/// and highest node indices along each direction).
+fn mark_cells_reached(grid: &Grid, s: &ShapeAt, reached: &mut [bool]) {
+    let (mut lo, mut hi) = ([usize::MAX; 2], [0usize; 2]);
+    for a in s.support() {
+        let (i, j) = grid.node_ij(s.nodes[a] as usize);
+        lo = [lo[0].min(i), lo[1].min(j)];
+        hi = [hi[0].max(i), hi[1].max(j)];
+    }
+    for cj in lo[1]..hi[1] {
+        for ci in lo[0]..hi[0] {
+            reached[cj * grid.cells[0] + ci] = true;
+        }
+    }
+}
+
+/// Contributions of one particle to the nodes of its support, in the order of
+/// [`ShapeAt::nodes`] (the first `count` entries are used).
+pub type Contribution<const K: usize> = [[f64; K]; MAX_SUPPORT];
+
 /// Sum particle contributions into grid nodes: `contribution(p)` returns the
-/// contributions of particle `p` to the four nodes of its cell (local order).
-/// Returns one `[f64; K]` per grid node (zero at inactive nodes). Deterministic.
+/// contributions of particle `p` to the nodes of its support.
+/// Returns one `[f64; K]` per grid node (zero at inactive nodes). Deterministic:
+/// particles are summed per cell in index order into the cell's node patch,
+/// then each node sums the patches that hold it in a fixed cell order.
 pub fn scatter<const K: usize, F>(
     grid: &Grid,
     bins: &ParticleBins,
+    shapes: &[ShapeAt],
     contribution: F,
 ) -> Vec<[f64; K]>
 where
-    F: Fn(usize) -> [[f64; K]; 4] + Sync,
+    F: Fn(usize) -> Contribution<K> + Sync,
 {
-    let cell_sums: Vec<[[f64; K]; 4]> = bins
+    let cell_sums: Vec<[[f64; K]; MAX_PATCH]> = bins
         .active_cells
         .par_iter()
         .map(|&c| {
-            let mut sum = [[0.0; K]; 4];
+            let mut sum = [[0.0; K]; MAX_PATCH];
             for &p in bins.particles_in(c as usize) {
-                let contrib = contribution(p as usize);
-                for a in 0..4 {
+                let p = p as usize;
+                let contrib = contribution(p);
+                let s = &shapes[p];
+                for a in s.support() {
+                    let place = s.local[a] as usize;
                     for k in 0..K {
-                        sum[a][k] += contrib[a][k];
+                        sum[place][k] += contrib[a][k];
                     }
                 }
             }
@@ -132,16 +176,18 @@ where
     gather_cells_to_nodes(grid, bins, &cell_sums)
 }
 
-/// Add per-active-cell nodal contributions into node values, each node
-/// summing its (up to four) cells in the fixed order lower-left, lower-right,
-/// upper-left, upper-right.
+/// Add per-active-cell patch sums into node values, each node summing the
+/// patches that hold it, cells in increasing (row-major) order.
 fn gather_cells_to_nodes<const K: usize>(
     grid: &Grid,
     bins: &ParticleBins,
-    cell_sums: &[[[f64; K]; 4]],
+    cell_sums: &[[[f64; K]; MAX_PATCH]],
 ) -> Vec<[f64; K]> {
     let (ncx, ncy) = (grid.cells[0] as isize, grid.cells[1] as isize);
     let nx = grid.cells[0] + 1;
+    let side = grid.patch_side() as isize;
+    let (offset, _) = grid.patch_origin(0, 0);
+    let offset = -offset;
     (0..grid.node_count())
         .into_par_iter()
         .map(|node| {
@@ -150,15 +196,18 @@ fn gather_cells_to_nodes<const K: usize>(
                 return value;
             }
             let (i, j) = ((node % nx) as isize, (node / nx) as isize);
-            // (cell offset, local index of this node in that cell)
-            for (di, dj, local) in [(-1, -1, 2usize), (0, -1, 3), (-1, 0, 1), (0, 0, 0)] {
-                let (ci, cj) = (i + di, j + dj);
-                if ci < 0 || cj < 0 || ci >= ncx || cj >= ncy {
-                    continue;
-                }
-                let slot = bins.cell_slot[(cj * ncx + ci) as usize];
-                if slot != NONE {
-                    let contrib = &cell_sums[slot as usize][local];
+            // the patch of cell c starts at node c − offset and spans `side` nodes
+            for cj in (j + offset - side + 1)..=(j + offset) {
+                for ci in (i + offset - side + 1)..=(i + offset) {
+                    if ci < 0 || cj < 0 || ci >= ncx || cj >= ncy {
+                        continue;
+                    }
+                    let slot = bins.cell_slot[(cj * ncx + ci) as usize];
+                    if slot == NONE {
+                        continue;
+                    }
+                    let place = ((j - (cj - offset)) * side + (i - (ci - offset))) as usize;
+                    let contrib = &cell_sums[slot as usize][place];
                     for k in 0..K {
                         value[k] += contrib[k];
                     }
@@ -171,10 +220,13 @@ fn gather_cells_to_nodes<const K: usize>(
 
 /// Lumped nodal mass m_i = Σ_p N_ip m_p (DESIGN D10).
 pub fn nodal_mass(grid: &Grid, bins: &ParticleBins, shapes: &[ShapeAt], mass: &[f64]) -> Vec<f64> {
-    scatter::<1, _>(grid, bins, |p| {
+    scatter::<1, _>(grid, bins, shapes, |p| {
         let s = &shapes[p];
-        let m = mass[p];
-        [[s.n[0] * m], [s.n[1] * m], [s.n[2] * m], [s.n[3] * m]]
+        let mut c = [[0.0; 1]; MAX_SUPPORT];
+        for a in s.support() {
+            c[a] = [s.n[a] * mass[p]];
+        }
+        c
     })
     .into_iter()
     .map(|v| v[0])
@@ -190,11 +242,11 @@ pub fn nodal_mass_weighted(
     mass: &[f64],
     field: &[[f64; 2]],
 ) -> Vec<[f64; 2]> {
-    scatter::<2, _>(grid, bins, |p| {
+    scatter::<2, _>(grid, bins, shapes, |p| {
         let s = &shapes[p];
         let (m, q) = (mass[p], field[p]);
-        let mut c = [[0.0; 2]; 4];
-        for a in 0..4 {
+        let mut c = [[0.0; 2]; MAX_SUPPORT];
+        for a in s.support() {
             c[a] = [s.n[a] * m * q[0], s.n[a] * m * q[1]];
         }
         c
@@ -209,15 +261,8 @@ pub fn body_force(
     mass: &[f64],
     b: [f64; 2],
 ) -> Vec<[f64; 2]> {
-    scatter::<2, _>(grid, bins, |p| {
-        let s = &shapes[p];
-        let m = mass[p];
-        let mut c = [[0.0; 2]; 4];
-        for a in 0..4 {
-            c[a] = [s.n[a] * m * b[0], s.n[a] * m * b[1]];
-        }
-        c
-    })
+    let uniform = vec![b; mass.len()];
+    nodal_mass_weighted(grid, bins, shapes, mass, &uniform)
 }
 
 /// Internal force f_i^int = Σ_p V_p B_ipᵀ σ_p (DESIGN D11), kN per metre run.
@@ -228,11 +273,11 @@ pub fn internal_force(
     volume: &[f64],
     stress: &[Voigt],
 ) -> Vec<[f64; 2]> {
-    scatter::<2, _>(grid, bins, |p| {
+    scatter::<2, _>(grid, bins, shapes, |p| {
         let s = &shapes[p];
         let (v, sig) = (volume[p], &stress[p]);
-        let mut c = [[0.0; 2]; 4];
-        for a in 0..4 {
+        let mut c = [[0.0; 2]; MAX_SUPPORT];
+        for a in s.support() {
             let [dx, dy] = s.dn[a];
             c[a] = [
                 v * (dx * sig[0] + dy * sig[3]),
@@ -247,7 +292,7 @@ pub fn internal_force(
 #[inline]
 pub fn interpolate(shape: &ShapeAt, nodal: &[[f64; 2]]) -> [f64; 2] {
     let mut g = [0.0; 2];
-    for a in 0..4 {
+    for a in shape.support() {
         let gi = nodal[shape.nodes[a] as usize];
         g[0] += shape.n[a] * gi[0];
         g[1] += shape.n[a] * gi[1];
@@ -260,7 +305,7 @@ pub fn interpolate(shape: &ShapeAt, nodal: &[[f64; 2]]) -> [f64; 2] {
 #[inline]
 pub fn gradient(shape: &ShapeAt, nodal: &[[f64; 2]]) -> [f64; 4] {
     let mut l = [0.0; 4];
-    for a in 0..4 {
+    for a in shape.support() {
         let gi = nodal[shape.nodes[a] as usize];
         let [dx, dy] = shape.dn[a];
         l[0] += gi[0] * dx;
@@ -290,13 +335,20 @@ pub fn rotate_stress(stress: &Voigt, spin: f64) -> Voigt {
     ]
 }
 
-/// Stiffness contribution V_p B_pᵀ D B_p of one particle to its cell's 8×8 block
-/// (row-major, dof order [u0x, u0y, u1x, …]), accumulated into `block` (DESIGN §3).
+/// Stiffness contribution V_p B_pᵀ D B_p of one particle to its cell's patch
+/// block (row-major, `dofs` = 2 × patch nodes, dof `2·place + direction`),
+/// accumulated into `block` (DESIGN §3).
 #[inline]
-pub fn add_particle_stiffness(block: &mut [f64; 64], shape: &ShapeAt, volume: f64, tangent: &Mat4) {
-    // DB_b (4×2) for every node b
-    let mut db = [[[0.0; 2]; 4]; 4];
-    for b in 0..4 {
+pub fn add_particle_stiffness(
+    block: &mut [f64],
+    dofs: usize,
+    shape: &ShapeAt,
+    volume: f64,
+    tangent: &Mat4,
+) {
+    // DB_b (4×2) for every node b of the support
+    let mut db = [[[0.0; 2]; 4]; MAX_SUPPORT];
+    for b in shape.support() {
         let [dx, dy] = shape.dn[b];
         for r in 0..4 {
             db[b][r] = [
@@ -305,38 +357,47 @@ pub fn add_particle_stiffness(block: &mut [f64; 64], shape: &ShapeAt, volume: f6
             ];
         }
     }
-    for a in 0..4 {
+    for a in shape.support() {
         let [dx, dy] = shape.dn[a];
-        for b in 0..4 {
+        let row = 2 * shape.local[a] as usize;
+        for b in shape.support() {
+            let col = 2 * shape.local[b] as usize;
             for c in 0..2 {
                 // rows of B_aᵀ: x-row = [dx, 0, 0, dy], y-row = [0, dy, 0, dx]
                 let kx = dx * db[b][0][c] + dy * db[b][3][c];
                 let ky = dy * db[b][1][c] + dx * db[b][3][c];
-                block[(2 * a) * 8 + 2 * b + c] += volume * kx;
-                block[(2 * a + 1) * 8 + 2 * b + c] += volume * ky;
+                block[row * dofs + col + c] += volume * kx;
+                block[(row + 1) * dofs + col + c] += volume * ky;
             }
         }
     }
 }
 
-/// Per-active-cell stiffness blocks Σ_{p ∈ cell} V_p B_pᵀ D_p B_p, in the order of
-/// `bins.active_cells` (deterministic: particles summed in index order).
+/// Number of dofs of a cell's patch block (2 × patch nodes).
+pub fn patch_dofs(grid: &Grid) -> usize {
+    2 * grid.patch_side() * grid.patch_side()
+}
+
+/// Per-active-cell patch stiffness blocks Σ_{p ∈ cell} V_p B_pᵀ D_p B_p, in the
+/// order of `bins.active_cells` (deterministic: particles summed in index order).
 pub fn cell_stiffness_blocks(
+    grid: &Grid,
     bins: &ParticleBins,
     shapes: &[ShapeAt],
     volume: &[f64],
     tangent: &[Mat4],
     spin_sensitivity: Option<&[Voigt]>,
-) -> Vec<[f64; 64]> {
+) -> Vec<Vec<f64>> {
+    let dofs = patch_dofs(grid);
     bins.active_cells
         .par_iter()
         .map(|&c| {
-            let mut block = [0.0; 64];
+            let mut block = vec![0.0; dofs * dofs];
             for &p in bins.particles_in(c as usize) {
                 let p = p as usize;
-                add_particle_stiffness(&mut block, &shapes[p], volume[p], &tangent[p]);
+                add_particle_stiffness(&mut block, dofs, &shapes[p], volume[p], &tangent[p]);
                 if let Some(s) = spin_sensitivity {
-                    add_spin_stiffness(&mut block, &shapes[p], volume[p], &s[p]);
+                    add_spin_stiffness(&mut block, dofs, &shapes[p], volume[p], &s[p]);
                 }
             }
             block
@@ -344,31 +405,67 @@ pub fn cell_stiffness_blocks(
         .collect()
 }
 
+/// The elements of the linear system: every active cell's patch block (with
+/// `cell_block` added on the cell's own 2 × 2 nodes), then, for GIMP, one
+/// 8-dof element per reached cell carrying `cell_block` alone. `cell_block`
+/// is an 8×8 block over the cell's nodes in row-major order (lower-left,
+/// lower-right, upper-left, upper-right), e.g. the background stiffness of
+/// DESIGN D19; `None` adds nothing. Matches `DofMap::element_dofs`.
+pub fn system_blocks(
+    grid: &Grid,
+    bins: &ParticleBins,
+    mut patch_blocks: Vec<Vec<f64>>,
+    cell_block: Option<&[f64; 64]>,
+) -> Vec<Vec<f64>> {
+    let dofs = patch_dofs(grid);
+    let side = grid.patch_side();
+    let own = side / 2 - 1;
+    if let Some(extra) = cell_block {
+        let dof_of = |k: usize| {
+            let (node, dir) = (k / 2, k % 2);
+            2 * ((node / 2 + own) * side + node % 2 + own) + dir
+        };
+        for block in patch_blocks.iter_mut() {
+            for r in 0..8 {
+                for c in 0..8 {
+                    block[dof_of(r) * dofs + dof_of(c)] += extra[8 * r + c];
+                }
+            }
+        }
+    }
+    let reached = cell_block.copied().unwrap_or([0.0; 64]).to_vec();
+    patch_blocks.extend(bins.reached_cells.iter().map(|_| reached.clone()));
+    patch_blocks
+}
+
 /// The linearisation of the Jaumann rotation (DESIGN D13) through the stress
 /// update: σ_{n+1} depends on the spin ω = ½ Σ_b (u_bx ∂yN_b − u_by ∂xN_b) via
 /// σ^R, with dσ_{n+1}/dω = D_alg C g, g = [2σxy, −2σxy, 0, σyy − σxx]
 /// (`spin_sensitivity`). Adds V_p B_aᵀ (D_alg C g) w_bᵀ, w_b = ½[∂yN_b, −∂xN_b],
-/// to the block: an unsymmetric term that makes the tangent consistent for
-/// prestressed, rotating material.
+/// to the patch block: an unsymmetric term that makes the tangent consistent
+/// for prestressed, rotating material.
 #[inline]
 pub fn add_spin_stiffness(
-    block: &mut [f64; 64],
+    block: &mut [f64],
+    dofs: usize,
     shape: &ShapeAt,
     volume: f64,
     spin_sensitivity: &Voigt,
 ) {
     let s = spin_sensitivity;
-    for a in 0..4 {
+    for a in shape.support() {
         let [dxa, dya] = shape.dn[a];
         let bx = dxa * s[0] + dya * s[3];
         let by = dya * s[1] + dxa * s[3];
-        for b in 0..4 {
+        let row = 2 * shape.local[a] as usize;
+        for b in shape.support() {
             let [dxb, dyb] = shape.dn[b];
+            let col = 2 * shape.local[b] as usize;
             let (wx, wy) = (0.5 * dyb, -0.5 * dxb);
-            block[(2 * a) * 8 + 2 * b] += volume * bx * wx;
-            block[(2 * a) * 8 + 2 * b + 1] += volume * bx * wy;
-            block[(2 * a + 1) * 8 + 2 * b] += volume * by * wx;
-            block[(2 * a + 1) * 8 + 2 * b + 1] += volume * by * wy;
+            block[row * dofs + col] += volume * bx * wx;
+            block[row * dofs + col + 1] += volume * bx * wy;
+            block[(row + 1) * dofs + col] += volume * by * wx;
+            block[(row + 1) * dofs + col + 1] += volume * by * wy;
         }
     }
 }
@@ -376,14 +473,22 @@ pub fn add_spin_stiffness(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::grid::ShapeFunctions;
 
     type Cloud = (Grid, Vec<[f64; 2]>, Vec<f64>, Vec<[f64; 2]>);
 
-    fn setup() -> Cloud {
+    /// Both kinds of shape functions (GIMP domains of a 2 × 2 point layout).
+    fn kinds() -> [ShapeFunctions; 2] {
+        [
+            ShapeFunctions::Bilinear,
+            ShapeFunctions::Gimp { half_width: 0.0625 },
+        ]
+    }
+
+    fn setup(kind: ShapeFunctions) -> Cloud {
         let grid = Grid {
-            origin: [0.0, 0.0],
-            cell_size: 0.25,
-            cells: [6, 5],
+            shape_functions: kind,
+            ..Grid::bilinear([0.0, 0.0], 0.25, [6, 5])
         };
         // pseudo-random points (deterministic LCG) inside part of the grid
         let mut seed = 12345u64;
@@ -407,7 +512,13 @@ mod tests {
     /// with the same weights (Σ_p m_p Σ_i N_ip v_i = Σ_i m_i v_i).
     #[test]
     fn p2g_conserves_mass_and_momentum() {
-        let (grid, pos, mass, vel) = setup();
+        for kind in kinds() {
+            p2g_conserves_mass_and_momentum_with(kind);
+        }
+    }
+
+    fn p2g_conserves_mass_and_momentum_with(kind: ShapeFunctions) {
+        let (grid, pos, mass, vel) = setup(kind);
         let shapes = shapes_at(&grid, &pos).unwrap();
         let bins = ParticleBins::new(&grid, &shapes);
         let m_nodes = nodal_mass(&grid, &bins, &shapes, &mass);
@@ -451,71 +562,116 @@ mod tests {
     }
 
     /// The internal force of a uniform stress sums to zero over the grid
-    /// (Σ_i ∇N_i = 0) and the particle stiffness block is symmetric for symmetric D.
+    /// (Σ_i ∇N_i = 0) and the patch stiffness blocks are symmetric for symmetric D.
     #[test]
     fn internal_force_and_stiffness_consistency() {
-        let (grid, pos, mass, _) = setup();
-        let shapes = shapes_at(&grid, &pos).unwrap();
-        let bins = ParticleBins::new(&grid, &shapes);
-        let stress = vec![[-3.0, 5.0, 1.0, 2.0]; pos.len()];
-        let f = internal_force(&grid, &bins, &shapes, &mass, &stress);
-        let (fx, fy) = f
-            .iter()
-            .fold((0.0, 0.0), |acc, v| (acc.0 + v[0], acc.1 + v[1]));
-        assert!(fx.abs() < 1e-12 && fy.abs() < 1e-12);
-        let d = crate::constitutive::LinearElastic::new(1000.0, 0.3).stiffness();
-        let blocks = cell_stiffness_blocks(&bins, &shapes, &mass, &vec![d; pos.len()], None);
-        for b in &blocks {
-            for i in 0..8 {
-                for j in 0..8 {
-                    assert!((b[i * 8 + j] - b[j * 8 + i]).abs() < 1e-10 * b[0].abs().max(1.0));
+        for kind in kinds() {
+            let (grid, pos, mass, _) = setup(kind);
+            let shapes = shapes_at(&grid, &pos).unwrap();
+            let bins = ParticleBins::new(&grid, &shapes);
+            let stress = vec![[-3.0, 5.0, 1.0, 2.0]; pos.len()];
+            let f = internal_force(&grid, &bins, &shapes, &mass, &stress);
+            let (fx, fy) = f
+                .iter()
+                .fold((0.0, 0.0), |acc, v| (acc.0 + v[0], acc.1 + v[1]));
+            assert!(fx.abs() < 1e-12 && fy.abs() < 1e-12, "{kind:?}");
+            let d = crate::constitutive::LinearElastic::new(1000.0, 0.3).stiffness();
+            let dofs = patch_dofs(&grid);
+            let blocks =
+                cell_stiffness_blocks(&grid, &bins, &shapes, &mass, &vec![d; pos.len()], None);
+            for b in &blocks {
+                let scale = b.iter().fold(1.0f64, |m, v| m.max(v.abs()));
+                for i in 0..dofs {
+                    for j in 0..dofs {
+                        assert!((b[i * dofs + j] - b[j * dofs + i]).abs() < 1e-12 * scale);
+                    }
                 }
             }
         }
     }
 
-    /// The stiffness block times nodal displacements equals the internal force
-    /// of the stress D·Δε those displacements produce (K u = f_int(u), linear elasticity).
+    /// The patch blocks times arbitrary nodal displacements equal the internal
+    /// force of the stress D·Δε those displacements produce (K u = f_int(u),
+    /// linear elasticity): checks every point's patch places.
     #[test]
-    fn stiffness_block_matches_internal_force_of_linear_field() {
-        let grid = Grid {
-            origin: [0.0, 0.0],
-            cell_size: 1.0,
-            cells: [1, 1],
-        };
-        let pos = vec![[0.2, 0.3], [0.7, 0.1], [0.6, 0.9], [0.1, 0.8], [0.5, 0.5]];
-        let vol = vec![0.2, 0.3, 0.1, 0.25, 0.15];
-        let shapes = shapes_at(&grid, &pos).unwrap();
-        let bins = ParticleBins::new(&grid, &shapes);
-        let d = crate::constitutive::LinearElastic::new(500.0, 0.25).stiffness();
-        let blocks = cell_stiffness_blocks(&bins, &shapes, &vol, &vec![d; pos.len()], None);
-        let u: Vec<[f64; 2]> = vec![[0.01, -0.02], [0.03, 0.005], [-0.01, 0.02], [0.004, 0.001]];
-        let stress: Vec<Voigt> = shapes
-            .iter()
-            .map(|s| {
-                let (eps, _) = strain_and_spin(&gradient(s, &u));
-                crate::constitutive::mat4_mul_vec(&d, &eps)
-            })
-            .collect();
-        let f = internal_force(&grid, &bins, &shapes, &vol, &stress);
-        let nodes = grid.cell_nodes(0, 0);
-        for a in 0..4 {
-            for c in 0..2 {
-                let ku: f64 = (0..4)
-                    .map(|b| {
-                        (0..2)
-                            .map(|e| {
-                                blocks[0][(2 * a + c) * 8 + 2 * b + e] * u[nodes[b] as usize][e]
-                            })
-                            .sum::<f64>()
-                    })
-                    .sum();
-                let fi = f[nodes[a] as usize][c];
-                assert!(
-                    (ku - fi).abs() < 1e-12 * fi.abs().max(1.0),
-                    "node {a} comp {c}: {ku} vs {fi}"
-                );
+    fn stiffness_blocks_match_internal_force() {
+        for kind in kinds() {
+            let (grid, pos, vol, _) = setup(kind);
+            let shapes = shapes_at(&grid, &pos).unwrap();
+            let bins = ParticleBins::new(&grid, &shapes);
+            let d = crate::constitutive::LinearElastic::new(500.0, 0.25).stiffness();
+            let u: Vec<[f64; 2]> = (0..grid.node_count())
+                .map(|k| {
+                    [
+                        (0.37 * k as f64).sin() * 0.01,
+                        (0.91 * k as f64).cos() * 0.02,
+                    ]
+                })
+                .collect();
+            let stress: Vec<Voigt> = shapes
+                .iter()
+                .map(|s| {
+                    let (eps, _) = strain_and_spin(&gradient(s, &u));
+                    crate::constitutive::mat4_mul_vec(&d, &eps)
+                })
+                .collect();
+            let f = internal_force(&grid, &bins, &shapes, &vol, &stress);
+            let blocks =
+                cell_stiffness_blocks(&grid, &bins, &shapes, &vol, &vec![d; pos.len()], None);
+            let dofs = patch_dofs(&grid);
+            let mut ku = vec![[0.0; 2]; grid.node_count()];
+            for (block, &c) in blocks.iter().zip(&bins.active_cells) {
+                let (ci, cj) = grid.cell_ij(c as usize);
+                let nodes = grid.patch_nodes(ci, cj);
+                for (ra, node_a) in nodes.iter().enumerate() {
+                    for (rb, node_b) in nodes.iter().enumerate() {
+                        let (Some(na), Some(nb)) = (node_a, node_b) else {
+                            continue;
+                        };
+                        for r in 0..2 {
+                            for e in 0..2 {
+                                ku[*na as usize][r] +=
+                                    block[(2 * ra + r) * dofs + 2 * rb + e] * u[*nb as usize][e];
+                            }
+                        }
+                    }
+                }
+            }
+            let scale = f
+                .iter()
+                .fold(0.0f64, |m, v| m.max(v[0].abs()).max(v[1].abs()));
+            for (node, (a, b)) in ku.iter().zip(&f).enumerate() {
+                for r in 0..2 {
+                    assert!(
+                        (a[r] - b[r]).abs() < 1e-12 * scale,
+                        "{kind:?} node {node}: {} vs {}",
+                        a[r],
+                        b[r]
+                    );
+                }
             }
         }
+    }
+
+    /// GIMP: the points near cell edges reach the nodes beyond them, whose
+    /// cells become "reached"; every reached node is active, and the support
+    /// spans at most 3 × 3 nodes.
+    #[test]
+    fn gimp_support_activates_reached_cells() {
+        let grid = Grid {
+            shape_functions: ShapeFunctions::Gimp { half_width: 0.125 },
+            ..Grid::bilinear([0.0, 0.0], 0.5, [4, 4])
+        };
+        // one point just left of the line x = 1.0, in cell (1, 1)
+        let shapes = shapes_at(&grid, &[[0.95, 0.75]]).unwrap();
+        let bins = ParticleBins::new(&grid, &shapes);
+        assert_eq!(shapes[0].count, 6);
+        assert_eq!(bins.active_cells, vec![5]);
+        assert_eq!(bins.reached_cells, vec![6]);
+        for a in shapes[0].support() {
+            assert!(bins.node_active[shapes[0].nodes[a] as usize]);
+        }
+        let active = bins.node_active.iter().filter(|&&a| a).count();
+        assert_eq!(active, 6);
     }
 }

@@ -1,5 +1,7 @@
-//! Pattern construction and deterministic scatter of per-cell 8x8 blocks (DESIGN §3
-//! "Linear system": constrained dofs eliminated, blocks summed into CSC).
+//! Pattern construction and deterministic scatter of per-element dense blocks (DESIGN §3
+//! "Linear system": constrained dofs eliminated, blocks summed into CSC). An element is any
+//! dof list: the 8 dofs of a bilinear cell, or the 32 dofs of the 4x4-node patch that the
+//! GIMP supports of a cell's points reach.
 
 use std::sync::Arc;
 
@@ -10,7 +12,7 @@ use crate::{SolverError, NO_DOF};
 const SKIP: u32 = u32::MAX;
 
 /// Sparsity pattern of K (full storage, both triangles, CSC) built once from the element dof
-/// lists, plus, for each element, the 64 value positions its 8x8 block scatters into.
+/// lists, plus, for each element of `d` dofs, the `d²` value positions its block scatters into.
 ///
 /// The pattern always contains the whole diagonal (so that [`Assembler::assemble_with_diagonal`]
 /// can add the Newmark mass term `4M/dt^2` of \[D17\] to any dof). It is fixed while the set of
@@ -20,8 +22,11 @@ const SKIP: u32 = u32::MAX;
 #[derive(Debug, Clone)]
 pub struct Assembler {
     pattern: Arc<Pattern>,
-    /// For element e, `scatter[e][8a + b]` is the value position of (dof_a, dof_b), or `SKIP`.
-    scatter: Vec<[u32; 64]>,
+    /// For element e of `d` dofs, `scatter[start[e] + d·a + b]` is the value position of
+    /// (dof_a, dof_b), or `SKIP`.
+    scatter: Vec<u32>,
+    /// Offsets of the elements' blocks in `scatter` (length elements + 1).
+    start: Vec<usize>,
     /// Value position of K_ii.
     diag_pos: Vec<usize>,
 }
@@ -33,10 +38,11 @@ impl Assembler {
     ///
     /// Errors: [`SolverError::EmptySystem`] if `n_dofs == 0`, [`SolverError::DofOutOfRange`],
     /// [`SolverError::TooManyNonZeros`] above `u32::MAX - 1` non-zeros.
-    pub fn new(n_dofs: usize, element_dofs: &[[u32; 8]]) -> Result<Self, SolverError> {
+    pub fn new<E: AsRef<[u32]>>(n_dofs: usize, element_dofs: &[E]) -> Result<Self, SolverError> {
         if n_dofs == 0 {
             return Err(SolverError::EmptySystem);
         }
+        let element_dofs: Vec<&[u32]> = element_dofs.iter().map(|e| e.as_ref()).collect();
         for (e, dofs) in element_dofs.iter().enumerate() {
             if let Some(&d) = dofs.iter().find(|&&d| d != NO_DOF && d as usize >= n_dofs) {
                 return Err(SolverError::DofOutOfRange {
@@ -51,7 +57,7 @@ impl Assembler {
         for j in 0..n_dofs {
             start[j + 1] = 1;
         }
-        for dofs in element_dofs {
+        for dofs in &element_dofs {
             let n_valid = dofs.iter().filter(|&&d| d != NO_DOF).count();
             for &c in dofs.iter().filter(|&&d| d != NO_DOF) {
                 start[c as usize + 1] += n_valid;
@@ -66,7 +72,7 @@ impl Assembler {
             rows[*f] = j as u32;
             *f += 1;
         }
-        for dofs in element_dofs {
+        for dofs in &element_dofs {
             for &c in dofs.iter().filter(|&&d| d != NO_DOF) {
                 for &r in dofs.iter().filter(|&&d| d != NO_DOF) {
                     let f = &mut fill[c as usize];
@@ -103,26 +109,25 @@ impl Assembler {
                 .position(r as usize, c as usize)
                 .map_or(SKIP, |p| p as u32)
         };
-        let scatter = element_dofs
-            .iter()
-            .map(|dofs| {
-                let mut s = [SKIP; 64];
-                for a in 0..8 {
-                    for b in 0..8 {
-                        if dofs[a] != NO_DOF && dofs[b] != NO_DOF {
-                            s[8 * a + b] = pos(dofs[a], dofs[b]);
-                        }
-                    }
+        let mut start = Vec::with_capacity(element_dofs.len() + 1);
+        start.push(0usize);
+        let mut scatter = Vec::new();
+        for dofs in &element_dofs {
+            for &a in dofs.iter() {
+                for &b in dofs.iter() {
+                    let valid = a != NO_DOF && b != NO_DOF;
+                    scatter.push(if valid { pos(a, b) } else { SKIP });
                 }
-                s
-            })
-            .collect();
+            }
+            start.push(scatter.len());
+        }
         let diag_pos = (0..n_dofs)
             .map(|i| pattern.position(i, i).unwrap_or(usize::MAX))
             .collect();
         Ok(Self {
             pattern: Arc::new(pattern),
             scatter,
+            start,
             diag_pos,
         })
     }
@@ -134,7 +139,7 @@ impl Assembler {
 
     /// Number of elements (cells) the pattern was built from.
     pub fn n_elements(&self) -> usize {
-        self.scatter.len()
+        self.start.len() - 1
     }
 
     /// Number of stored entries of K: the distinct (row, col) couplings plus the diagonal.
@@ -142,14 +147,18 @@ impl Assembler {
         self.pattern.row_idx().len()
     }
 
-    /// Values of K = sum over elements of the blocks. `element_blocks[e]` is row-major 8x8:
-    /// `block[8a + b]` couples local dof `a` (row) with `b` (column). Entries whose row or column
-    /// is [`NO_DOF`] are skipped.
+    /// Values of K = sum over elements of the blocks. `element_blocks[e]` is row-major d×d for an
+    /// element of d dofs: `block[d·a + b]` couples local dof `a` (row) with `b` (column). Entries
+    /// whose row or column is [`NO_DOF`] are skipped.
     ///
     /// Contributions are summed sequentially in element order, so the result is bit-identical
     /// whatever the thread count of the caller. Errors: [`SolverError::DimensionMismatch`] if the
-    /// number of blocks differs from the number of elements.
-    pub fn assemble(&self, element_blocks: &[[f64; 64]]) -> Result<SparseMatrix, SolverError> {
+    /// number of blocks differs from the number of elements, or a block's size from its
+    /// element's d².
+    pub fn assemble<B: AsRef<[f64]>>(
+        &self,
+        element_blocks: &[B],
+    ) -> Result<SparseMatrix, SolverError> {
         self.assemble_with_diagonal(element_blocks, None)
     }
 
@@ -158,9 +167,9 @@ impl Assembler {
     ///
     /// Errors: [`SolverError::DimensionMismatch`] for a wrong number of blocks or a diagonal whose
     /// length is not [`Assembler::n_dofs`].
-    pub fn assemble_with_diagonal(
+    pub fn assemble_with_diagonal<B: AsRef<[f64]>>(
         &self,
-        element_blocks: &[[f64; 64]],
+        element_blocks: &[B],
         diagonal: Option<&[f64]>,
     ) -> Result<SparseMatrix, SolverError> {
         let mut k = SparseMatrix::from_parts(self.pattern.clone(), vec![0.0; self.nnz()]);
@@ -172,10 +181,10 @@ impl Assembler {
     /// its pattern) with a new assembly; avoids reallocating the value array every Newton
     /// iteration. Same summation order and errors as [`Assembler::assemble_with_diagonal`], plus
     /// [`SolverError::DimensionMismatch`] if `k` does not share this assembler's pattern.
-    pub fn reassemble(
+    pub fn reassemble<B: AsRef<[f64]>>(
         &self,
         k: &mut SparseMatrix,
-        element_blocks: &[[f64; 64]],
+        element_blocks: &[B],
         diagonal: Option<&[f64]>,
     ) -> Result<(), SolverError> {
         if !Arc::ptr_eq(&k.pattern, &self.pattern) {
@@ -185,12 +194,22 @@ impl Assembler {
                 found: k.nnz(),
             });
         }
-        if element_blocks.len() != self.scatter.len() {
+        if element_blocks.len() != self.n_elements() {
             return Err(SolverError::DimensionMismatch {
                 context: "element blocks (one per element)",
-                expected: self.scatter.len(),
+                expected: self.n_elements(),
                 found: element_blocks.len(),
             });
+        }
+        for (e, block) in element_blocks.iter().enumerate() {
+            let expected = self.start[e + 1] - self.start[e];
+            if block.as_ref().len() != expected {
+                return Err(SolverError::DimensionMismatch {
+                    context: "element block (d² values for an element of d dofs)",
+                    expected,
+                    found: block.as_ref().len(),
+                });
+            }
         }
         if let Some(d) = diagonal {
             if d.len() != self.n_dofs() {
@@ -203,8 +222,9 @@ impl Assembler {
         }
         let values = &mut k.values;
         values.fill(0.0);
-        for (map, block) in self.scatter.iter().zip(element_blocks) {
-            for (&p, &v) in map.iter().zip(block.iter()) {
+        for (e, block) in element_blocks.iter().enumerate() {
+            let map = &self.scatter[self.start[e]..self.start[e + 1]];
+            for (&p, &v) in map.iter().zip(block.as_ref()) {
                 if p != SKIP {
                     values[p as usize] += v;
                 }

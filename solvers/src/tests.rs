@@ -217,14 +217,14 @@ fn grid_nnz_is_number_of_distinct_couplings() {
 #[test]
 fn assembler_rejects_bad_input() {
     assert_eq!(
-        Assembler::new(0, &[]).unwrap_err(),
+        Assembler::new(0, &[] as &[[u32; 8]]).unwrap_err(),
         SolverError::EmptySystem
     );
     let e = Assembler::new(4, &[[0, 1, 2, 3, 4, NO_DOF, NO_DOF, NO_DOF]]).unwrap_err();
     assert!(matches!(e, SolverError::DofOutOfRange { dof: 4, .. }));
     let asm = Assembler::new(4, &[[0, 1, 2, 3, NO_DOF, NO_DOF, NO_DOF, NO_DOF]]).unwrap();
     assert!(matches!(
-        asm.assemble(&[]),
+        asm.assemble(&[] as &[[f64; 64]]),
         Err(SolverError::DimensionMismatch { .. })
     ));
     assert!(matches!(
@@ -489,4 +489,23 @@ fn weak_regularised_cells_are_not_flagged_singular() {
         assert!(st.last_pivot_ratio.is_none_or(|p| p > 1e-13), "{st:?}");
         assert!(st.last_probe_error.is_none_or(|e| e < 1e-6), "{st:?}");
     }
+}
+
+/// Elements of different sizes (a 4-dof and a 2-dof one sharing two dofs) sum into one
+/// pattern; a block whose size is not the element's d² is refused.
+#[test]
+fn mixed_element_sizes_sum_and_check_block_size() {
+    let elems: Vec<Vec<u32>> = vec![vec![0, 1, 2, 3], vec![2, NO_DOF, 3]];
+    let asm = Assembler::new(4, &elems).unwrap();
+    let big: Vec<f64> = (0..16).map(|k| k as f64).collect();
+    let small: Vec<f64> = (0..9).map(|k| 100.0 * (k + 1) as f64).collect();
+    let k = asm.assemble(&[big.clone(), small.clone()]).unwrap();
+    // (row 2, col 3): big[4·2 + 3] + small[3·0 + 2]; (row 3, col 3): big[15] + small[8]
+    assert_eq!(k.get(2, 3), 11.0 + 300.0);
+    assert_eq!(k.get(3, 3), 15.0 + 900.0);
+    assert_eq!(k.get(0, 1), 1.0);
+    assert!(matches!(
+        asm.assemble(&[big, small[..4].to_vec()]),
+        Err(SolverError::DimensionMismatch { .. })
+    ));
 }

@@ -44,7 +44,7 @@ impl Simulation {
             let mut spring = vec![0.0; nodal_mass.len()];
             for k in 0..self.driven.len() {
                 let s = &shapes[self.driven.particle[k]];
-                for a in 0..4 {
+                for a in s.support() {
                     spring[s.nodes[a] as usize] += self.driven.stiffness[k] * s.n[a];
                 }
             }

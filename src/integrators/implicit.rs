@@ -361,18 +361,18 @@ impl Simulation {
         let spin =
             (!trial.spin_sensitivity.is_empty()).then_some(trial.spin_sensitivity.as_slice());
         let mut blocks = transfer::cell_stiffness_blocks(
+            &self.grid,
             &sg.bins,
             &sg.shapes,
             &self.particles.volume,
             &trial.tangent,
             spin,
         );
-        for block in blocks.iter_mut() {
-            for (b, bg) in block.iter_mut().zip(self.background_block.iter()) {
-                *b += bg;
-            }
-        }
-        self.driven.add_stiffness(&sg.shapes, &sg.bins, &mut blocks);
+        let dofs = transfer::patch_dofs(&self.grid);
+        self.driven
+            .add_stiffness(&sg.shapes, &sg.bins, dofs, &mut blocks);
+        let blocks =
+            transfer::system_blocks(&self.grid, &sg.bins, blocks, Some(&self.background_block));
         let beta = self.newmark().beta;
         let diagonal = self.dynamic().then(|| {
             let mut diag = vec![0.0; n];
