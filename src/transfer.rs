@@ -438,6 +438,37 @@ pub fn system_blocks(
     patch_blocks
 }
 
+/// Force `cell_block · Δu` of the GIMP-reached cells' elements (see
+/// [`system_blocks`]), added into `force`. The background stiffness of DESIGN
+/// D19 enters the tangent only; on a reached cell it is kept consistent by
+/// this residual term: a node that a point's domain barely overlaps has a
+/// true stiffness of order (overlap/h)², far below ε_bg E, and a tangent-only
+/// term there would make Newton converge linearly. The term resists only the
+/// step's increment of those nodes, 1e-6 of an elastic cell.
+pub fn add_reached_cells_force(
+    grid: &Grid,
+    bins: &ParticleBins,
+    cell_block: &[f64; 64],
+    du: &[[f64; 2]],
+    force: &mut [[f64; 2]],
+) {
+    for &c in &bins.reached_cells {
+        let (ci, cj) = grid.cell_ij(c as usize);
+        let [ll, lr, ur, ul] = grid.cell_nodes(ci, cj);
+        let nodes = [ll, lr, ul, ur].map(|n| n as usize);
+        for (a, &na) in nodes.iter().enumerate() {
+            for r in 0..2 {
+                let row = &cell_block[8 * (2 * a + r)..8 * (2 * a + r + 1)];
+                force[na][r] += nodes
+                    .iter()
+                    .enumerate()
+                    .map(|(b, &nb)| row[2 * b] * du[nb][0] + row[2 * b + 1] * du[nb][1])
+                    .sum::<f64>();
+            }
+        }
+    }
+}
+
 /// The linearisation of the Jaumann rotation (DESIGN D13) through the stress
 /// update: σ_{n+1} depends on the spin ω = ½ Σ_b (u_bx ∂yN_b − u_by ∂xN_b) via
 /// σ^R, with dσ_{n+1}/dω = D_alg C g, g = [2σxy, −2σxy, 0, σyy − σxx]

@@ -274,9 +274,16 @@ impl Simulation {
     ) -> Residual {
         let grid = &self.grid;
         let p = &self.particles;
-        let internal = self.profile.time(Stage::P2G, || {
+        let mut internal = self.profile.time(Stage::P2G, || {
             transfer::internal_force(grid, &sg.bins, &sg.shapes, &p.volume, &trial.stress)
         });
+        transfer::add_reached_cells_force(
+            grid,
+            &sg.bins,
+            &self.background_block,
+            du,
+            &mut internal,
+        );
         let mut penalty = vec![[0.0; 2]; grid.node_count()];
         self.driven.add_forces(p, &sg.shapes, du, t1, &mut penalty);
         let dynamic = self.dynamic();

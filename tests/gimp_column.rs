@@ -1,0 +1,65 @@
+//! GIMP shape functions on the soft elastic column of
+//! `validation/elastic/soft_column.toml` (settles ~2.6 cells under its own
+//! weight, double mapping off). With bilinear shape functions the settlement
+//! grows with the step count (measured 0.127 / 0.149 / 0.174 m for 10 / 100 /
+//! 400 steps) because each point's strain jumps when it crosses a cell edge;
+//! with GIMP it converges to the large-strain solution.
+//!
+//! Exact (1-D, hypoelastic with the Jaumann rate = logarithmic strain): the
+//! stretch at initial height Y is λ = exp(−ρ0 g (H − Y)/M), M = E(1 − ν)/((1 + ν)(1 − 2ν)),
+//! so the top settles H − (M/ρ0 g)(1 − exp(−ρ0 g H/M)) = 0.11219 m.
+
+mod common;
+
+const SCENE: &str = "elastic/soft_column.toml";
+
+/// Top settlement (m) and RMS of σyy − (−ρ0 g (H − Y)) (kPa), GIMP, `steps` steps.
+fn run_gimp(steps: usize) -> (f64, f64) {
+    let dt = 1.0 / steps as f64;
+    let overrides = [
+        "grid.shape_functions=gimp".to_string(),
+        "grid.point_layout=uniform".to_string(),
+        "smoothing.double_mapping=off".to_string(),
+        format!("scene.steps={steps}"),
+        format!("scene.dt={dt}"),
+        format!(
+            "loads.gravity_ramp={{ increment = {}, interval = {dt}, max = 9.81 }}",
+            9.81 / steps as f64
+        ),
+    ];
+    let overrides: Vec<&str> = overrides.iter().map(String::as_str).collect();
+    let mut sim = common::simulation(SCENE, &overrides);
+    let history = common::run_history(&mut sim);
+    let settlement = -history.last().unwrap().1[common::column(&sim, "top_settlement")];
+    let rho = sim.scene.materials["soil"].density();
+    let p = &sim.particles;
+    let sum: f64 = (0..p.len())
+        .map(|i| (p.stress[i][1] + rho * 9.81 * (1.0 - p.position0[i][1])).powi(2))
+        .sum();
+    (settlement, (sum / p.len() as f64).sqrt())
+}
+
+fn exact_settlement() -> f64 {
+    let (e, nu, rho, g, h): (f64, f64, f64, f64, f64) = (60.0, 0.3, 2.0, 9.81, 1.0);
+    let m = e * (1.0 - nu) / ((1.0 + nu) * (1.0 - 2.0 * nu));
+    h - m / (rho * g) * (1.0 - (-rho * g * h / m).exp())
+}
+
+/// The settlement approaches the exact one as the step shrinks: within 1 % at
+/// 20 steps (measured +0.54 %) and 0.5 % at 100 steps (measured +0.19 %), the
+/// error falling with the step. The stress is free of cell-crossing
+/// oscillation: RMS deviation from the exact profile below 0.5 kPa (measured
+/// 0.28 kPa at 20 steps, against 2.99 kPa bilinear and 1.41 kPa bilinear with
+/// double mapping; the weight at the base is 19.6 kPa).
+#[test]
+fn gimp_settlement_converges_to_the_large_strain_solution() {
+    let exact = exact_settlement();
+    let (coarse, rms) = run_gimp(20);
+    let (fine, _) = run_gimp(100);
+    let (e_coarse, e_fine) = (coarse / exact - 1.0, fine / exact - 1.0);
+    assert!(e_coarse.abs() < 0.01, "20 steps: {coarse} m vs {exact} m");
+    assert!(e_fine.abs() < 0.005, "100 steps: {fine} m vs {exact} m");
+    assert!(e_fine.abs() < e_coarse.abs(), "{e_coarse} → {e_fine}");
+    println!("settlement {coarse} / {fine} m (exact {exact}), RMS {rms} kPa");
+    assert!(rms < 0.5, "σyy RMS {rms} kPa");
+}
