@@ -214,11 +214,17 @@ impl Grid {
     }
 
     /// uGIMP shape functions at `x` of the cell `(ci, cj)` that holds it: the
-    /// tensor product of [`shape::gimp_1d`] along x and y.
-    fn gimp_in_cell(&self, ci: usize, cj: usize, x: [f64; 2], half_width: f64) -> ShapeAt {
+    /// tensor product of [`shape::gimp_1d`] along x and y, the domain clipped
+    /// to `bounds` (`[[x_lo, x_hi], [y_lo, y_hi]]`, grid lines).
+    fn gimp_in_cell(
+        &self,
+        (ci, cj): (usize, usize),
+        x: [f64; 2],
+        half_width: f64,
+        bounds: [[f64; 2]; 2],
+    ) -> ShapeAt {
         let h = self.cell_size;
-        let along =
-            |d: usize| shape::gimp_1d(self.origin[d], h, self.cells[d] + 1, x[d], half_width);
+        let along = |d: usize| shape::gimp_1d(self.origin[d], h, x[d], half_width, bounds[d]);
         let (gx, gy) = (along(0), along(1));
         let nx = self.cells[0] + 1;
         let mut s = ShapeAt {
@@ -244,12 +250,27 @@ impl Grid {
     }
 
     /// Shape functions of a material point at `x` (the grid's
-    /// [`ShapeFunctions`]); `None` outside the grid.
+    /// [`ShapeFunctions`]; a GIMP domain is clipped to the grid); `None`
+    /// outside the grid.
     pub fn shape_at(&self, x: [f64; 2]) -> Option<ShapeAt> {
+        let max = self.extent_max();
+        let bounds = [[self.origin[0], max[0]], [self.origin[1], max[1]]];
+        self.shape_clipped(x, |_, _| bounds)
+    }
+
+    /// Like [`Grid::shape_at`], with a GIMP domain clipped to
+    /// `bounds(ci, cj)` for a point in cell `(ci, cj)` (ignored for bilinear).
+    pub fn shape_clipped(
+        &self,
+        x: [f64; 2],
+        bounds: impl Fn(usize, usize) -> [[f64; 2]; 2],
+    ) -> Option<ShapeAt> {
         let (ci, cj) = self.locate(x)?;
         Some(match self.shape_functions {
             ShapeFunctions::Bilinear => self.shape_in_cell(ci, cj, x),
-            ShapeFunctions::Gimp { half_width } => self.gimp_in_cell(ci, cj, x, half_width),
+            ShapeFunctions::Gimp { half_width } => {
+                self.gimp_in_cell((ci, cj), x, half_width, bounds(ci, cj))
+            }
         })
     }
 

@@ -29,22 +29,22 @@ pub fn gradients(xi: f64, eta: f64, h: f64) -> [[f64; 2]; 4] {
 }
 
 /// uGIMP shape functions along one grid direction (Bardenhagen & Kober 2004):
-/// the particle domain [x_p − l_p, x_p + l_p], clipped to the grid [a, b], and
+/// the particle domain [x_p − l_p, x_p + l_p], clipped to `bounds` (grid lines
+/// inside the grid) to give [a, b], and
 /// for each node k whose hat function N_k reaches it with positive length
 ///
 ///   S_k = (1/(b − a)) ∫_a^b N_k dx,    S'_k = (1/(b − a)) ∫_a^b N_k' dx = (N_k(b) − N_k(a))/(b − a).
 ///
 /// Σ S_k = 1, Σ S'_k = 0 and Σ S'_k x_k = 1 hold exactly (the hats sum to 1 on
 /// the grid); Σ S_k x_k = (a + b)/2, which is x_p unless the domain is clipped.
-/// Both are continuous in x_p, so nothing jumps when a point crosses a cell edge.
-/// `origin`, `h`, `nodes`: first node, spacing and node count along the direction.
-pub fn gimp_1d(origin: f64, h: f64, nodes: usize, xp: f64, half_width: f64) -> Gimp1d {
-    let end = origin + (nodes - 1) as f64 * h;
-    let a = (xp - half_width).max(origin);
-    let b = (xp + half_width).min(end);
+/// Both are continuous in x_p while the bounds stay fixed, so nothing jumps
+/// when a point crosses a cell edge. `origin`, `h`: first node and spacing.
+pub fn gimp_1d(origin: f64, h: f64, xp: f64, half_width: f64, bounds: [f64; 2]) -> Gimp1d {
+    let a = (xp - half_width).max(bounds[0]);
+    let b = (xp + half_width).min(bounds[1]);
     let length = b - a;
-    let first = (((a - origin) / h).floor().max(0.0) as usize).min(nodes - 1);
-    let last = (((b - origin) / h).ceil().max(0.0) as usize).min(nodes - 1);
+    let first = ((a - origin) / h).floor().max(0.0) as usize;
+    let last = ((b - origin) / h).ceil().max(0.0) as usize;
     let mut out = Gimp1d::default();
     for k in first..=last.min(first + 2) {
         let xk = origin + k as f64 * h;
@@ -137,9 +137,10 @@ mod tests {
     /// across a grid line, and the bilinear hat recovered for l_p → 0.
     #[test]
     fn gimp_1d_completeness_and_continuity() {
-        let (origin, h, nodes, lp) = (-0.3, 0.2, 8, 0.05);
+        let (origin, h, lp) = (-0.3, 0.2, 0.05);
+        let bounds = [origin, origin + 7.0 * h];
         for &xp in &[-0.3, -0.27, -0.12, -0.1001, -0.1, 0.0437, 0.97, 1.1] {
-            let g = gimp_1d(origin, h, nodes, xp, lp);
+            let g = gimp_1d(origin, h, xp, lp, bounds);
             let xk = |k: usize| origin + k as f64 * h;
             let sum: f64 = g.weight[..g.count].iter().sum();
             let gsum: f64 = g.gradient[..g.count].iter().sum();
@@ -155,8 +156,8 @@ mod tests {
             if !clipped && xp - lp - 1e-6 > origin {
                 let step = 1e-7;
                 let (gp, gm) = (
-                    gimp_1d(origin, h, nodes, xp + step, lp),
-                    gimp_1d(origin, h, nodes, xp - step, lp),
+                    gimp_1d(origin, h, xp + step, lp, bounds),
+                    gimp_1d(origin, h, xp - step, lp, bounds),
                 );
                 let weight_of = |g: &Gimp1d, node: usize| {
                     (0..g.count)
@@ -175,8 +176,8 @@ mod tests {
         }
         // a point 1e-12 either side of the grid line x = −0.1 has the same weights
         let (l, r) = (
-            gimp_1d(origin, h, nodes, -0.1 - 1e-12, lp),
-            gimp_1d(origin, h, nodes, -0.1 + 1e-12, lp),
+            gimp_1d(origin, h, -0.1 - 1e-12, lp, bounds),
+            gimp_1d(origin, h, -0.1 + 1e-12, lp, bounds),
         );
         assert_eq!(l.count, 3);
         for k in 0..3 {
@@ -185,7 +186,7 @@ mod tests {
             assert!((l.gradient[k] - r.gradient[k]).abs() < 1e-8);
         }
         // l_p = 0 is the bilinear hat: weights 0.7 / 0.3 and gradients ∓1/h
-        let g = gimp_1d(origin, h, nodes, origin + 0.3 * h, 0.0);
+        let g = gimp_1d(origin, h, origin + 0.3 * h, 0.0, bounds);
         assert_eq!(g.count, 2);
         assert!((g.weight[0] - 0.7).abs() < 1e-14 && (g.weight[1] - 0.3).abs() < 1e-14);
         assert!((g.gradient[0] + 1.0 / h).abs() < 1e-12 && (g.gradient[1] - 1.0 / h).abs() < 1e-12);
