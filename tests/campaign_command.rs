@@ -1,9 +1,10 @@
 //! The `campaign` command end to end on two short biaxial runs (local and
-//! nonlocal, h = 1/300 m, 40 steps): every output is written, the combined
-//! curves hold one row per step and run, the metrics table has one row per run
-//! with the initial slope within 3 % of the rough-platen FE value of DESIGN §8.1
-//! (12,632 kN/m per m; the coarse mesh's measured value is 2.8 % above it), and
-//! the plots decode as PNG images.
+//! nonlocal, h = 1/300 m, 40 steps, the paper's bilinear cells with Gauss
+//! points): every output is written, the combined curves hold one row per
+//! step and run, the metrics table has one row per run with the initial slope
+//! within 3 % of the rough-platen FE value of DESIGN §8.1 (12,632 kN/m per m;
+//! the coarse mesh's measured value is 2.8 % above it), and the plots decode
+//! as PNG images.
 
 mod common;
 
@@ -30,6 +31,10 @@ fn campaign_writes_curves_metrics_report_and_plots() {
             out.to_str().unwrap(),
             "--set",
             "scene.steps=40",
+            "--set",
+            "grid.shape_functions=bilinear",
+            "--set",
+            "grid.point_layout=gauss",
         ])
         .status()
         .unwrap();
@@ -67,12 +72,12 @@ fn campaign_writes_curves_metrics_report_and_plots() {
 
 /// `--step-refinement 2` runs each scene again with twice the steps at half
 /// the step and reports the time-step discrepancy. On the elastic (c = 1e6 kPa)
-/// quasi-static biaxial at h = 1/300 m to δ = 0.3 mm, where no point crosses a
-/// cell boundary, the whole-curve discrepancy is only the geometric
-/// nonlinearity of the updated configuration: ≤ 1e-4 (measured 6.5e-6). (To
-/// δ = 1.2 mm, past the first crossing at 0.21 h, it measures 1.4e-2: the
-/// grid-crossing error described in the README.) An explicit scene is refused
-/// before anything runs, with a message naming the option.
+/// quasi-static biaxial at h = 1/300 m to δ = 1.2 mm, past the first rows of
+/// points crossing cell edges (at δ ≈ 0.21 h), the whole-curve discrepancy of
+/// the scene's GIMP discretisation is only the geometric nonlinearity of the
+/// updated configuration: ≤ 1e-4 (measured 4.6e-5). With bilinear cells the
+/// crossings make it at least 30 times larger (measured 1.4e-2). An explicit
+/// scene is refused before anything runs, with a message naming the option.
 #[test]
 fn step_refinement_reports_the_time_step_discrepancy() {
     let dir = tempfile::tempdir().unwrap();
@@ -83,39 +88,40 @@ fn step_refinement_reports_the_time_step_discrepancy() {
         scenes.join("local_h300.toml"),
     )
     .unwrap();
-    let out = dir.path().join("out");
-    let status = Command::new(env!("CARGO_BIN_EXE_mpm-geo"))
-        .args(["campaign", scenes.to_str().unwrap(), "--out"])
-        .arg(&out)
-        .args([
-            "--step-refinement",
-            "2",
-            "--set",
-            "materials.soil.c_ini=1e6",
-        ])
-        .args([
-            "--set",
-            "scene.analysis=quasi_static",
-            "--set",
-            "scene.steps=30",
-        ])
-        .status()
-        .unwrap();
-    assert!(status.success());
-    let table = std::fs::read_to_string(out.join("step_convergence.csv")).unwrap();
-    let mut reader = csv::Reader::from_reader(table.as_bytes());
-    let headers = reader.headers().unwrap().clone();
-    let col = headers
-        .iter()
-        .position(|h| h == "whole_curve_step_discrepancy")
-        .unwrap();
-    let rows: Vec<csv::StringRecord> = reader.records().map(|r| r.unwrap()).collect();
-    assert_eq!(rows.len(), 1);
-    let discrepancy: f64 = rows[0][col].parse().unwrap();
-    assert!(discrepancy <= 1e-4, "step discrepancy {discrepancy}");
-    assert!(std::fs::read_to_string(out.join("report.md"))
-        .unwrap()
-        .contains("## Time-step convergence"));
+    let discrepancy = |name: &str, overrides: &[&str]| -> f64 {
+        let out = dir.path().join(name);
+        let status = Command::new(env!("CARGO_BIN_EXE_mpm-geo"))
+            .args(["campaign", scenes.to_str().unwrap(), "--out"])
+            .arg(&out)
+            .args(["--step-refinement", "2"])
+            .args(["--set", "materials.soil.c_ini=1e6"])
+            .args(["--set", "scene.analysis=quasi_static"])
+            .args(["--set", "scene.steps=120"])
+            .args(overrides.iter().flat_map(|o| ["--set", o]))
+            .status()
+            .unwrap();
+        assert!(status.success());
+        assert!(std::fs::read_to_string(out.join("report.md"))
+            .unwrap()
+            .contains("## Time-step convergence"));
+        let table = std::fs::read_to_string(out.join("step_convergence.csv")).unwrap();
+        let mut reader = csv::Reader::from_reader(table.as_bytes());
+        let headers = reader.headers().unwrap().clone();
+        let col = headers
+            .iter()
+            .position(|h| h == "whole_curve_step_discrepancy")
+            .unwrap();
+        let rows: Vec<csv::StringRecord> = reader.records().map(|r| r.unwrap()).collect();
+        assert_eq!(rows.len(), 1);
+        rows[0][col].parse().unwrap()
+    };
+    let gimp = discrepancy("out", &[]);
+    let bilinear = discrepancy(
+        "out_bilinear",
+        &["grid.shape_functions=bilinear", "grid.point_layout=gauss"],
+    );
+    assert!(gimp <= 1e-4, "GIMP step discrepancy {gimp}");
+    assert!(bilinear >= 30.0 * gimp, "bilinear {bilinear} vs GIMP {gimp}");
 
     std::fs::copy(
         common::validation("elastic/bar_explicit.toml"),
