@@ -215,7 +215,8 @@ pub fn restore_internal_forces(
     );
     let blocks = transfer::system_blocks(frame.grid, frame.bins, blocks, None);
     let element_dofs = dofs.element_dofs(frame.grid, frame.bins);
-    let assembler = Assembler::new(n, &element_dofs)?;
+    let coupling = transfer::patch_coupling(frame.grid);
+    let assembler = Assembler::with_couplings(n, &element_dofs, coupling)?;
     let mut gram = assembler.assemble(&blocks)?;
     let max_diagonal = (0..n).map(|i| gram.get(i, i)).fold(0.0, f64::max);
     let shift = EQUILIBRIUM_REGULARISATION * max_diagonal.max(f64::MIN_POSITIVE);

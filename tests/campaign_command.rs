@@ -121,7 +121,10 @@ fn step_refinement_reports_the_time_step_discrepancy() {
         &["grid.shape_functions=bilinear", "grid.point_layout=gauss"],
     );
     assert!(gimp <= 1e-4, "GIMP step discrepancy {gimp}");
-    assert!(bilinear >= 30.0 * gimp, "bilinear {bilinear} vs GIMP {gimp}");
+    assert!(
+        bilinear >= 30.0 * gimp,
+        "bilinear {bilinear} vs GIMP {gimp}"
+    );
 
     std::fs::copy(
         common::validation("elastic/bar_explicit.toml"),

@@ -39,6 +39,19 @@ impl Assembler {
     /// Errors: [`SolverError::EmptySystem`] if `n_dofs == 0`, [`SolverError::DofOutOfRange`],
     /// [`SolverError::TooManyNonZeros`] above `u32::MAX - 1` non-zeros.
     pub fn new<E: AsRef<[u32]>>(n_dofs: usize, element_dofs: &[E]) -> Result<Self, SolverError> {
+        Self::with_couplings(n_dofs, element_dofs, |_, _, _| true)
+    }
+
+    /// Like [`Assembler::new`], keeping only the couplings of local dofs `a`, `b` of an element
+    /// of `d` dofs with `coupled(d, a, b)` (symmetric in `a`, `b`). Use it when some
+    /// entries of every block are zero by construction, e.g. the nodes three apart in a GIMP
+    /// cell patch that no single material point reaches together: the pattern, and the fill of
+    /// the factors, shrink. Block entries outside the couplings are ignored when assembling.
+    pub fn with_couplings<E: AsRef<[u32]>>(
+        n_dofs: usize,
+        element_dofs: &[E],
+        coupled: impl Fn(usize, usize, usize) -> bool,
+    ) -> Result<Self, SolverError> {
         if n_dofs == 0 {
             return Err(SolverError::EmptySystem);
         }
@@ -57,10 +70,22 @@ impl Assembler {
         for j in 0..n_dofs {
             start[j + 1] = 1;
         }
+        // (local a, local b) pairs of an element that enter the pattern
+        let pairs = |dofs: &[u32]| {
+            let valid: Vec<usize> = (0..dofs.len()).filter(|&a| dofs[a] != NO_DOF).collect();
+            let mut out = Vec::with_capacity(valid.len() * valid.len());
+            for &a in &valid {
+                for &b in &valid {
+                    if coupled(dofs.len(), a, b) {
+                        out.push((a, b));
+                    }
+                }
+            }
+            out
+        };
         for dofs in &element_dofs {
-            let n_valid = dofs.iter().filter(|&&d| d != NO_DOF).count();
-            for &c in dofs.iter().filter(|&&d| d != NO_DOF) {
-                start[c as usize + 1] += n_valid;
+            for (_, b) in pairs(dofs) {
+                start[dofs[b] as usize + 1] += 1;
             }
         }
         for j in 0..n_dofs {
@@ -73,12 +98,10 @@ impl Assembler {
             *f += 1;
         }
         for dofs in &element_dofs {
-            for &c in dofs.iter().filter(|&&d| d != NO_DOF) {
-                for &r in dofs.iter().filter(|&&d| d != NO_DOF) {
-                    let f = &mut fill[c as usize];
-                    rows[*f] = r;
-                    *f += 1;
-                }
+            for (a, b) in pairs(dofs) {
+                let f = &mut fill[dofs[b] as usize];
+                rows[*f] = dofs[a];
+                *f += 1;
             }
         }
         // Sort and deduplicate each column.
@@ -113,10 +136,10 @@ impl Assembler {
         start.push(0usize);
         let mut scatter = Vec::new();
         for dofs in &element_dofs {
-            for &a in dofs.iter() {
-                for &b in dofs.iter() {
-                    let valid = a != NO_DOF && b != NO_DOF;
-                    scatter.push(if valid { pos(a, b) } else { SKIP });
+            for (la, &a) in dofs.iter().enumerate() {
+                for (lb, &b) in dofs.iter().enumerate() {
+                    let kept = a != NO_DOF && b != NO_DOF && coupled(dofs.len(), la, lb);
+                    scatter.push(if kept { pos(a, b) } else { SKIP });
                 }
             }
             start.push(scatter.len());

@@ -509,3 +509,21 @@ fn mixed_element_sizes_sum_and_check_block_size() {
         Err(SolverError::DimensionMismatch { .. })
     ));
 }
+
+/// A coupling filter drops the listed entries from the pattern and from the assembly, and
+/// keeps the rest (here: dofs 0 and 3 of a 4-dof element are never coupled).
+#[test]
+fn coupling_filter_shrinks_the_pattern() {
+    let elems = vec![vec![0u32, 1, 2, 3]];
+    let full = Assembler::new(4, &elems).unwrap();
+    let far = |_: usize, a: usize, b: usize| a.abs_diff(b) <= 2;
+    let thin = Assembler::with_couplings(4, &elems, far).unwrap();
+    assert_eq!(full.nnz(), 16);
+    assert_eq!(thin.nnz(), 14);
+    let block: Vec<f64> = (0..16).map(|k| 1.0 + k as f64).collect();
+    let k = thin.assemble(&[block]).unwrap();
+    assert_eq!(k.get(0, 3), 0.0);
+    assert_eq!(k.get(3, 0), 0.0);
+    assert_eq!(k.get(1, 2), 7.0);
+    assert_eq!(k.get(3, 3), 16.0);
+}

@@ -361,8 +361,9 @@ impl Simulation {
         let reuse =
             matches!(&self.assembler, Some((key, a)) if *key == element_dofs && a.n_dofs() == n);
         if !reuse {
-            let assembler =
-                Assembler::new(n, &element_dofs).map_err(|e| StepFailure::Solver(e.to_string()))?;
+            let coupling = transfer::patch_coupling(&self.grid);
+            let assembler = Assembler::with_couplings(n, &element_dofs, coupling)
+                .map_err(|e| StepFailure::Solver(e.to_string()))?;
             self.assembler = Some((element_dofs, assembler));
         }
         let spin =
