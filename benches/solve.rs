@@ -1,6 +1,8 @@
 //! Assembly, symbolic + numeric factorisation and solve of the oedometer
 //! column's tangent (issue 3 bench `solve`) at ~10k and ~100k unknowns,
-//! Cholesky vs LU (faer, single-threaded factorisation).
+//! Cholesky vs LU (faer, single-threaded factorisation); at ~10k also with GIMP
+//! shape functions (`10k_gimp`: each point reaches up to 3 × 3 nodes, so the
+//! tangent couples nodes up to two apart and the factors are denser).
 //! Run: `cargo bench --bench solve`.
 
 use std::path::PathBuf;
@@ -10,16 +12,21 @@ use mpm_geo::scene::Scene;
 use mpm_geo::simulation::Simulation;
 use mpm_solvers::{DirectSolver, SolverPolicy};
 
-/// The oedometer scene widened to `nx` × `ny` cells of 0.01 m.
-fn column(nx: usize, ny: usize) -> Simulation {
+/// The oedometer scene widened to `nx` × `ny` cells of 0.01 m, with GIMP
+/// shape functions when `gimp`.
+fn column(nx: usize, ny: usize, gimp: bool) -> Simulation {
     let h = 0.01;
     let (w, height) = (nx as f64 * h, ny as f64 * h);
-    let overrides = vec![
+    let mut overrides = vec![
         format!("grid.cell_size={h}"),
         format!("grid.size=[{w}, {height}]"),
         format!("body.0.box=[[0.0, 0.0], [{w}, {height}]]"),
         format!("bc.fixed.1.line=\"x={w}\""),
     ];
+    if gimp {
+        overrides.push("grid.shape_functions=\"gimp\"".into());
+        overrides.push("grid.point_layout=\"uniform\"".into());
+    }
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("validation/elastic/oedometer.toml");
     Simulation::new(Scene::load(&path, &overrides).expect("scene")).expect("setup")
 }
@@ -27,8 +34,12 @@ fn column(nx: usize, ny: usize) -> Simulation {
 fn bench_solve(c: &mut Criterion) {
     let mut group = c.benchmark_group("solve");
     group.sample_size(10);
-    for (label, nx, ny) in [("10k", 50usize, 100usize), ("100k", 158, 316)] {
-        let mut sim = column(nx, ny);
+    for (label, nx, ny, gimp) in [
+        ("10k", 50usize, 100usize, false),
+        ("10k_gimp", 50, 100, true),
+        ("100k", 158, 316, false),
+    ] {
+        let mut sim = column(nx, ny, gimp);
         let n = sim.unknowns().expect("unknowns");
         let zeros = vec![0.0; n];
         group.bench_function(BenchmarkId::new("linearize_and_assemble", label), |b| {
