@@ -50,7 +50,7 @@ impl Monitor {
                         .unwrap_or_default(),
                 )
             }
-            MonitorKind::RigidForce => {
+            MonitorKind::RigidForce | MonitorKind::RigidDisplacement => {
                 let name = spec.rigid.clone().unwrap_or_default();
                 Target::Rigid(
                     sim.driven
@@ -109,6 +109,9 @@ impl Monitor {
                     }
                 }
                 pick(sum)
+            }
+            (Target::Rigid(r), MonitorKind::RigidDisplacement) => {
+                pick(sim.driven.mean_displacement(*r, p))
             }
             (Target::Rigid(r), _) => pick(sim.driven.force_on_soil(*r, p, sim.time)),
             (_, MonitorKind::KineticEnergy) => sim.kinetic_energy(),

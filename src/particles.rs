@@ -10,7 +10,7 @@ use crate::constitutive::{PointState, Voigt};
 pub struct Particles {
     /// Current position x_p, m.
     pub position: Vec<[f64; 2]>,
-    /// Initial position x_p(0), m (driven-point anchors, displacement output).
+    /// Initial position x_p(0), m (displacement output).
     pub position0: Vec<[f64; 2]>,
     /// Mass m_p, t per metre run.
     pub mass: Vec<f64>,

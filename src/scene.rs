@@ -622,6 +622,25 @@ pub struct RigidSpec {
     pub footprint: [f64; 2],
     /// Prescribed rigid velocity, m per unit time (quasi-static: per step with dt = 1).
     pub velocity: [f64; 2],
+    /// Where the body is tied to the soil: `top_points` (the top row of
+    /// material points, DESIGN §8.0) or `surface` (points on the soil surface).
+    #[serde(default)]
+    pub contact: ContactKind,
+}
+
+/// Where a rigid body's penalty springs hold the soil (DESIGN D40–D41).
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum ContactKind {
+    /// The material points of the body's top point row inside the footprint
+    /// (DESIGN §8.0). The soil between that row and the surface moves with the
+    /// rigid body, which stiffens the response by O(h).
+    #[default]
+    TopPoints,
+    /// Massless points on the body's top surface inside the footprint, two per
+    /// cell-wide segment, moving with the soil surface: the tie acts where the
+    /// body touches the soil.
+    Surface,
 }
 
 /// `[bc]`: all boundary conditions.
@@ -678,6 +697,9 @@ pub enum MonitorKind {
     Reaction,
     /// Force exerted by rigid body `rigid` on the soil (kN/m, DESIGN D40).
     RigidForce,
+    /// Mean displacement of the points tied to rigid body `rigid` (m): the
+    /// displacement of the contact surface for `contact = "surface"`.
+    RigidDisplacement,
     /// Total kinetic energy Σ ½ m_p |v_p|², kJ/m.
     KineticEnergy,
     /// Total elastic strain energy Σ ½ V_p σ_pᵀ C σ_p, kJ/m.
@@ -1390,7 +1412,7 @@ impl Scene {
                         }
                     }
                 },
-                MonitorKind::RigidForce => {
+                MonitorKind::RigidForce | MonitorKind::RigidDisplacement => {
                     let ok = m
                         .rigid
                         .as_ref()

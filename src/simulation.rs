@@ -196,7 +196,8 @@ impl Simulation {
             .unwrap_or_else(|r| {
                 errors.push(FieldError {
                     field: format!("bc.rigid[{r}].footprint"),
-                    message: "selects no material point of the body's top row".into(),
+                    message: "must be a non-empty range on the top of its body that selects points"
+                        .into(),
                 });
                 DrivenPoints::default()
             });
@@ -267,7 +268,13 @@ impl Simulation {
         };
         let bins = crate::transfer::ParticleBins::new(&self.grid, &shapes);
         let mass = crate::transfer::nodal_mass(&self.grid, &bins, &shapes, &self.particles.mass);
-        let (_, limit, reason) = self.explicit_time_step(&mass, &shapes, false);
+        let Ok(driven_shapes) =
+            self.driven
+                .shapes(&self.grid, &bins, self.traction_min_points(), &shapes)
+        else {
+            return Ok(());
+        };
+        let (_, limit, reason) = self.explicit_time_step(&mass, &driven_shapes, false);
         if dt > limit {
             return Err(SceneError::Invalid {
                 path: self.scene.scene.name.clone(),

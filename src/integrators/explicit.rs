@@ -23,7 +23,7 @@ impl Simulation {
     pub(crate) fn explicit_time_step(
         &self,
         nodal_mass: &[f64],
-        shapes: &[crate::grid::ShapeAt],
+        driven_shapes: &[crate::grid::ShapeAt],
         with_velocity: bool,
     ) -> (f64, f64, String) {
         let p = &self.particles;
@@ -42,8 +42,7 @@ impl Simulation {
         }
         if !self.driven.is_empty() {
             let mut spring = vec![0.0; nodal_mass.len()];
-            for k in 0..self.driven.len() {
-                let s = &shapes[self.driven.particle[k]];
+            for (k, s) in driven_shapes.iter().enumerate() {
                 for a in s.support() {
                     spring[s.nodes[a] as usize] += self.driven.stiffness[k] * s.n[a];
                 }
@@ -94,9 +93,18 @@ impl Simulation {
                     point: o.particle,
                     position: o.position,
                 })?;
-            Ok((shapes, bins, traction_shapes))
+            let driven_shapes = self
+                .driven
+                .shapes(&grid, &bins, self.traction_min_points(), &shapes)
+                .map_err(|o| RunError::TractionPointLeftGrid {
+                    step,
+                    time: t,
+                    point: o.particle,
+                    position: o.position,
+                })?;
+            Ok((shapes, bins, traction_shapes, driven_shapes))
         })?;
-        let (shapes, bins, traction_shapes) = setup;
+        let (shapes, bins, traction_shapes, driven_shapes) = setup;
         // Nonlocal weights from the start-of-step configuration; explicit runs
         // update κ̄ once per step (DESIGN §4, mode "step").
         let mut nonlocal = match &self.scene.nonlocal {
@@ -124,8 +132,13 @@ impl Simulation {
                 vec![[0.0; 2]; n_nodes]
             };
             self.traction.add_forces(&traction_shapes, &mut external);
-            self.driven
-                .add_forces(p, &shapes, &vec![[0.0; 2]; n_nodes], t, &mut external);
+            self.driven.add_forces(
+                p,
+                &driven_shapes,
+                &vec![[0.0; 2]; n_nodes],
+                t,
+                &mut external,
+            );
             let force: Vec<[f64; 2]> = external
                 .iter()
                 .zip(&internal)
@@ -135,7 +148,7 @@ impl Simulation {
         });
 
         // Time step, checked every step as the points move.
-        let (cfl_dt, limit, reason) = self.explicit_time_step(&mass, &shapes, true);
+        let (cfl_dt, limit, reason) = self.explicit_time_step(&mass, &driven_shapes, true);
         let dt = match self.scene.scene.dt {
             Some(fixed) if fixed > limit => {
                 return Err(RunError::UnstableTimeStep {
@@ -300,6 +313,7 @@ impl Simulation {
             }
         }
         self.traction.advect(&traction_shapes, &du);
+        self.driven.advect(&driven_shapes, &du);
         self.profile.add(Stage::G2P, start.elapsed().as_secs_f64());
         self.reaction = reaction;
         self.last_increment = du;

@@ -65,6 +65,8 @@ struct StepGrid {
     /// External force at t_{n+1} (body force + traction), per grid node.
     external: Vec<[f64; 2]>,
     traction_shapes: Vec<ShapeAt>,
+    /// Shape functions of the rigid bodies' contact points.
+    driven_shapes: Vec<ShapeAt>,
 }
 
 /// Residual-side quantities of one Newton iterate.
@@ -194,17 +196,22 @@ impl Simulation {
         let p = &self.particles;
         let grid = &self.grid;
         let profile = &self.profile;
-        let (shapes, bins, dofs, traction_shapes) = profile.time(Stage::Setup, || {
-            let shapes = transfer::shapes_at(grid, &p.position)
-                .map_err(|o| StepFailure::LeftGrid(o.particle, o.position))?;
-            let bins = ParticleBins::new(grid, &shapes);
-            let dofs = DofMap::new(&bins, &self.constraints);
-            let traction_shapes = self
-                .traction
-                .shapes(grid, &bins, self.traction_min_points())
-                .map_err(|o| StepFailure::TractionLeftGrid(o.particle, o.position))?;
-            Ok((shapes, bins, dofs, traction_shapes))
-        })?;
+        let (shapes, bins, dofs, traction_shapes, driven_shapes) =
+            profile.time(Stage::Setup, || {
+                let shapes = transfer::shapes_at(grid, &p.position)
+                    .map_err(|o| StepFailure::LeftGrid(o.particle, o.position))?;
+                let bins = ParticleBins::new(grid, &shapes);
+                let dofs = DofMap::new(&bins, &self.constraints);
+                let traction_shapes = self
+                    .traction
+                    .shapes(grid, &bins, self.traction_min_points())
+                    .map_err(|o| StepFailure::TractionLeftGrid(o.particle, o.position))?;
+                let driven_shapes = self
+                    .driven
+                    .shapes(grid, &bins, self.traction_min_points(), &shapes)
+                    .map_err(|o| StepFailure::TractionLeftGrid(o.particle, o.position))?;
+                Ok((shapes, bins, dofs, traction_shapes, driven_shapes))
+            })?;
         let dynamic = self.dynamic();
         let (mass, velocity, acceleration, external) = profile.time(Stage::P2G, || {
             let (mut mass, mut velocity, mut acceleration) = (Vec::new(), Vec::new(), Vec::new());
@@ -242,6 +249,7 @@ impl Simulation {
             acceleration,
             external,
             traction_shapes,
+            driven_shapes,
         })
     }
 
@@ -285,7 +293,8 @@ impl Simulation {
             &mut internal,
         );
         let mut penalty = vec![[0.0; 2]; grid.node_count()];
-        self.driven.add_forces(p, &sg.shapes, du, t1, &mut penalty);
+        self.driven
+            .add_forces(p, &sg.driven_shapes, du, t1, &mut penalty);
         let dynamic = self.dynamic();
         let newmark = self.newmark();
         let mut residual = vec![[0.0; 2]; grid.node_count()];
@@ -378,7 +387,7 @@ impl Simulation {
         );
         let dofs = transfer::patch_dofs(&self.grid);
         self.driven
-            .add_stiffness(&sg.shapes, &sg.bins, dofs, &mut blocks);
+            .add_stiffness(&sg.driven_shapes, &sg.bins, dofs, &mut blocks);
         let blocks =
             transfer::system_blocks(&self.grid, &sg.bins, blocks, Some(&self.background_block));
         let beta = self.newmark().beta;
@@ -777,6 +786,7 @@ impl Simulation {
             return Err(StepFailure::LeftGrid(i, p.position[i]));
         }
         self.traction.advect(&sg.traction_shapes, du);
+        self.driven.advect(&sg.driven_shapes, du);
         self.last_increment = du.to_vec();
         self.profile.add(Stage::G2P, start.elapsed().as_secs_f64());
         Ok(())
