@@ -128,8 +128,7 @@ impl DofMap {
         });
         let reached = bins.reached_cells.iter().map(|&c| {
             let (ci, cj) = grid.cell_ij(c as usize);
-            let [ll, lr, ur, ul] = grid.cell_nodes(ci, cj);
-            dofs_of(&[Some(ll), Some(lr), Some(ul), Some(ur)])
+            dofs_of(&grid.cell_nodes_row_major(ci, cj).map(Some))
         });
         patches.chain(reached).collect()
     }

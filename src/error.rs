@@ -18,14 +18,17 @@ pub enum RunError {
         /// Where it went, m.
         position: [f64; 2],
     },
-    /// A traction (pressure) point left the background grid.
-    #[error("step {step} (t = {time:.6e} s): traction point {point} left the grid at ({:.6}, {:.6}) m", position[0], position[1])]
-    TractionPointLeftGrid {
+    /// A boundary point (a traction point carrying a pressure, or a rigid
+    /// body's surface contact point) left the background grid.
+    #[error("step {step} (t = {time:.6e} s): {kind} point {point} left the grid at ({:.6}, {:.6}) m", position[0], position[1])]
+    BoundaryPointLeftGrid {
         /// Step being computed.
         step: usize,
         /// Time, s.
         time: f64,
-        /// Traction point index.
+        /// `traction` or `contact`.
+        kind: &'static str,
+        /// Index of the point among the points of its kind.
         point: usize,
         /// Where it went, m.
         position: [f64; 2],

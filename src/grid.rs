@@ -124,6 +124,14 @@ impl Grid {
         ]
     }
 
+    /// The four global node indices of cell `(ci, cj)` in row-major order
+    /// (lower-left, lower-right, upper-left, upper-right), the order of the
+    /// 8×8 cell blocks of `transfer::system_blocks`.
+    pub fn cell_nodes_row_major(&self, ci: usize, cj: usize) -> [u32; 4] {
+        let [ll, lr, ur, ul] = self.cell_nodes(ci, cj);
+        [ll, lr, ul, ur]
+    }
+
     /// Side of the node patch of a cell: the nodes any point of the cell can
     /// reach (2 bilinear, 4 GIMP).
     pub fn patch_side(&self) -> usize {

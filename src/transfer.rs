@@ -517,8 +517,7 @@ pub fn add_reached_cells_force(
 ) {
     for &c in &bins.reached_cells {
         let (ci, cj) = grid.cell_ij(c as usize);
-        let [ll, lr, ur, ul] = grid.cell_nodes(ci, cj);
-        let nodes = [ll, lr, ul, ur].map(|n| n as usize);
+        let nodes = grid.cell_nodes_row_major(ci, cj).map(|n| n as usize);
         for (a, &na) in nodes.iter().enumerate() {
             for r in 0..2 {
                 let row = &cell_block[8 * (2 * a + r)..8 * (2 * a + r + 1)];

@@ -87,18 +87,20 @@ impl Simulation {
             let traction_shapes = self
                 .traction
                 .shapes(&grid, &bins, self.traction_min_points())
-                .map_err(|o| RunError::TractionPointLeftGrid {
+                .map_err(|o| RunError::BoundaryPointLeftGrid {
                     step,
                     time: t,
+                    kind: "traction",
                     point: o.particle,
                     position: o.position,
                 })?;
             let driven_shapes = self
                 .driven
                 .shapes(&grid, &bins, self.traction_min_points(), &shapes)
-                .map_err(|o| RunError::TractionPointLeftGrid {
+                .map_err(|o| RunError::BoundaryPointLeftGrid {
                     step,
                     time: t,
+                    kind: "contact",
                     point: o.particle,
                     position: o.position,
                 })?;

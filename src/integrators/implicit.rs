@@ -37,8 +37,8 @@ pub(crate) enum StepFailure {
     Solver(String),
     /// Not retried: a material point left the grid.
     LeftGrid(usize, [f64; 2]),
-    /// Not retried: a traction point left the grid.
-    TractionLeftGrid(usize, [f64; 2]),
+    /// Not retried: a boundary point (kind, index, position) left the grid.
+    BoundaryLeftGrid(&'static str, usize, [f64; 2]),
 }
 
 /// A line-search outcome: increment, its stresses and residual, step length α.
@@ -111,7 +111,7 @@ impl Simulation {
                 self.solver_usage.newton_iterations += iterations;
                 Ok(())
             }
-            Err(f @ (StepFailure::LeftGrid(..) | StepFailure::TractionLeftGrid(..))) => {
+            Err(f @ (StepFailure::LeftGrid(..) | StepFailure::BoundaryLeftGrid(..))) => {
                 Err(self.failure_to_error(f, t + dt, depth))
             }
             Err(_) if depth < self.scene.solver.max_halvings => {
@@ -143,12 +143,15 @@ impl Simulation {
                 particle,
                 position,
             },
-            StepFailure::TractionLeftGrid(point, position) => RunError::TractionPointLeftGrid {
-                step,
-                time,
-                point,
-                position,
-            },
+            StepFailure::BoundaryLeftGrid(kind, point, position) => {
+                RunError::BoundaryPointLeftGrid {
+                    step,
+                    time,
+                    kind,
+                    point,
+                    position,
+                }
+            }
             StepFailure::Diverged(history) => RunError::NewtonFailed {
                 step,
                 time,
@@ -205,11 +208,15 @@ impl Simulation {
                 let traction_shapes = self
                     .traction
                     .shapes(grid, &bins, self.traction_min_points())
-                    .map_err(|o| StepFailure::TractionLeftGrid(o.particle, o.position))?;
+                    .map_err(|o| {
+                        StepFailure::BoundaryLeftGrid("traction", o.particle, o.position)
+                    })?;
                 let driven_shapes = self
                     .driven
                     .shapes(grid, &bins, self.traction_min_points(), &shapes)
-                    .map_err(|o| StepFailure::TractionLeftGrid(o.particle, o.position))?;
+                    .map_err(|o| {
+                        StepFailure::BoundaryLeftGrid("contact", o.particle, o.position)
+                    })?;
                 Ok((shapes, bins, dofs, traction_shapes, driven_shapes))
             })?;
         let dynamic = self.dynamic();
