@@ -175,3 +175,33 @@ fn explicit_step_above_the_penalty_limit_is_refused_before_the_run() {
     let (code, text) = mpm_geo(&accepted);
     assert_eq!(code, 0, "{text}");
 }
+
+/// GIMP needs point domains that tile the cells; a rigid body's contact kind
+/// must be one of the two; a surface contact whose footprint leaves the
+/// body's top is refused.
+#[test]
+fn shape_function_and_contact_options_are_checked() {
+    check_refused(
+        &["--set", "grid.shape_functions=\"gimp\""],
+        &["grid.point_layout", "uniform"],
+    );
+    let platen = common::validation("elastic/platen.toml");
+    let platen = platen.to_str().unwrap();
+    let (code, text) = mpm_geo(&["check", platen, "--set", "bc.rigid.0.contact=\"edge\""]);
+    assert_ne!(code, 0);
+    assert!(
+        text.contains("bc.rigid.contact") && text.contains("surface"),
+        "{text}"
+    );
+    let (code, text) = mpm_geo(&[
+        "check",
+        platen,
+        "--set",
+        "bc.rigid.0.contact=\"surface\"",
+        "--set",
+        "bc.rigid.0.footprint=[0.1, 0.3]",
+    ]);
+    assert_ne!(code, 0);
+    assert!(text.contains("bc.rigid[0].footprint"), "{text}");
+    assert!(!text.contains("panicked"), "{text}");
+}
