@@ -1,9 +1,11 @@
 //! P2G + G2P cost per particle per step (issue 3 bench `transfer`), at 10k and
 //! 100k material points (2×2 per cell), serial (1-thread rayon pool) and
-//! rayon (all threads). Run: `cargo bench --bench transfer`.
+//! rayon (all threads); `gimp_*`: the same with GIMP shape functions, points
+//! on sub-cell centres moved by up to ±0.05 h so that domains cross cell
+//! edges (up to 3 × 3 nodes per point). Run: `cargo bench --bench transfer`.
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
-use mpm_geo::grid::Grid;
+use mpm_geo::grid::{Grid, ShapeFunctions};
 use mpm_geo::transfer::{self, ParticleBins};
 
 struct Cloud {
@@ -15,11 +17,18 @@ struct Cloud {
     stress: Vec<[f64; 4]>,
 }
 
-fn cloud(particles: usize) -> Cloud {
+fn cloud(particles: usize, gimp: bool) -> Cloud {
     let cells_side = ((particles / 4) as f64).sqrt().ceil() as usize;
     let h = 0.01;
-    let grid = Grid::bilinear([0.0, 0.0], h, [cells_side + 2, cells_side + 2]);
-    let g = 0.5 / 3f64.sqrt();
+    let mut grid = Grid::bilinear([0.0, 0.0], h, [cells_side + 2, cells_side + 2]);
+    let g = if gimp {
+        grid.shape_functions = ShapeFunctions::Gimp {
+            half_width: 0.25 * h,
+        };
+        0.25
+    } else {
+        0.5 / 3f64.sqrt()
+    };
     let mut position = Vec::with_capacity(particles);
     'outer: for cj in 1..=cells_side {
         for ci in 1..=cells_side {
@@ -27,7 +36,12 @@ fn cloud(particles: usize) -> Cloud {
                 if position.len() == particles {
                     break 'outer;
                 }
-                position.push([(ci as f64 + 0.5 + dx) * h, (cj as f64 + 0.5 + dy) * h]);
+                let k = position.len() as f64;
+                let jitter = if gimp { 0.05 * (k * 0.7).sin() } else { 0.0 };
+                position.push([
+                    (ci as f64 + 0.5 + dx + jitter) * h,
+                    (cj as f64 + 0.5 + dy - jitter) * h,
+                ]);
             }
         }
     }
@@ -88,14 +102,18 @@ fn bench_transfer(c: &mut Criterion) {
         .unwrap();
     let parallel = rayon::ThreadPoolBuilder::new().build().unwrap();
     for n in [10_000usize, 100_000] {
-        let cloud = cloud(n);
-        group.throughput(Throughput::Elements(cloud.position.len() as u64));
-        group.bench_with_input(BenchmarkId::new("serial", n), &cloud, |b, cl| {
-            b.iter(|| serial.install(|| p2g_g2p(cl)))
-        });
-        group.bench_with_input(BenchmarkId::new("rayon", n), &cloud, |b, cl| {
-            b.iter(|| parallel.install(|| p2g_g2p(cl)))
-        });
+        for (prefix, gimp) in [("", false), ("gimp_", true)] {
+            let cloud = cloud(n, gimp);
+            group.throughput(Throughput::Elements(cloud.position.len() as u64));
+            let serial_id = BenchmarkId::new(format!("{prefix}serial"), n);
+            group.bench_with_input(serial_id, &cloud, |b, cl| {
+                b.iter(|| serial.install(|| p2g_g2p(cl)))
+            });
+            let rayon_id = BenchmarkId::new(format!("{prefix}rayon"), n);
+            group.bench_with_input(rayon_id, &cloud, |b, cl| {
+                b.iter(|| parallel.install(|| p2g_g2p(cl)))
+            });
+        }
     }
     group.finish();
 }

@@ -273,13 +273,24 @@ impl Grid {
         x: [f64; 2],
         bounds: impl Fn(usize, usize) -> [[f64; 2]; 2],
     ) -> Option<ShapeAt> {
-        let (ci, cj) = self.locate(x)?;
-        Some(match self.shape_functions {
+        let cell = self.locate(x)?;
+        Some(self.shape_in(cell, x, bounds))
+    }
+
+    /// Shape functions at `x` of a point that cell `cell` holds (see
+    /// [`Grid::shape_clipped`]).
+    pub fn shape_in(
+        &self,
+        (ci, cj): (usize, usize),
+        x: [f64; 2],
+        bounds: impl Fn(usize, usize) -> [[f64; 2]; 2],
+    ) -> ShapeAt {
+        match self.shape_functions {
             ShapeFunctions::Bilinear => self.shape_in_cell(ci, cj, x),
             ShapeFunctions::Gimp { half_width } => {
                 self.gimp_in_cell((ci, cj), x, half_width, bounds(ci, cj))
             }
-        })
+        }
     }
 
     /// Cell `(ci, cj)` from a cell index.

@@ -35,16 +35,16 @@ pub struct OutsideGrid {
 /// of order ε/h from the surface stress, and move by O(h/ε): measured, a
 /// local biaxial run throws corner points off the grid.
 pub fn shapes_at(grid: &Grid, positions: &[[f64; 2]]) -> Result<Vec<ShapeAt>, OutsideGrid> {
-    let cells: Vec<(usize, usize)> = positions
-        .par_iter()
-        .enumerate()
-        .map(|(p, &x)| {
-            grid.locate(x).ok_or(OutsideGrid {
-                particle: p,
-                position: x,
-            })
-        })
-        .collect::<Result<_, _>>()?;
+    // indexed collects (an unindexed `Result` collect would copy every shape twice)
+    let located: Vec<Option<(usize, usize)>> =
+        positions.par_iter().map(|&x| grid.locate(x)).collect();
+    if let Some(p) = located.iter().position(Option::is_none) {
+        return Err(OutsideGrid {
+            particle: p,
+            position: positions[p],
+        });
+    }
+    let cells: Vec<(usize, usize)> = located.into_iter().flatten().collect();
     let mut holds_points = vec![false; grid.cell_count()];
     for &(ci, cj) in &cells {
         holds_points[cj * grid.cells[0] + ci] = true;
@@ -72,16 +72,11 @@ pub fn shapes_at(grid: &Grid, positions: &[[f64; 2]]) -> Result<Vec<ShapeAt>, Ou
             extent(1, j, filled(i, j - 1), filled(i, j + 1)),
         ]
     };
-    positions
+    Ok(positions
         .par_iter()
-        .enumerate()
-        .map(|(p, &x)| {
-            grid.shape_clipped(x, bounds).ok_or(OutsideGrid {
-                particle: p,
-                position: x,
-            })
-        })
-        .collect()
+        .zip(&cells)
+        .map(|(&x, &cell)| grid.shape_in(cell, x, bounds))
+        .collect())
 }
 
 /// Largest node patch of a cell (4 × 4 for GIMP).
