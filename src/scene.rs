@@ -949,6 +949,18 @@ impl Scene {
                 ));
             }
         }
+        let surface_contact = self
+            .bc
+            .rigid
+            .iter()
+            .any(|r| r.contact == ContactKind::Surface);
+        if self.scene.analysis == AnalysisKind::Explicit && surface_contact && self.solver.cfl > 0.7
+        {
+            w.push(format!(
+                "solver.cfl {} > 0.7 with a surface-tied rigid body: explicit runs with contact = \"surface\" were measured stable only up to CFL 0.7",
+                self.solver.cfl
+            ));
+        }
         w
     }
 

@@ -70,3 +70,24 @@ fn explicit_surface_contact_matches_the_quasi_static_stiffness() {
     );
     assert!((explicit / quasi_static - 1.0).abs() <= 0.02);
 }
+
+/// An explicit scene with a surface-tied body and CFL above 0.7 gets a
+/// warning naming `solver.cfl`; at 0.5 it does not.
+#[test]
+fn surface_contact_above_cfl_07_is_warned() {
+    let warnings = |cfl: &str| {
+        common::scene(
+            "elastic/platen.toml",
+            &[
+                "bc.rigid.0.contact=surface",
+                "scene.analysis=explicit",
+                "scene.end_time=0.05",
+                cfl,
+            ],
+        )
+        .warnings()
+    };
+    let high = warnings("solver.cfl=0.8");
+    assert!(high.iter().any(|w| w.contains("solver.cfl")), "{high:?}");
+    assert!(warnings("solver.cfl=0.5").is_empty());
+}
