@@ -263,22 +263,12 @@ impl Grid {
     pub fn shape_at(&self, x: [f64; 2]) -> Option<ShapeAt> {
         let max = self.extent_max();
         let bounds = [[self.origin[0], max[0]], [self.origin[1], max[1]]];
-        self.shape_clipped(x, |_, _| bounds)
-    }
-
-    /// Like [`Grid::shape_at`], with a GIMP domain clipped to
-    /// `bounds(ci, cj)` for a point in cell `(ci, cj)` (ignored for bilinear).
-    pub fn shape_clipped(
-        &self,
-        x: [f64; 2],
-        bounds: impl Fn(usize, usize) -> [[f64; 2]; 2],
-    ) -> Option<ShapeAt> {
         let cell = self.locate(x)?;
-        Some(self.shape_in(cell, x, bounds))
+        Some(self.shape_in(cell, x, |_, _| bounds))
     }
 
-    /// Shape functions at `x` of a point that cell `cell` holds (see
-    /// [`Grid::shape_clipped`]).
+    /// Shape functions at `x` of a point that cell `cell` holds; a GIMP
+    /// domain is clipped to `bounds(ci, cj)` (ignored for bilinear).
     pub fn shape_in(
         &self,
         (ci, cj): (usize, usize),

@@ -45,9 +45,13 @@ pub fn shapes_at(grid: &Grid, positions: &[[f64; 2]]) -> Result<Vec<ShapeAt>, Ou
         });
     }
     let cells: Vec<(usize, usize)> = located.into_iter().flatten().collect();
-    let mut holds_points = vec![false; grid.cell_count()];
-    for &(ci, cj) in &cells {
-        holds_points[cj * grid.cells[0] + ci] = true;
+    // which cells hold points (needed only to clip GIMP domains)
+    let mut holds_points = Vec::new();
+    if grid.patch_side() > 2 {
+        holds_points = vec![false; grid.cell_count()];
+        for &(ci, cj) in &cells {
+            holds_points[cj * grid.cells[0] + ci] = true;
+        }
     }
     let bounds = |ci: usize, cj: usize| {
         let h = grid.cell_size;
@@ -122,9 +126,12 @@ impl ParticleBins {
             order[next[c] as usize] = p as u32;
             next[c] += 1;
         }
+        // a bilinear support never leaves the holding cell
         let mut reached = vec![false; n_cells];
-        for s in shapes {
-            mark_cells_reached(grid, s, &mut reached);
+        if grid.patch_side() > 2 {
+            for s in shapes {
+                mark_cells_reached(grid, s, &mut reached);
+            }
         }
         let mut active_cells = Vec::new();
         let mut reached_cells = Vec::new();

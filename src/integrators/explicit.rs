@@ -319,11 +319,13 @@ impl Simulation {
         // material points (step 3), not with the remapped increment `du`:
         // measured, following `du` they drift off the surface and the platen
         // load swings by ±8 %.
-        let motion: Vec<[f64; 2]> = velocity_nodes
-            .iter()
-            .map(|v| [dt * v[0], dt * v[1]])
-            .collect();
-        self.driven.advect(&driven_shapes, &motion);
+        if !self.driven.is_empty() {
+            let motion: Vec<[f64; 2]> = velocity_nodes
+                .iter()
+                .map(|v| [dt * v[0], dt * v[1]])
+                .collect();
+            self.driven.advect(&driven_shapes, &motion);
+        }
         self.profile.add(Stage::G2P, start.elapsed().as_secs_f64());
         self.reaction = reaction;
         self.last_increment = du;
