@@ -149,6 +149,16 @@ fn main() -> ExitCode {
                         sim.solver_usage.halvings,
                         sim.solver_usage.stagnated_steps
                     );
+                    if let Some(first) = sim.lost_points.first() {
+                        let mass: f64 = sim.lost_points.iter().map(|l| l.mass).sum();
+                        let total: f64 = sim.particles.mass.iter().sum::<f64>() + mass;
+                        eprintln!(
+                            "warning: {} material point(s) left the grid and were removed (first at step {}, {:.2e} of the mass; listed in run.json)",
+                            sim.lost_points.len(),
+                            first.step,
+                            mass / total
+                        );
+                    }
                     match outcome.error {
                         Some(e) => fail(
                             1,

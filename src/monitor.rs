@@ -77,6 +77,16 @@ impl Monitor {
         }
     }
 
+    /// Follow the monitored point to its index after points were removed
+    /// (`new_index[old]`; the caller keeps monitored points).
+    pub(crate) fn remap_particle(&mut self, new_index: &[Option<usize>]) {
+        if let Target::Particle(p) = &mut self.target {
+            if let Some(new) = new_index[*p] {
+                *p = new;
+            }
+        }
+    }
+
     /// Current value (scale · raw + offset).
     pub fn value(&self, sim: &Simulation) -> f64 {
         let component = self.spec.component.unwrap_or(VectorComponent::Y);

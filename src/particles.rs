@@ -69,6 +69,26 @@ impl Particles {
         self.body.push(body);
     }
 
+    /// Keep the points with `keep[p]` true (all per-point arrays, order preserved).
+    pub fn retain(&mut self, keep: &[bool]) {
+        fn filter<T: Copy>(values: &mut Vec<T>, keep: &[bool]) {
+            let mut flags = keep.iter();
+            values.retain(|_| *flags.next().unwrap_or(&true));
+        }
+        filter(&mut self.position, keep);
+        filter(&mut self.position0, keep);
+        filter(&mut self.mass, keep);
+        filter(&mut self.volume, keep);
+        filter(&mut self.def_grad, keep);
+        filter(&mut self.stress, keep);
+        filter(&mut self.strain, keep);
+        filter(&mut self.velocity, keep);
+        filter(&mut self.acceleration, keep);
+        filter(&mut self.state, keep);
+        filter(&mut self.material, keep);
+        filter(&mut self.body, keep);
+    }
+
     /// Displacement x_p − x_p(0) of point `p`, m.
     pub fn displacement(&self, p: usize) -> [f64; 2] {
         [

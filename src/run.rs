@@ -180,6 +180,7 @@ pub fn write_run_json(
         "steps_completed": sim.step,
         "time": sim.time,
         "particles": sim.particles.len(),
+        "lost_points": sim.lost_points,
         "grid_cells": sim.grid.cells,
         "wall_seconds": wall_seconds,
         "rayon_threads": rayon::current_num_threads(),

@@ -214,6 +214,24 @@ pub struct GridSpec {
     /// needs `point_layout = "uniform"`).
     #[serde(default)]
     pub shape_functions: ShapeFunctionChoice,
+    /// What happens when a material point leaves the grid: `stop` (default, the
+    /// run ends with an error naming the point) or `remove` (the point is
+    /// dropped from the run and listed in `run.json`; points tied to a rigid
+    /// body or followed by a monitor still stop the run).
+    #[serde(default)]
+    pub lost_points: LostPointPolicy,
+}
+
+/// `[grid] lost_points`: the treatment of material points that leave the grid.
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum LostPointPolicy {
+    /// Stop the run with an error naming the point (outputs so far kept).
+    #[default]
+    Stop,
+    /// Drop the point (e.g. a stress-free fragment ejected from a free surface)
+    /// and record it; the run goes on.
+    Remove,
 }
 
 /// Shape functions of the material points.

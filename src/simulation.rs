@@ -14,8 +14,8 @@ use crate::monitor::Monitor;
 use crate::particles::Particles;
 use crate::profile::Profile;
 use crate::scene::{
-    AnalysisKind, FieldError, LinearSolverChoice, MaterialSpec, PointLayout, Scene, SceneError,
-    ShapeFunctionChoice, VelocityProfile,
+    AnalysisKind, FieldError, LinearSolverChoice, LostPointPolicy, MaterialSpec, PointLayout,
+    Scene, SceneError, ShapeFunctionChoice, VelocityProfile,
 };
 use crate::transfer;
 
@@ -72,6 +72,26 @@ pub struct SolverUsage {
     pub stagnated_steps: usize,
 }
 
+/// A material point dropped from the run after it left the grid
+/// (`[grid] lost_points = "remove"`), as it was at that moment.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct LostPoint {
+    /// Step during which the point left the grid.
+    pub step: usize,
+    /// Index of the point just before its removal (later points move down by one).
+    pub index: usize,
+    /// Position outside the grid, m.
+    pub position: [f64; 2],
+    /// Velocity, m/s.
+    pub velocity: [f64; 2],
+    /// Mass, t per metre run.
+    pub mass: f64,
+    /// Mean stress p = −tr σ / 3, kPa.
+    pub mean_stress: f64,
+    /// Local equivalent plastic strain κ.
+    pub plastic_strain_eq: f64,
+}
+
 /// A run in progress.
 pub struct Simulation {
     /// The validated scene.
@@ -105,6 +125,8 @@ pub struct Simulation {
     pub last_residuals: (Vec<f64>, f64),
     /// Accumulated plastic dissipation D (DESIGN D43), kJ per metre run.
     pub dissipated_energy: f64,
+    /// Points removed after leaving the grid (`[grid] lost_points = "remove"`).
+    pub lost_points: Vec<LostPoint>,
     /// Stage timings.
     pub profile: Profile,
     /// Linear-solver usage counts.
@@ -236,6 +258,7 @@ impl Simulation {
             last_increment: vec![[0.0; 2]; n_nodes],
             last_residuals: (Vec::new(), 0.0),
             dissipated_energy: 0.0,
+            lost_points: Vec::new(),
             profile: Profile::default(),
             solver_usage: SolverUsage::default(),
             solver: DirectSolver::new(policy),
@@ -325,6 +348,63 @@ impl Simulation {
             let report = self.step_once()?;
             observer.on_step(self, &report)?;
         }
+        Ok(())
+    }
+
+    /// With `[grid] lost_points = "remove"`, drop every material point outside
+    /// the grid after a (sub-)step and record it in [`Self::lost_points`];
+    /// indices held by rigid-body ties and monitors follow. A point that a rigid
+    /// body is tied to or a monitor follows is not dropped, nor is the last
+    /// point of the run: `Err((index, position))` of the first such point (the
+    /// caller reports it as having left the grid). With `stop` this does nothing.
+    pub(crate) fn drop_lost_points(&mut self) -> Result<(), (usize, [f64; 2])> {
+        if self.scene.grid.lost_points == LostPointPolicy::Stop {
+            return Ok(());
+        }
+        let p = &self.particles;
+        let keep: Vec<bool> = p.position.iter().map(|&x| self.grid.contains(x)).collect();
+        if keep.iter().all(|&k| k) {
+            return Ok(());
+        }
+        let mut new_index = vec![None; keep.len()];
+        let mut next = 0;
+        for (old, &k) in keep.iter().enumerate() {
+            if k {
+                new_index[old] = Some(next);
+                next += 1;
+            }
+        }
+        let tied_or_monitored = |i: usize| {
+            self.driven.particle.contains(&Some(i))
+                || self.monitors.iter().any(|m| m.particle() == Some(i))
+        };
+        // A run with no material left has nothing to compute: report the first point out.
+        let nothing_left = !keep.iter().any(|&k| k);
+        if let Some(i) =
+            (0..keep.len()).find(|&i| !keep[i] && (nothing_left || tied_or_monitored(i)))
+        {
+            return Err((i, p.position[i]));
+        }
+        for (removed, i) in (0..keep.len()).filter(|&i| !keep[i]).enumerate() {
+            self.lost_points.push(LostPoint {
+                step: self.step + 1,
+                index: i - removed,
+                position: p.position[i],
+                velocity: p.velocity[i],
+                mass: p.mass[i],
+                mean_stress: crate::constitutive::mean_stress(&p.stress[i]),
+                plastic_strain_eq: p.state[i].plastic_strain_eq,
+            });
+        }
+        for tie in self.driven.particle.iter_mut().flatten() {
+            if let Some(new) = new_index[*tie] {
+                *tie = new;
+            }
+        }
+        for monitor in &mut self.monitors {
+            monitor.remap_particle(&new_index);
+        }
+        self.particles.retain(&keep);
         Ok(())
     }
 

@@ -11,6 +11,7 @@ use crate::bc::DofConstraint;
 use crate::error::RunError;
 use crate::integrators::implicit::update_kinematics;
 use crate::profile::Stage;
+use crate::scene::LostPointPolicy;
 use crate::simulation::{Simulation, StepReport};
 use crate::transfer::{self, ParticleBins};
 
@@ -291,6 +292,7 @@ impl Simulation {
                 time: t + dt,
                 what: format!("nonlocal average: {e}"),
             })?;
+        let stop = self.scene.grid.lost_points == LostPointPolicy::Stop;
         {
             let p = &mut self.particles;
             for i in 0..p.len() {
@@ -298,7 +300,7 @@ impl Simulation {
                 p.stress[i] = stress[i];
                 p.state[i] = state[i];
             }
-            if let Some(i) = (0..p.len()).find(|&i| !grid.contains(p.position[i])) {
+            if let Some(i) = (0..p.len()).find(|&i| stop && !grid.contains(p.position[i])) {
                 return Err(RunError::ParticleLeftGrid {
                     step,
                     time: t + dt,
@@ -329,6 +331,13 @@ impl Simulation {
         self.profile.add(Stage::G2P, start.elapsed().as_secs_f64());
         self.reaction = reaction;
         self.last_increment = du;
+        self.drop_lost_points()
+            .map_err(|(particle, position)| RunError::ParticleLeftGrid {
+                step,
+                time: t + dt,
+                particle,
+                position,
+            })?;
         self.step = step;
         self.time = t + dt;
         Ok(StepReport {

@@ -15,7 +15,7 @@ use crate::bc::{DofConstraint, DofMap};
 use crate::error::RunError;
 use crate::grid::ShapeAt;
 use crate::profile::Stage;
-use crate::scene::AnalysisKind;
+use crate::scene::{AnalysisKind, LostPointPolicy};
 use crate::simulation::{Simulation, StepReport};
 use crate::transfer::{self, ParticleBins, NONE};
 
@@ -789,12 +789,16 @@ impl Simulation {
             p.stress[i] = stress[i];
             p.state[i] = state[i];
         }
-        if let Some(i) = (0..n).find(|&i| !self.grid.contains(p.position[i])) {
-            return Err(StepFailure::LeftGrid(i, p.position[i]));
+        if self.scene.grid.lost_points == LostPointPolicy::Stop {
+            if let Some(i) = (0..n).find(|&i| !self.grid.contains(p.position[i])) {
+                return Err(StepFailure::LeftGrid(i, p.position[i]));
+            }
         }
         self.traction.advect(&sg.traction_shapes, du);
         self.driven.advect(&sg.driven_shapes, du);
         self.last_increment = du.to_vec();
+        self.drop_lost_points()
+            .map_err(|(i, x)| StepFailure::LeftGrid(i, x))?;
         self.profile.add(Stage::G2P, start.elapsed().as_secs_f64());
         Ok(())
     }
