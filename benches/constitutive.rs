@@ -7,7 +7,7 @@ use std::hint::black_box;
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use mpm_geo::constitutive::hmc::{Hmc, HmcParameters};
-use mpm_geo::constitutive::{ConstitutiveModel, PointState, Voigt};
+use mpm_geo::constitutive::{ConstitutiveModel, PointState, StrengthVariable, Voigt};
 use mpm_geo::point_driver::run_biaxial;
 
 /// (stress σ_n, strain increment Δε, state_n) triples.
@@ -51,9 +51,10 @@ fn elastic_cases(n: usize) -> Cases {
 fn bench(c: &mut Criterion) {
     let model = Hmc::new(HmcParameters::table1()).expect("Table 1");
     let plastic = softening_cases(&model);
-    assert!(plastic
-        .iter()
-        .all(|(s, e, st)| model.update(s, e, st, None).expect("update").yielded));
+    assert!(plastic.iter().all(|(s, e, st)| model
+        .update(s, e, st, StrengthVariable::Local)
+        .expect("update")
+        .yielded));
     let elastic = elastic_cases(plastic.len());
     let mut group = c.benchmark_group("hmc_update");
     for (name, cases, frozen) in [
@@ -66,7 +67,7 @@ fn bench(c: &mut Criterion) {
             b.iter(|| {
                 let mut acc = 0.0;
                 for (stress, increment, state) in cases.iter() {
-                    let kbar = frozen.then_some(state.plastic_strain_eq);
+                    let kbar = StrengthVariable::from(frozen.then_some(state.plastic_strain_eq));
                     let u = model
                         .update(black_box(stress), black_box(increment), state, kbar)
                         .expect("update");

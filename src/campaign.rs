@@ -54,6 +54,9 @@ pub struct CampaignRun {
     pub kappa_bar: Vec<f64>,
     /// The error that stopped the run, if any.
     pub error: Option<String>,
+    /// Points that left the grid and were removed (`[grid] lost_points = "remove"`):
+    /// (count, removed mass / initial mass).
+    pub lost_points: (usize, f64),
     /// Plastic dissipation at the last step (monitor `dissipation`, D43), kJ/m.
     pub dissipation: Option<f64>,
     /// Wall time, s.
@@ -337,6 +340,7 @@ fn run_one(name: &str, scene: Scene, out: &Path, step_factor: usize) -> Campaign
         eps_q: Vec::new(),
         kappa_bar: Vec::new(),
         error: None,
+        lost_points: (0, 0.0),
         dissipation: None,
         wall_seconds: 0.0,
         profile: String::new(),
@@ -356,6 +360,10 @@ fn run_one(name: &str, scene: Scene, out: &Path, step_factor: usize) -> Campaign
                     .collect();
             }
             run.error = outcome.error.map(|e| e.to_string());
+            let sim = &outcome.simulation;
+            let lost_mass: f64 = sim.lost_points.iter().map(|l| l.mass).sum();
+            let total_mass = sim.particles.mass.iter().sum::<f64>() + lost_mass;
+            run.lost_points = (sim.lost_points.len(), lost_mass / total_mass);
             run.profile = outcome.simulation.profile.table(outcome.wall_seconds);
         }
     }
@@ -545,6 +553,13 @@ fn write_outputs(out: &Path, runs: &[CampaignRun]) -> Result<(), CampaignError> 
             fmt_opt(mm.band_width, 1e3, 2),
             fmt_opt(mm.band_width_kappa_bar, 1e3, 2),
             fmt_opt(r.dissipation, 1.0, 4),
+        );
+    }
+    for r in runs.iter().filter(|r| r.lost_points.0 > 0) {
+        let _ = writeln!(
+            md,
+            "\n- {}: {} material point(s) left the grid and were removed ({:.2e} of the mass; run.json lists them)",
+            r.name, r.lost_points.0, r.lost_points.1
         );
     }
     for r in runs.iter().filter(|r| r.error.is_some()) {

@@ -10,7 +10,8 @@ use std::path::{Path, PathBuf};
 
 use crate::constitutive::hmc::{Hmc, HmcParameters};
 use crate::constitutive::{
-    deviatoric_stress, mean_stress, ConstitutiveError, ConstitutiveModel, PointState, Voigt,
+    deviatoric_stress, mean_stress, ConstitutiveError, ConstitutiveModel, PointState,
+    StrengthVariable, Voigt,
 };
 
 /// Width of the quarter biaxial specimen w (m, paper §3.1): load F = −σyy·w (kN/m).
@@ -195,7 +196,7 @@ fn mixed_control_step(
     let mut residual = f64::INFINITY;
     for _ in 0..MIXED_CONTROL_ITERATIONS {
         let update = model
-            .update(stress_n, increment, state_n, None)
+            .update(stress_n, increment, state_n, StrengthVariable::Local)
             .map_err(|source| PointDriverError::Constitutive { step, source })?;
         let r: Vec<f64> = free
             .iter()

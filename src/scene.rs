@@ -135,6 +135,14 @@ pub struct NonlocalSpec {
     /// ε_κ of DESIGN D18 (third criterion).
     #[serde(default = "default_kappa_tolerance")]
     pub tolerance: f64,
+    /// Over-nonlocal factor m ≥ 1 (Vermeer & Brinkgreve 1994): κ̄ = κ̄(n) +
+    /// m Σ_q W_pq Δκ_q + (1 − m) Δκ_p. The default 1 is DESIGN D35.
+    #[serde(default = "default_over_nonlocal")]
+    pub over_nonlocal: f64,
+}
+
+fn default_over_nonlocal() -> f64 {
+    1.0
 }
 
 fn default_cutoff() -> f64 {
@@ -944,6 +952,15 @@ impl Scene {
                 "nonlocal.tolerance",
                 nl.tolerance > 0.0 && nl.tolerance < 1.0,
                 "must lie in (0, 1)",
+            );
+            check(
+                &mut e,
+                "nonlocal.over_nonlocal",
+                (1.0..=3.0).contains(&nl.over_nonlocal),
+                format!(
+                    "must lie in [1, 3] (got {}; 1 is the plain nonlocal model of DESIGN D35)",
+                    nl.over_nonlocal
+                ),
             );
             check(
                 &mut e,

@@ -205,3 +205,23 @@ fn shape_function_and_contact_options_are_checked() {
     assert!(text.contains("bc.rigid[0].footprint"), "{text}");
     assert!(!text.contains("panicked"), "{text}");
 }
+
+#[test]
+fn out_of_range_over_nonlocal_factor_and_unknown_lost_point_policy_are_refused() {
+    let scene = common::validation("biaxial/nonlocal_h300.toml");
+    let scene = scene.to_str().unwrap();
+    for (set, needles) in [
+        (
+            "nonlocal.over_nonlocal=0.5",
+            ["nonlocal.over_nonlocal", "[1, 3]"],
+        ),
+        ("grid.lost_points=\"drop\"", ["lost_points", "drop"]),
+    ] {
+        let (code, text) = mpm_geo(&["check", scene, "--set", set]);
+        assert_ne!(code, 0, "accepted {set}: {text}");
+        for n in needles {
+            assert!(text.contains(n), "message lacks `{n}`: {text}");
+        }
+        assert!(!text.contains("panicked"), "{text}");
+    }
+}

@@ -1,7 +1,8 @@
 //! Isotropic linear (hypo)elasticity in plane strain (DESIGN D22).
 
 use super::{
-    mat4_mul_vec, ConstitutiveError, ConstitutiveModel, Mat4, PointState, StressUpdate, Voigt,
+    mat4_mul_vec, ConstitutiveError, ConstitutiveModel, Mat4, PointState, StrengthVariable,
+    StressUpdate, Voigt,
 };
 
 /// Isotropic linear elasticity with Young's modulus `youngs_modulus` (kPa) and
@@ -86,7 +87,7 @@ impl ConstitutiveModel for LinearElastic {
         stress_rotated: &Voigt,
         strain_increment: &Voigt,
         state_n: &PointState,
-        _strength_kappa: Option<f64>,
+        _strength: StrengthVariable,
     ) -> Result<StressUpdate, ConstitutiveError> {
         let d = self.stiffness();
         let increment = mat4_mul_vec(&d, strain_increment);

@@ -17,7 +17,7 @@ use super::softening::ThreeLevelSoftening;
 use super::yield_surface::{HyperbolicMohrCoulomb, Invariants, SurfaceStrength};
 use super::{
     mat4_mul_vec, ConstitutiveError, ConstitutiveModel, LinearElastic, Mat4, PointState,
-    StressUpdate, Voigt,
+    StrengthVariable, StressUpdate, Voigt,
 };
 
 /// Newton iterations per (sub)step before sub-stepping (DESIGN §5.6 step 3).
@@ -37,6 +37,64 @@ const KAPPA_TOLERANCE: f64 = 1e-12;
 const COHESION_FLOOR_FRACTION: f64 = 1e-3;
 /// Below J = 1e−10 c_ref the Lode angle is undefined (DESIGN D6).
 const LODE_J_MIN_FRACTION: f64 = 1e-10;
+/// The strength argument κ_s as an affine function of the point's own κ, fixed
+/// for one stress update ([`StrengthVariable`]): local κ_s = κ; nonlocal
+/// κ_s = max(0, κ̄_nb + w (κ − κ_n)) with w = 1 − m the weight of the own
+/// increment (κ̄ is a non-negative average: the clamp guards round-off and
+/// m > 1). With w = 0 the κ row of D29 is dropped (DESIGN §5.6, nonlocal) and
+/// κ follows from Δλ afterwards.
+#[derive(Clone, Copy, Debug)]
+struct StrengthArg {
+    offset: f64,
+    slope: f64,
+    nonlocal: bool,
+}
+
+impl StrengthArg {
+    const LOCAL: Self = Self {
+        offset: 0.0,
+        slope: 1.0,
+        nonlocal: false,
+    };
+
+    fn new(strength: StrengthVariable, kappa_n: f64) -> Self {
+        match strength {
+            StrengthVariable::Local => Self::LOCAL,
+            StrengthVariable::Nonlocal {
+                neighbours,
+                own_weight,
+            } => Self {
+                offset: neighbours - own_weight * kappa_n,
+                slope: own_weight,
+                nonlocal: true,
+            },
+        }
+    }
+
+    /// κ_s depends on the update's own plastic flow: the κ row of D29 is solved.
+    fn couples_kappa(&self) -> bool {
+        self.slope != 0.0
+    }
+
+    /// κ_s at own κ.
+    fn at(&self, kappa: f64) -> f64 {
+        self.at_generic(kappa)
+    }
+
+    /// κ_s at own κ, generic for exact κ-derivatives.
+    fn at_generic<T: Real>(&self, kappa: T) -> T {
+        if self.nonlocal {
+            (T::cst(self.offset) + kappa * T::cst(self.slope)).max_by_value(T::cst(0.0))
+        } else {
+            kappa
+        }
+    }
+
+    fn is_finite(&self) -> bool {
+        self.offset.is_finite() && self.slope.is_finite()
+    }
+}
+
 /// A converged state with J < 1e−8 c_ref is "at the tip" (DESIGN §5.6 step 4).
 const TIP_J_FRACTION: f64 = 1e-8;
 /// Largest admissible friction angle (degrees): the van Eekelen shape with Z = −0.229 is
@@ -435,15 +493,16 @@ impl Hmc {
     }
 
     /// f, f_σ, m, m_σ, h = ‖m‖ε and their κ-derivatives by one dual-number evaluation
-    /// (exact; DESIGN D30–D31). `seed_kappa` = false freezes κ (nonlocal mode).
+    /// (exact; DESIGN D30–D31), with the strength at κ_s = `arg`(κ); the κ-derivatives
+    /// are zero when κ_s does not depend on κ (strength frozen, nonlocal m = 1).
     #[inline]
-    fn linearise(&self, stress: &Voigt, kappa: f64, seed_kappa: bool) -> Linearisation {
+    fn linearise(&self, stress: &Voigt, kappa: f64, arg: StrengthArg) -> Linearisation {
         type D5 = Dual<5>;
         let sigma: [D5; 4] = std::array::from_fn(|i| D5::variable(stress[i], i));
-        let kappa = if seed_kappa {
-            D5::variable(kappa, 4)
+        let kappa = if arg.couples_kappa() {
+            arg.at_generic(D5::variable(kappa, 4))
         } else {
-            D5::cst(kappa)
+            D5::cst(arg.at(kappa))
         };
         let strength = self.strength(kappa);
         let (f, gradient) = self.surface.value_and_gradient(&sigma, &strength);
@@ -472,9 +531,9 @@ impl Hmc {
         multiplier: f64,
         trial: &Voigt,
         kappa_n: f64,
-        frozen: Option<f64>,
+        arg: StrengthArg,
     ) -> (Vec6, f64) {
-        let strength = self.strength_f64(frozen.unwrap_or(kappa));
+        let strength = self.strength_f64(arg.at(kappa));
         let (f, gradient) = self.surface.value_and_gradient(stress, &strength);
         let m = self.flow.direction(&gradient, strength.tan_friction);
         let r = self.assemble_residual(
@@ -483,7 +542,7 @@ impl Hmc {
             multiplier,
             trial,
             kappa_n,
-            frozen.is_none(),
+            arg.couples_kappa(),
             &m,
             strain_norm(&m),
             f,
@@ -560,15 +619,15 @@ impl Hmc {
         &self,
         trial: &Voigt,
         kappa_n: f64,
-        frozen: Option<f64>,
+        arg: StrengthArg,
         tolerance: f64,
     ) -> Result<PlasticStep, &'static str> {
-        let local = frozen.is_none();
+        let local = arg.couples_kappa();
         let e = self.parameters.youngs_modulus;
         let mut stress = *trial;
         let mut kappa = kappa_n;
         let mut multiplier = 0.0;
-        let mut lin = self.linearise(&stress, frozen.unwrap_or(kappa), local);
+        let mut lin = self.linearise(&stress, kappa, arg);
         for _ in 0..MAX_NEWTON_ITERATIONS {
             let r = self.assemble_residual(
                 &stress, kappa, multiplier, trial, kappa_n, local, &lin.m, lin.h, lin.f,
@@ -614,7 +673,7 @@ impl Hmc {
                 (s_try, k_try, multiplier + alpha * step[5])
             };
             let (s_full, k_full, l_full) = point(1.0);
-            let lin_full = self.linearise(&s_full, frozen.unwrap_or(k_full), local);
+            let lin_full = self.linearise(&s_full, k_full, arg);
             let r_full = self.assemble_residual(
                 &s_full,
                 k_full,
@@ -635,7 +694,7 @@ impl Hmc {
             for halving in 1..=MAX_LINE_SEARCH_HALVINGS {
                 alpha *= 0.5;
                 let (s_try, k_try, l_try) = point(alpha);
-                let (r_try, _) = self.residual(&s_try, k_try, l_try, trial, kappa_n, frozen);
+                let (r_try, _) = self.residual(&s_try, k_try, l_try, trial, kappa_n, arg);
                 let norm = r_try.norm();
                 if (norm.is_finite() && norm <= (1.0 - 1e-4 * alpha) * norm0)
                     || halving == MAX_LINE_SEARCH_HALVINGS
@@ -647,7 +706,7 @@ impl Hmc {
                     break;
                 }
             }
-            lin = self.linearise(&stress, frozen.unwrap_or(kappa), local);
+            lin = self.linearise(&stress, kappa, arg);
         }
         Err("Newton iteration limit reached")
     }
@@ -660,10 +719,10 @@ impl Hmc {
         stress_n: &Voigt,
         strain_increment: &Voigt,
         kappa_n: f64,
-        frozen: Option<f64>,
+        arg: StrengthArg,
         substeps: u32,
     ) -> Result<Integrated, &'static str> {
-        let local = frozen.is_none();
+        let local = arg.couples_kappa();
         let n = f64::from(substeps);
         let sub_increment = strain_increment.map(|x| x / n);
         let d_sub = mat4_mul_vec(&self.stiffness, &sub_increment);
@@ -683,7 +742,7 @@ impl Hmc {
                 stress[2] + d_sub[2],
                 stress[3] + d_sub[3],
             ];
-            let strength = self.strength_f64(frozen.unwrap_or(kappa));
+            let strength = self.strength_f64(arg.at(kappa));
             let f_trial = self.surface.value(&trial, &strength);
             if f_trial <= elastic_tolerance {
                 stress = trial;
@@ -697,7 +756,7 @@ impl Hmc {
             let trial_scale = trial.iter().fold(0.0f64, |acc, x| acc.max(x.abs()));
             // Round-off floor for very large stresses (~500 ulp of the trial stress).
             let tolerance = tolerance_base.max(1e-13 * trial_scale);
-            let step = self.plastic_step(&trial, kappa, frozen, tolerance)?;
+            let step = self.plastic_step(&trial, kappa, arg, tolerance)?;
             // Sensitivity: A dy = [C dσ_k + dΔε/n; dκ_k; 0] (linearised D29).
             let mut rhs = SMatrix::<f64, 6, 4>::zeros();
             for i in 0..4 {
@@ -743,13 +802,13 @@ impl Hmc {
         stress_n: &Voigt,
         strain_increment: &Voigt,
         kappa_n: f64,
-        frozen: Option<f64>,
+        arg: StrengthArg,
     ) -> Integrated {
         let mut kappa = kappa_n;
         let mut stress = [0.0; 4];
         let mut plastic = [0.0; 4];
         for _ in 0..50 {
-            let tensile = self.strength_f64(frozen.unwrap_or(kappa)).tensile_strength;
+            let tensile = self.strength_f64(arg.at(kappa)).tensile_strength;
             stress = [tensile, tensile, tensile, 0.0];
             let diff = [
                 stress[0] - stress_n[0],
@@ -762,7 +821,7 @@ impl Hmc {
             let kappa_new = kappa_n + strain_norm(&plastic);
             let change = (kappa_new - kappa).abs();
             kappa = kappa_new;
-            if frozen.is_some() || change <= KAPPA_TOLERANCE {
+            if !arg.couples_kappa() || change <= KAPPA_TOLERANCE {
                 break;
             }
         }
@@ -782,42 +841,29 @@ impl Hmc {
         stress_rotated: &Voigt,
         strain_increment: &Voigt,
         state_n: &PointState,
-        strength_kappa: Option<f64>,
+        strength: StrengthVariable,
     ) -> Result<(StressUpdate, u32), ConstitutiveError> {
+        let kappa_n = state_n.plastic_strain_eq;
+        let arg = StrengthArg::new(strength, kappa_n);
         if stress_rotated
             .iter()
             .chain(strain_increment.iter())
             .any(|x| !x.is_finite())
-            || !state_n.plastic_strain_eq.is_finite()
-            || strength_kappa.is_some_and(|k| !k.is_finite())
+            || !kappa_n.is_finite()
+            || !arg.is_finite()
         {
             return Err(ConstitutiveError::NonFinite(format!(
-                "input stress {stress_rotated:?}, strain increment {strain_increment:?}, κ = {}, κ̄ = {strength_kappa:?}",
-                state_n.plastic_strain_eq
+                "input stress {stress_rotated:?}, strain increment {strain_increment:?}, κ = {kappa_n}, strength variable {strength:?}",
             )));
         }
-        let kappa_n = state_n.plastic_strain_eq;
-        // κ̄ is a non-negative average; guard against round-off below zero.
-        let strength_kappa = strength_kappa.map(|k| k.max(0.0));
         let d_eps = mat4_mul_vec(&self.stiffness, strain_increment);
         let trial: Voigt = std::array::from_fn(|i| stress_rotated[i] + d_eps[i]);
         let trial_mean = -(trial[0] + trial[1] + trial[2]) / 3.0;
-        let tip_applies = |kappa: f64| {
-            trial_mean
-                < -self
-                    .strength(strength_kappa.unwrap_or(kappa))
-                    .tensile_strength
-        };
+        let tip_applies = |kappa: f64| trial_mean < -self.strength(arg.at(kappa)).tensile_strength;
         let mut outcome = None;
         let mut failure = "";
         for level in 0..=MAX_SUBSTEP_LEVEL {
-            match self.integrate(
-                stress_rotated,
-                strain_increment,
-                kappa_n,
-                strength_kappa,
-                1 << level,
-            ) {
+            match self.integrate(stress_rotated, strain_increment, kappa_n, arg, 1 << level) {
                 Ok(result) => {
                     outcome = Some((result, 1u32 << level));
                     break;
@@ -832,7 +878,7 @@ impl Hmc {
                     && tip_applies(result.kappa);
                 if at_tip {
                     (
-                        self.tip_return(stress_rotated, strain_increment, kappa_n, strength_kappa),
+                        self.tip_return(stress_rotated, strain_increment, kappa_n, arg),
                         0,
                     )
                 } else {
@@ -840,7 +886,7 @@ impl Hmc {
                 }
             }
             None if tip_applies(kappa_n) => (
-                self.tip_return(stress_rotated, strain_increment, kappa_n, strength_kappa),
+                self.tip_return(stress_rotated, strain_increment, kappa_n, arg),
                 0,
             ),
             None => {
@@ -865,7 +911,7 @@ impl Hmc {
         }
         let mut state = *state_n;
         state.plastic_strain_eq = result.kappa;
-        if strength_kappa.is_none() {
+        if strength == StrengthVariable::Local {
             state.plastic_strain_eq_nonlocal = result.kappa;
         }
         for i in 0..4 {
@@ -885,10 +931,8 @@ impl Hmc {
         }
         // Never hand back a stress outside the surface (elastic results passed the check already).
         let f = if result.yielded {
-            self.surface.value(
-                &result.stress,
-                &self.strength_f64(strength_kappa.unwrap_or(result.kappa)),
-            )
+            self.surface
+                .value(&result.stress, &self.strength_f64(arg.at(result.kappa)))
         } else {
             f64::NEG_INFINITY
         };
@@ -980,9 +1024,9 @@ impl ConstitutiveModel for Hmc {
         stress_rotated: &Voigt,
         strain_increment: &Voigt,
         state_n: &PointState,
-        strength_kappa: Option<f64>,
+        strength: StrengthVariable,
     ) -> Result<StressUpdate, ConstitutiveError> {
-        self.update_with_substeps(stress_rotated, strain_increment, state_n, strength_kappa)
+        self.update_with_substeps(stress_rotated, strain_increment, state_n, strength)
             .map(|(u, _)| u)
     }
 }
@@ -993,8 +1037,8 @@ mod tests {
     use crate::constitutive::flow_rule::strain_norm_f64;
     use crate::constitutive::yield_surface::stress_from_invariants;
 
-    /// (label, model, σ_n, Δε, κ_n, frozen κ̄) of the tangent check.
-    type TangentCase<'a> = (String, &'a Hmc, Voigt, Voigt, f64, Option<f64>);
+    /// (label, model, σ_n, Δε, κ_n, strength variable) of the tangent check.
+    type TangentCase<'a> = (String, &'a Hmc, Voigt, Voigt, f64, StrengthVariable);
 
     fn model(edit: impl FnOnce(&mut HmcParameters)) -> Hmc {
         let mut p = HmcParameters::table1();
@@ -1058,7 +1102,7 @@ mod tests {
         let inc = scale(total, 1.0 / n as f64);
         for _ in 0..n {
             let u = model
-                .update(&stress, &inc, &state, None)
+                .update(&stress, &inc, &state, StrengthVariable::Local)
                 .expect("update converges");
             stress = u.stress;
             state = u.state;
@@ -1165,7 +1209,12 @@ mod tests {
             let dir = [0.2, -1.0, 0.0, 0.3];
             let inc = scale(&dir, factor * elastic_limit(&m, &isotropic(100.0), &dir));
             let u = m
-                .update(&isotropic(100.0), &inc, &PointState::default(), None)
+                .update(
+                    &isotropic(100.0),
+                    &inc,
+                    &PointState::default(),
+                    StrengthVariable::Local,
+                )
                 .unwrap();
             assert!(u.yielded);
             let big = u
@@ -1211,7 +1260,9 @@ mod tests {
                         ..Default::default()
                     };
                     let dir = &scale(dir, 3.0 * elastic_limit(m, &stress0, dir));
-                    let u = m.update(&stress0, dir, &state0, frozen).expect("converges");
+                    let u = m
+                        .update(&stress0, dir, &state0, frozen.into())
+                        .expect("converges");
                     assert!(u.yielded, "direction {dir:?} should yield");
                     let kappa_strength = frozen.unwrap_or(u.state.plastic_strain_eq);
                     let f = m.yield_function(&u.stress, kappa_strength);
@@ -1264,7 +1315,12 @@ mod tests {
             let t = elastic_limit(&m, &stress0, &dir);
             let inc = scale(&dir, 100.0 * t);
             let (u, substeps) = m
-                .update_with_substeps(&stress0, &inc, &PointState::default(), None)
+                .update_with_substeps(
+                    &stress0,
+                    &inc,
+                    &PointState::default(),
+                    StrengthVariable::Local,
+                )
                 .expect("converges");
             let f = m.yield_function(&u.stress, u.state.plastic_strain_eq);
             assert!(f.abs() <= 1e-8 * m.strength_scale(), "f = {f}");
@@ -1289,7 +1345,7 @@ mod tests {
                 &isotropic(10.0),
                 &[0.01, 0.01, 0.01, 0.0],
                 &PointState::default(),
-                Some(0.0),
+                StrengthVariable::frozen(0.0),
             )
             .expect("tip");
         let pt = m.strength_at(0.0).tensile_strength;
@@ -1382,11 +1438,22 @@ mod tests {
         let mut cases: Vec<TangentCase> = Vec::new();
         for (name, m) in models {
             for theta_deg in [29.9f64, -29.9, 0.0, 12.0] {
-                for frozen in [None, Some(0.03)] {
+                let over_nonlocal = StrengthVariable::Nonlocal {
+                    neighbours: 0.03,
+                    own_weight: -0.3,
+                };
+                for strength in [
+                    StrengthVariable::Local,
+                    StrengthVariable::frozen(0.03),
+                    over_nonlocal,
+                ] {
                     // Start on (just inside) the surface at p = 150 kPa and push along the flow direction + shear.
                     let theta = theta_deg.to_radians();
                     let kappa0 = 0.01;
-                    let strength_k = frozen.unwrap_or(kappa0);
+                    let strength_k = match strength {
+                        StrengthVariable::Local => kappa0,
+                        StrengthVariable::Nonlocal { neighbours, .. } => neighbours,
+                    };
                     let p = 150.0;
                     let (mut lo, mut hi) = (0.0, 2000.0);
                     for _ in 0..100 {
@@ -1405,12 +1472,12 @@ mod tests {
                         2e-3 * flow[i] / strain_norm_f64(&flow) + [1e-4, -2e-4, 0.0, 3e-4][i]
                     });
                     cases.push((
-                        format!("{name} θ={theta_deg} {frozen:?}"),
+                        format!("{name} θ={theta_deg} {strength:?}"),
                         m,
                         stress0,
                         inc,
                         kappa0,
-                        frozen,
+                        strength,
                     ));
                 }
             }
@@ -1422,7 +1489,7 @@ mod tests {
                 [pt - 1.0, pt - 1.5, pt - 1.2, 0.2],
                 [2e-4, 1.5e-4, 0.0, 1e-4],
                 0.0,
-                None,
+                StrengthVariable::Local,
             ));
             // Elastic unloading.
             cases.push((
@@ -1431,7 +1498,7 @@ mod tests {
                 isotropic(100.0),
                 [1e-4, -2e-4, 0.0, 1e-4],
                 0.0,
-                None,
+                StrengthVariable::Local,
             ));
         }
         // A large increment that needs sub-stepping (the tangent is chained through the sub-steps).
@@ -1443,18 +1510,18 @@ mod tests {
             isotropic(100.0),
             scale(&big, 100.0 * t),
             0.0,
-            None,
+            StrengthVariable::Local,
         ));
         assert!(cases.len() >= 20);
         let mut plastic_cases = 0;
         let mut worst_overall: f64 = 0.0;
-        for (label, m, stress0, inc, kappa0, frozen) in &cases {
+        for (label, m, stress0, inc, kappa0, strength) in &cases {
             let state0 = PointState {
                 plastic_strain_eq: *kappa0,
                 plastic_strain_eq_nonlocal: *kappa0,
                 ..Default::default()
             };
-            let u = m.update(stress0, inc, &state0, *frozen).expect("update");
+            let u = m.update(stress0, inc, &state0, *strength).expect("update");
             if u.yielded {
                 plastic_cases += 1;
             }
@@ -1469,8 +1536,12 @@ mod tests {
                 let (mut ip, mut im) = (*inc, *inc);
                 ip[j] += eta;
                 im[j] -= eta;
-                let up = m.update(stress0, &ip, &state0, *frozen).expect("update +");
-                let um = m.update(stress0, &im, &state0, *frozen).expect("update −");
+                let up = m
+                    .update(stress0, &ip, &state0, *strength)
+                    .expect("update +");
+                let um = m
+                    .update(stress0, &im, &state0, *strength)
+                    .expect("update −");
                 for i in 0..4 {
                     let fd = (up.stress[i] - um.stress[i]) / (2.0 * eta);
                     worst = worst.max((fd - u.tangent[i][j]).abs());
@@ -1489,7 +1560,7 @@ mod tests {
                 &isotropic(100.0),
                 &scale(&big, 100.0 * t),
                 &PointState::default(),
-                None,
+                StrengthVariable::Local,
             )
             .unwrap();
         eprintln!("tangent check: {} cases, worst relative error {worst_overall:.2e}; large case used {substeps} sub-steps", cases.len());
@@ -1545,7 +1616,7 @@ mod tests {
         ];
         for m in &models {
             for (stress, kappa) in &states {
-                let lin = m.linearise(stress, *kappa, true);
+                let lin = m.linearise(stress, *kappa, StrengthArg::LOCAL);
                 let (m_sigma, m_kappa, f_kappa) = linearise_fd(m, stress, *kappa);
                 let big = lin
                     .m_sigma
@@ -1570,7 +1641,9 @@ mod tests {
         let start = std::time::Instant::now();
         let mut acc = 0.0;
         for k in 0..n {
-            acc += m.linearise(&stress, kappa + 1e-9 * k as f64, true).m_sigma[1][1];
+            acc += m
+                .linearise(&stress, kappa + 1e-9 * k as f64, StrengthArg::LOCAL)
+                .m_sigma[1][1];
         }
         let dual = start.elapsed().as_secs_f64() / n as f64;
         let start = std::time::Instant::now();
@@ -1644,7 +1717,7 @@ mod tests {
                 plastic_strain_eq_nonlocal: kappa0,
                 ..Default::default()
             };
-            match m.update(&stress0, &inc, &state0, frozen) {
+            match m.update(&stress0, &inc, &state0, frozen.into()) {
                 Ok(u) => {
                     let f =
                         m.yield_function(&u.stress, frozen.unwrap_or(u.state.plastic_strain_eq));
@@ -1673,7 +1746,12 @@ mod tests {
         let m = model(|_| {});
         let inc = [1e-5, -2e-5, 0.0, 1e-5];
         let u = m
-            .update(&isotropic(100.0), &inc, &PointState::default(), None)
+            .update(
+                &isotropic(100.0),
+                &inc,
+                &PointState::default(),
+                StrengthVariable::Local,
+            )
             .unwrap();
         assert!(!u.yielded);
         assert_eq!(u.tangent, m.elastic_stiffness());
@@ -1688,7 +1766,7 @@ mod tests {
                 &[f64::NAN, 0.0, 0.0, 0.0],
                 &inc,
                 &PointState::default(),
-                None
+                StrengthVariable::Local
             ),
             Err(ConstitutiveError::NonFinite(_))
         ));

@@ -92,14 +92,14 @@ pub trait ConstitutiveModel: Send + Sync + Debug {
     /// * `stress_rotated` – σ_n^R, the committed stress rotated by the incremental spin (D13);
     /// * `strain_increment` – Δε of the step so far (D12);
     /// * `state_n` – committed state at the start of the step;
-    /// * `strength_kappa` – `Some(κ̄)` in nonlocal runs: the strength is evaluated at this
-    ///   frozen value and κ is accumulated locally; `None` in local runs (strength at κ).
+    /// * `strength` – the equivalent plastic strain the strength is evaluated at:
+    ///   the point's own κ (local runs) or the nonlocal κ̄ (DESIGN §6).
     fn update(
         &self,
         stress_rotated: &Voigt,
         strain_increment: &Voigt,
         state_n: &PointState,
-        strength_kappa: Option<f64>,
+        strength: StrengthVariable,
     ) -> Result<StressUpdate, ConstitutiveError>;
 
     /// True when the strength can decrease with plastic strain (softening):
@@ -118,6 +118,44 @@ pub trait ConstitutiveModel: Send + Sync + Debug {
         _strength_kappa: Option<f64>,
     ) -> Voigt {
         *stress
+    }
+}
+
+/// The equivalent plastic strain κ_s at which a point's strength is evaluated
+/// during its stress update.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum StrengthVariable {
+    /// Local runs: the point's own κ = κ_n + Δκ (DESIGN §5.6; the return mapping
+    /// solves for Δκ).
+    Local,
+    /// Nonlocal runs (DESIGN D36, with the over-nonlocal factor m):
+    /// κ_s = `neighbours` + `own_weight`·Δκ, where `neighbours` = κ̄_n + m Σ_q W_pq Δκ_q
+    /// is frozen during the update and `own_weight` = 1 − m. For m = 1 (D35)
+    /// the strength is frozen at κ_s = `neighbours`; for m > 1 the point's own
+    /// plastic strain enters with a negative weight and the return mapping
+    /// solves for it together with the stress.
+    Nonlocal {
+        /// κ̄_n + m Σ_q W_pq Δκ_q, the frozen part.
+        neighbours: f64,
+        /// 1 − m, the weight of the point's own increment Δκ.
+        own_weight: f64,
+    },
+}
+
+impl StrengthVariable {
+    /// The strength frozen at κ̄ (DESIGN D36, m = 1).
+    pub fn frozen(kappa_bar: f64) -> Self {
+        Self::Nonlocal {
+            neighbours: kappa_bar,
+            own_weight: 0.0,
+        }
+    }
+}
+
+impl From<Option<f64>> for StrengthVariable {
+    /// `None`: local; `Some(κ̄)`: strength frozen at κ̄.
+    fn from(frozen: Option<f64>) -> Self {
+        frozen.map_or(Self::Local, Self::frozen)
     }
 }
 

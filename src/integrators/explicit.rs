@@ -272,7 +272,7 @@ impl Simulation {
                     &self.materials,
                     &shapes,
                     &du,
-                    nonlocal.as_ref().map(|n| n.strength_kappa()),
+                    nonlocal.as_ref().map(|n| n.strength()),
                     None,
                     &mut trial,
                 )

@@ -525,7 +525,7 @@ impl Simulation {
                     &self.materials,
                     &sg.shapes,
                     du,
-                    nonlocal.map(|n| n.strength_kappa()),
+                    nonlocal.map(|n| n.strength()),
                     self.spin_compliances(),
                     trial,
                 )

@@ -3,17 +3,38 @@
 //! strength variable κ̄ each Newton iteration sees, its convergence (third
 //! criterion of D18), and the value committed at the end of the step.
 
+use crate::constitutive::StrengthVariable;
 use crate::nonlocal::{NonlocalAverager, NonlocalParameters};
 use crate::particles::Particles;
 use crate::scene::{NonlocalSpec, NonlocalUpdate};
+
+/// The strength variable of every point for one iteration's stress updates.
+#[derive(Clone, Copy)]
+pub struct NonlocalStrength<'a> {
+    neighbours: &'a [f64],
+    own_weight: f64,
+}
+
+impl NonlocalStrength<'_> {
+    /// κ_s of point `p`: κ̄_n + m Σ W Δκ (lagged) + (1 − m) Δκ_p (solved with the update).
+    pub fn at(&self, p: usize) -> StrengthVariable {
+        StrengthVariable::Nonlocal {
+            neighbours: self.neighbours[p],
+            own_weight: self.own_weight,
+        }
+    }
+}
 
 /// Nonlocal bookkeeping of one step.
 pub struct NonlocalStep {
     averager: NonlocalAverager,
     /// κ̄(n), committed at the start of the step.
     start: Vec<f64>,
-    /// κ̄ the current iteration's strengths are evaluated at.
-    current: Vec<f64>,
+    /// κ̄(n) + m Σ_q W_pq Δκ_q of the previous iteration (D36; for m = 1 the κ̄
+    /// the current iteration's strengths are evaluated at).
+    neighbours: Vec<f64>,
+    /// Over-nonlocal factor m: the own increment enters κ̄ with weight 1 − m.
+    over_nonlocal: f64,
     update: NonlocalUpdate,
     tolerance: f64,
     scratch_increment: Vec<f64>,
@@ -51,8 +72,9 @@ impl NonlocalStep {
         let n = start.len();
         Ok(Self {
             averager,
-            current: start.clone(),
+            neighbours: start.clone(),
             start,
+            over_nonlocal: spec.over_nonlocal,
             update: if force_step_update {
                 NonlocalUpdate::Step
             } else {
@@ -66,12 +88,16 @@ impl NonlocalStep {
         })
     }
 
-    /// κ̄ at which the strengths of the current iteration are evaluated.
-    pub fn strength_kappa(&self) -> &[f64] {
-        &self.current
+    /// The strength variables of the current iteration's stress updates.
+    pub fn strength(&self) -> NonlocalStrength<'_> {
+        NonlocalStrength {
+            neighbours: &self.neighbours,
+            own_weight: 1.0 - self.over_nonlocal,
+        }
     }
 
-    /// κ̄(n) + Σ_q W_pq Δκ_q for the local increments Δκ = κ(trial) − κ(n) (D35).
+    /// Σ_q W_pq Δκ_q for the local increments Δκ = κ(trial) − κ(n) (D35); the
+    /// increments are left in `scratch_increment`.
     ///
     /// In `iteration` mode (D36: one average per Newton iteration, weights fixed within the
     /// step) the weights of the plastic sources are cached at their first appearance in the
@@ -102,17 +128,15 @@ impl NonlocalStep {
         self.averager
             .average(&self.scratch_increment, &mut self.scratch_average)
             .map_err(|e| e.to_string())?;
-        for (avg, start) in self.scratch_average.iter_mut().zip(&self.start) {
-            *avg += start;
-        }
         self.memo_increment.copy_from_slice(&self.scratch_increment);
         self.memo_valid = true;
         Ok(&self.scratch_average)
     }
 
-    /// After an iteration's stress update: lag κ̄ by one iteration (D36) and
-    /// report whether it has converged (max change ≤ ε_κ · max(max Δκ̄, 1e−8)).
-    /// In `step` mode the strength stays frozen at κ̄(n) and this is always true.
+    /// After an iteration's stress update: lag the neighbour part of κ̄ by one
+    /// iteration (D36) and report whether it has converged (max change ≤
+    /// ε_κ · max(max Δκ̄, 1e−8)). In `step` mode the strength stays frozen at
+    /// κ̄(n) and this is always true.
     pub fn iterate(
         &mut self,
         particles: &Particles,
@@ -121,23 +145,133 @@ impl NonlocalStep {
         if self.update == NonlocalUpdate::Step {
             return Ok(true);
         }
-        let next = self.averaged(particles, trial_kappa)?.to_vec();
+        let m = self.over_nonlocal;
+        self.averaged(particles, trial_kappa)?;
         let mut change = 0.0f64;
         let mut largest = 0.0f64;
-        for p in 0..next.len() {
-            change = change.max((next[p] - self.current[p]).abs());
-            largest = largest.max(next[p] - self.start[p]);
+        for ((neighbours, start), avg) in self
+            .neighbours
+            .iter_mut()
+            .zip(&self.start)
+            .zip(&self.scratch_average)
+        {
+            let next = start + m * avg;
+            change = change.max((next - *neighbours).abs());
+            largest = largest.max(next - start);
+            *neighbours = next;
         }
-        self.current = next;
         Ok(change <= self.tolerance * largest.max(1e-8))
     }
 
-    /// κ̄(n+1) of the converged step (D35).
+    /// κ̄(n+1) = κ̄(n) + m Σ_q W_pq Δκ_q + (1 − m) Δκ_p of the converged step
+    /// (D35; m = 1 by default).
     pub fn committed(
         &mut self,
         particles: &Particles,
         trial_kappa: impl Fn(usize) -> f64,
     ) -> Result<Vec<f64>, String> {
-        Ok(self.averaged(particles, trial_kappa)?.to_vec())
+        let m = self.over_nonlocal;
+        self.averaged(particles, trial_kappa)?;
+        Ok(self
+            .start
+            .iter()
+            .zip(&self.scratch_average)
+            .zip(&self.scratch_increment)
+            .map(|((start, avg), own)| start + m * avg + (1.0 - m) * own)
+            .collect())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// 5 × 5 points at spacing l_s/2, each of volume (l_s/2)², all κ̄(n) = 0.2.
+    fn grid_of_points() -> Particles {
+        let mut particles = Particles::default();
+        for i in 0..5 {
+            for j in 0..5 {
+                let x = [0.005 * i as f64, 0.005 * j as f64];
+                particles.push(x, 1.0, 2.5e-5, [0.0; 4], 0, 0);
+            }
+        }
+        for state in &mut particles.state {
+            state.plastic_strain_eq = 0.1;
+            state.plastic_strain_eq_nonlocal = 0.2;
+        }
+        particles
+    }
+
+    fn spec(over_nonlocal: f64) -> NonlocalSpec {
+        NonlocalSpec {
+            length_scale: 0.01,
+            cutoff_factor: 3.0,
+            update: NonlocalUpdate::Iteration,
+            tolerance: 1e-3,
+            over_nonlocal,
+        }
+    }
+
+    /// κ̄(n+1) − κ̄(n) = m Σ W Δκ + (1 − m) Δκ_p (D35 with the over-nonlocal
+    /// factor): a uniform increment gives the same κ̄ increment for every m
+    /// (weights normalised), and a non-uniform one is the m-weighted blend of
+    /// the plain average (m = 1) and the point's own increment.
+    #[test]
+    fn over_nonlocal_commit_blends_average_and_own_increment() {
+        let particles = grid_of_points();
+        let uniform = |_: usize| 0.1 + 0.03;
+        let peaked = |p: usize| 0.1 + if p == 12 { 0.05 } else { 0.01 * (p % 3) as f64 };
+        let plain = NonlocalStep::new(&spec(1.0), &particles, false)
+            .unwrap()
+            .committed(&particles, peaked)
+            .unwrap();
+        for m in [1.0, 1.1, 2.0] {
+            let mut step = NonlocalStep::new(&spec(m), &particles, false).unwrap();
+            for k in step.committed(&particles, uniform).unwrap() {
+                assert!((k - 0.23).abs() < 1e-12, "m = {m}: {k}");
+            }
+            let committed = step.committed(&particles, peaked).unwrap();
+            for p in 0..particles.len() {
+                let own = peaked(p) - 0.1;
+                let expected = 0.2 + m * (plain[p] - 0.2) + (1.0 - m) * own;
+                assert!(
+                    (committed[p] - expected).abs() < 1e-12,
+                    "m = {m}, point {p}"
+                );
+            }
+        }
+    }
+
+    /// The strength variable of an iteration carries the lagged neighbour part
+    /// κ̄(n) + m Σ W Δκ and the own weight 1 − m; `step` mode keeps κ̄(n).
+    #[test]
+    fn strength_variable_carries_lagged_neighbours_and_own_weight() {
+        let particles = grid_of_points();
+        let increments = |p: usize| 0.1 + 0.002 * p as f64;
+        let plain = NonlocalStep::new(&spec(1.0), &particles, false)
+            .unwrap()
+            .committed(&particles, increments)
+            .unwrap();
+        let m = 1.1;
+        let mut step = NonlocalStep::new(&spec(m), &particles, false).unwrap();
+        step.iterate(&particles, increments).unwrap();
+        for (p, plain_p) in plain.iter().enumerate() {
+            match step.strength().at(p) {
+                StrengthVariable::Nonlocal {
+                    neighbours,
+                    own_weight,
+                } => {
+                    assert!((neighbours - (0.2 + m * (plain_p - 0.2))).abs() < 1e-12);
+                    assert!((own_weight - (1.0 - m)).abs() < 1e-15);
+                }
+                StrengthVariable::Local => panic!("local strength in a nonlocal step"),
+            }
+        }
+        let mut frozen = NonlocalStep::new(&spec(m), &particles, true).unwrap();
+        assert!(frozen.iterate(&particles, increments).unwrap());
+        assert!(matches!(
+            frozen.strength().at(7),
+            StrengthVariable::Nonlocal { neighbours, .. } if neighbours == 0.2
+        ));
     }
 }

@@ -6,8 +6,9 @@ use std::sync::Arc;
 
 use rayon::prelude::*;
 
+use super::regularisation::NonlocalStrength;
 use crate::constitutive::{
-    mat4_mul_vec, ConstitutiveError, ConstitutiveModel, Mat4, PointState, Voigt,
+    mat4_mul_vec, ConstitutiveError, ConstitutiveModel, Mat4, PointState, StrengthVariable, Voigt,
 };
 use crate::grid::ShapeAt;
 use crate::particles::Particles;
@@ -33,15 +34,15 @@ pub struct TrialStresses {
 }
 
 /// Evaluate the stress update at every material point for the nodal
-/// increment `du`. `strength_kappa` (nonlocal runs) gives the frozen κ̄ each
-/// point's strength is evaluated at. On failure returns the lowest-index
+/// increment `du`. `strength` (nonlocal runs) gives the variable each point's
+/// strength is evaluated at (D36); local runs pass `None`. On failure returns the lowest-index
 /// failing point (deterministic whatever the thread count).
 pub fn evaluate_stresses(
     particles: &Particles,
     materials: &[Arc<dyn ConstitutiveModel>],
     shapes: &[ShapeAt],
     du: &[[f64; 2]],
-    strength_kappa: Option<&[f64]>,
+    strength: Option<NonlocalStrength<'_>>,
     compliances: Option<&[Mat4]>,
     trial: &mut TrialStresses,
 ) -> Result<(), (usize, ConstitutiveError)> {
@@ -70,8 +71,8 @@ pub fn evaluate_stresses(
             let rotated = transfer::rotate_stress(&particles.stress[p], spin);
             *rotated_out = rotated;
             let material = &materials[particles.material[p] as usize];
-            let kappa = strength_kappa.map(|k| k[p]);
-            match material.update(&rotated, &strain_increment, &particles.state[p], kappa) {
+            let strength = strength.map_or(StrengthVariable::Local, |s| s.at(p));
+            match material.update(&rotated, &strain_increment, &particles.state[p], strength) {
                 Ok(update) => {
                     *stress = update.stress;
                     *state = update.state;
