@@ -264,22 +264,32 @@ impl TractionPoints {
     /// Add the nodal forces −P n_s ℓ_s N_i(x_s) into `force` (per grid node), in point order.
     pub fn add_forces(&self, shapes: &[ShapeAt], force: &mut [[f64; 2]]) {
         for (s, shape) in shapes.iter().enumerate() {
-            let (n, len) = self.normal_and_length(s);
-            let magnitude = self.pressure[s] * len;
+            let f = self.force(s);
             for a in shape.support() {
                 let node = shape.nodes[a] as usize;
-                force[node][0] -= magnitude * n[0] * shape.n[a];
-                force[node][1] -= magnitude * n[1] * shape.n[a];
+                force[node][0] += f[0] * shape.n[a];
+                force[node][1] += f[1] * shape.n[a];
             }
         }
     }
 
+    /// Force −P n_s ℓ_s of point `s` on the body, kN/m.
+    fn force(&self, s: usize) -> [f64; 2] {
+        let (n, len) = self.normal_and_length(s);
+        let magnitude = self.pressure[s] * len;
+        [-magnitude * n[0], -magnitude * n[1]]
+    }
+
     /// Move the points with the converged nodal displacement increment and
-    /// stretch/rotate their tangents with ΔF(x_s) (follower load).
-    pub fn advect(&mut self, shapes: &[ShapeAt], du: &[[f64; 2]]) {
+    /// stretch/rotate their tangents with ΔF(x_s) (follower load). Returns the
+    /// work of the pressure on this motion, Σ_s ½ (f_s,before + f_s,after)·Δx_s
+    /// (kJ/m; trapezoidal in the follower force).
+    pub fn advect(&mut self, shapes: &[ShapeAt], du: &[[f64; 2]]) -> f64 {
+        let mut work = 0.0;
         for (s, shape) in shapes.iter().enumerate() {
             let u = transfer::interpolate(shape, du);
             let l = transfer::gradient(shape, du);
+            let before = self.force(s);
             let t = self.tangent[s];
             self.position[s][0] += u[0];
             self.position[s][1] += u[1];
@@ -287,7 +297,10 @@ impl TractionPoints {
                 t[0] + l[0] * t[0] + l[1] * t[1],
                 t[1] + l[2] * t[0] + l[3] * t[1],
             ];
+            let after = self.force(s);
+            work += 0.5 * ((before[0] + after[0]) * u[0] + (before[1] + after[1]) * u[1]);
         }
+        work
     }
 }
 

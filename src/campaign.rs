@@ -59,6 +59,9 @@ pub struct CampaignRun {
     pub lost_points: (usize, f64),
     /// Plastic dissipation at the last step (monitor `dissipation`, D43), kJ/m.
     pub dissipation: Option<f64>,
+    /// Energy balance at the last step, from the monitors `external_work`,
+    /// `internal_work` and `kinetic_energy` (when the scene has all three).
+    pub energy: Option<EnergyBalance>,
     /// Wall time, s.
     pub wall_seconds: f64,
     /// Per-stage profile table.
@@ -111,6 +114,25 @@ fn read_curve(path: &Path) -> Vec<(f64, f64)> {
 }
 
 /// Last value of column `name` of a CSV file.
+/// M5 energy balance of a run at its last step, kJ/m.
+#[derive(Debug, Clone, Copy)]
+pub struct EnergyBalance {
+    /// Work of the pressures and rigid bodies on the soil.
+    pub external: f64,
+    /// Work of the stresses on the strain increments (stored + dissipated).
+    pub internal: f64,
+    /// Kinetic energy.
+    pub kinetic: f64,
+}
+
+impl EnergyBalance {
+    /// (W − W_int − K) / W: the share of the external work lost by the time
+    /// integration (e.g. Newmark γ > ½ damping a dynamic snap).
+    pub fn relative_loss(&self) -> f64 {
+        (self.external - self.internal - self.kinetic) / self.external
+    }
+}
+
 fn last_value(path: &Path, name: &str) -> Option<f64> {
     let mut reader = csv::Reader::from_path(path).ok()?;
     let column = reader.headers().ok()?.iter().position(|h| h == name)?;
@@ -342,6 +364,7 @@ fn run_one(name: &str, scene: Scene, out: &Path, step_factor: usize) -> Campaign
         error: None,
         lost_points: (0, 0.0),
         dissipation: None,
+        energy: None,
         wall_seconds: 0.0,
         profile: String::new(),
         step_factor,
@@ -369,6 +392,19 @@ fn run_one(name: &str, scene: Scene, out: &Path, step_factor: usize) -> Campaign
     }
     run.curve = read_curve(&out.join("curve.csv"));
     run.dissipation = last_value(&out.join("curve.csv"), "dissipation");
+    let curve = out.join("curve.csv");
+    run.energy = match (
+        last_value(&curve, "external_work"),
+        last_value(&curve, "internal_work"),
+        last_value(&curve, "kinetic_energy"),
+    ) {
+        (Some(external), Some(internal), Some(kinetic)) => Some(EnergyBalance {
+            external,
+            internal,
+            kinetic,
+        }),
+        _ => None,
+    };
     run.wall_seconds = start.elapsed().as_secs_f64();
     run
 }
@@ -501,7 +537,7 @@ fn write_outputs(out: &Path, runs: &[CampaignRun]) -> Result<(), CampaignError> 
     // metrics
     let m = compute_metrics(runs);
     let metrics_path = out.join("metrics.csv");
-    let mut csv = String::from("run,family,cell_size,length_scale,status,wall_seconds,initial_slope,peak_delta,peak_load,final_load,M1_discrepancy,M2_peak_spread,M3_brittleness,M4_band_width,M4_band_width_kappa_bar,external_work,M5_dissipation\n");
+    let mut csv = String::from("run,family,cell_size,length_scale,status,wall_seconds,initial_slope,peak_delta,peak_load,final_load,M1_discrepancy,M2_peak_spread,M3_brittleness,M4_band_width,M4_band_width_kappa_bar,load_curve_work,M5_dissipation,external_work,internal_work,kinetic_energy,energy_loss\n");
     let mut md = String::from("# Mesh-objectivity report\n\nReference of each family: its finest completed mesh (DESIGN §9). δ in mm, loads in kN/m, band width w (M4 on εq) and w_κ̄ (M4 on the nonlocal variable κ̄) in mm.\n\n| run | h (mm) | status | wall (s) | slope (kN/m/m) | peak F | δ_peak | F_end | β (M3) | M1 e_h | M2 | w (mm) | w/l_s | w_κ̄ (mm) | D (kJ/m, M5) |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     for (r, mm) in runs.iter().zip(&m) {
         let family = if r.length_scale.is_some() {
@@ -516,7 +552,7 @@ fn write_outputs(out: &Path, runs: &[CampaignRun]) -> Result<(), CampaignError> 
         };
         let _ = writeln!(
             csv,
-            "{},{family},{:e},{},{status},{:.2},{:.1},{:e},{:e},{:e},{},{},{},{},{},{},{}",
+            "{},{family},{:e},{},{status},{:.2},{:.1},{:e},{:e},{:e},{},{},{},{},{},{},{},{},{},{},{}",
             r.name,
             r.cell_size,
             r.length_scale.map(|l| l.to_string()).unwrap_or_default(),
@@ -532,6 +568,10 @@ fn write_outputs(out: &Path, runs: &[CampaignRun]) -> Result<(), CampaignError> 
             fmt_opt(mm.band_width_kappa_bar, 1.0, 6),
             fmt_opt(mm.external_work, 1.0, 6),
             fmt_opt(r.dissipation, 1.0, 6),
+            fmt_opt(r.energy.map(|e| e.external), 1.0, 6),
+            fmt_opt(r.energy.map(|e| e.internal), 1.0, 6),
+            fmt_opt(r.energy.map(|e| e.kinetic), 1.0, 9),
+            fmt_opt(r.energy.map(|e| e.relative_loss()), 1.0, 5),
         );
         let ratio = match (mm.band_width, r.length_scale) {
             (Some(w), Some(l)) => format!("{:.2}", w / l),
@@ -554,6 +594,23 @@ fn write_outputs(out: &Path, runs: &[CampaignRun]) -> Result<(), CampaignError> 
             fmt_opt(mm.band_width_kappa_bar, 1e3, 2),
             fmt_opt(r.dissipation, 1.0, 4),
         );
+    }
+    if runs.iter().any(|r| r.energy.is_some()) {
+        md.push_str("\n## Energy balance (M5)\n\nAt the last step, kJ/m: W work of the pressures and the platen on the soil, W_int work of the stresses on the strain increments (elastic energy stored + dissipation D), K kinetic energy. The loss (W − W_int − K)/W is the energy the time integration removed (Newmark γ > ½ damping a dynamic snap; about 2e-5 in an elastic run, tests/energy_balance.rs).\n\n| run | W | W_int | D | K | loss |\n|---|---|---|---|---|---|\n");
+        for r in runs {
+            if let Some(e) = r.energy {
+                let _ = writeln!(
+                    md,
+                    "| {} | {:.5} | {:.5} | {} | {:.2e} | {:.2} % |",
+                    r.name,
+                    e.external,
+                    e.internal,
+                    fmt_opt(r.dissipation, 1.0, 5),
+                    e.kinetic,
+                    100.0 * e.relative_loss()
+                );
+            }
+        }
     }
     for r in runs.iter().filter(|r| r.lost_points.0 > 0) {
         let _ = writeln!(

@@ -126,6 +126,8 @@ impl Monitor {
             (Target::Rigid(r), _) => pick(sim.driven.force_on_soil(*r, p, sim.time)),
             (_, MonitorKind::KineticEnergy) => sim.kinetic_energy(),
             (_, MonitorKind::StrainEnergy) => sim.strain_energy(),
+            (_, MonitorKind::ExternalWork) => sim.external_work,
+            (_, MonitorKind::InternalWork) => sim.internal_work,
             (_, MonitorKind::MaxPlasticStrain) => p
                 .state
                 .iter()

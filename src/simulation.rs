@@ -127,6 +127,18 @@ pub struct Simulation {
     pub dissipated_energy: f64,
     /// Points removed after leaving the grid (`[grid] lost_points = "remove"`).
     pub lost_points: Vec<LostPoint>,
+    /// Work W of the external loads on the soil so far, kJ per metre run: the
+    /// follower pressures (trapezoidal per step) and the rigid bodies (their
+    /// force on the soil times their prescribed motion, trapezoidal per step;
+    /// the penalty springs' own energy, ½ k gap², is left out). Gravity is not
+    /// included. Energy balance (DESIGN §9, M5): W = W_int + ΔK + numerical losses.
+    pub external_work: f64,
+    /// Work of the stresses on the strain increments so far (DESIGN D43 with the
+    /// total strain increment), kJ per metre run: elastic energy stored plus
+    /// plastic dissipation.
+    pub internal_work: f64,
+    /// Force of every rigid body on the soil at the end of the last step, kN/m.
+    rigid_force: Vec<[f64; 2]>,
     /// Stage timings.
     pub profile: Profile,
     /// Linear-solver usage counts.
@@ -259,6 +271,9 @@ impl Simulation {
             last_residuals: (Vec::new(), 0.0),
             dissipated_energy: 0.0,
             lost_points: Vec::new(),
+            external_work: 0.0,
+            internal_work: 0.0,
+            rigid_force: Vec::new(),
             profile: Profile::default(),
             solver_usage: SolverUsage::default(),
             solver: DirectSolver::new(policy),
@@ -334,9 +349,28 @@ impl Simulation {
 
     /// Advance one step with the scene's integrator.
     pub fn step_once(&mut self) -> Result<StepReport, RunError> {
-        match self.analysis() {
+        let start = self.time;
+        let report = match self.analysis() {
             AnalysisKind::QuasiStatic | AnalysisKind::ImplicitDynamic => self.implicit_step(),
             AnalysisKind::Explicit => self.explicit_step(),
+        }?;
+        self.add_rigid_work(start);
+        Ok(report)
+    }
+
+    /// Work of the rigid bodies on the soil over the step from `start`:
+    /// ½ (R_n + R_n+1)·v Δt per body (R of DESIGN D40).
+    fn add_rigid_work(&mut self, start: f64) {
+        let bodies = self.driven.velocity.len();
+        self.rigid_force.resize(bodies, [0.0; 2]);
+        let dt = self.time - start;
+        for r in 0..bodies {
+            let now = self.driven.force_on_soil(r, &self.particles, self.time);
+            let before = self.rigid_force[r];
+            let v = self.driven.velocity[r];
+            self.external_work +=
+                0.5 * dt * ((before[0] + now[0]) * v[0] + (before[1] + now[1]) * v[1]);
+            self.rigid_force[r] = now;
         }
     }
 

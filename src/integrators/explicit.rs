@@ -285,6 +285,7 @@ impl Simulation {
             })?;
         let start = std::time::Instant::now();
         self.dissipated_energy += self.step_dissipation(&trial);
+        self.internal_work += self.step_internal_work(&trial);
         let (stress, state) = self
             .finalize_stresses(&bins, &shapes, &trial, nonlocal.as_mut())
             .map_err(|e| RunError::NonFinite {
@@ -316,7 +317,7 @@ impl Simulation {
                 });
             }
         }
-        self.traction.advect(&traction_shapes, &du);
+        self.external_work += self.traction.advect(&traction_shapes, &du);
         // Surface contact points move with the nodal velocity that moved the
         // material points (step 3), not with the remapped increment `du`:
         // measured, following `du` they drift off the surface and the platen

@@ -23,6 +23,22 @@ impl Simulation {
         }
     }
 
+    /// Work of the stresses on the converged step's strain increments (M5):
+    /// Σ_p V_p(n) · ½(σ_p(n+1) + σ_p^R(n)) · Δε_p, with the constitutive stresses
+    /// before double mapping (Voigt dot product, engineering shear), kJ per metre
+    /// run. Minus the dissipation of D43 it is the elastic energy stored.
+    pub(crate) fn step_internal_work(&self, trial: &TrialStresses) -> f64 {
+        let p = &self.particles;
+        (0..p.len())
+            .map(|i| {
+                let strain = crate::transfer::strain_and_spin(&trial.gradient[i]).0;
+                let (now, before) = (&trial.stress[i], &trial.rotated[i]);
+                let work: f64 = (0..4).map(|k| 0.5 * (now[k] + before[k]) * strain[k]).sum();
+                p.volume[i] * work
+            })
+            .sum()
+    }
+
     /// Plastic dissipation of the converged step (DESIGN D43, M5):
     /// Σ_p V_p(n) · ½(σ_p(n+1) + σ_p^R(n)) · Δε^p_p with Δε^p = Δε − C(σ(n+1) − σ^R(n)),
     /// using the constitutive stresses before double mapping; elastic materials

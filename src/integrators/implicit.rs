@@ -759,6 +759,7 @@ impl Simulation {
             }
         }
         self.dissipated_energy += self.step_dissipation(trial);
+        self.internal_work += self.step_internal_work(trial);
         let (stress, state) = self
             .finalize_stresses(&sg.bins, &sg.shapes, trial, nonlocal)
             .map_err(|e| StepFailure::NonFinite(format!("nonlocal average: {e}"), Vec::new()))?;
@@ -794,7 +795,7 @@ impl Simulation {
                 return Err(StepFailure::LeftGrid(i, p.position[i]));
             }
         }
-        self.traction.advect(&sg.traction_shapes, du);
+        self.external_work += self.traction.advect(&sg.traction_shapes, du);
         self.driven.advect(&sg.driven_shapes, du);
         self.last_increment = du.to_vec();
         self.drop_lost_points()
