@@ -37,64 +37,6 @@ const KAPPA_TOLERANCE: f64 = 1e-12;
 const COHESION_FLOOR_FRACTION: f64 = 1e-3;
 /// Below J = 1e−10 c_ref the Lode angle is undefined (DESIGN D6).
 const LODE_J_MIN_FRACTION: f64 = 1e-10;
-/// The strength argument κ_s as an affine function of the point's own κ, fixed
-/// for one stress update ([`StrengthVariable`]): local κ_s = κ; nonlocal
-/// κ_s = max(0, κ̄_nb + w (κ − κ_n)) with w = 1 − m the weight of the own
-/// increment (κ̄ is a non-negative average: the clamp guards round-off and
-/// m > 1). With w = 0 the κ row of D29 is dropped (DESIGN §5.6, nonlocal) and
-/// κ follows from Δλ afterwards.
-#[derive(Clone, Copy, Debug)]
-struct StrengthArg {
-    offset: f64,
-    slope: f64,
-    nonlocal: bool,
-}
-
-impl StrengthArg {
-    const LOCAL: Self = Self {
-        offset: 0.0,
-        slope: 1.0,
-        nonlocal: false,
-    };
-
-    fn new(strength: StrengthVariable, kappa_n: f64) -> Self {
-        match strength {
-            StrengthVariable::Local => Self::LOCAL,
-            StrengthVariable::Nonlocal {
-                neighbours,
-                own_weight,
-            } => Self {
-                offset: neighbours - own_weight * kappa_n,
-                slope: own_weight,
-                nonlocal: true,
-            },
-        }
-    }
-
-    /// κ_s depends on the update's own plastic flow: the κ row of D29 is solved.
-    fn couples_kappa(&self) -> bool {
-        self.slope != 0.0
-    }
-
-    /// κ_s at own κ.
-    fn at(&self, kappa: f64) -> f64 {
-        self.at_generic(kappa)
-    }
-
-    /// κ_s at own κ, generic for exact κ-derivatives.
-    fn at_generic<T: Real>(&self, kappa: T) -> T {
-        if self.nonlocal {
-            (T::cst(self.offset) + kappa * T::cst(self.slope)).max_by_value(T::cst(0.0))
-        } else {
-            kappa
-        }
-    }
-
-    fn is_finite(&self) -> bool {
-        self.offset.is_finite() && self.slope.is_finite()
-    }
-}
-
 /// A converged state with J < 1e−8 c_ref is "at the tip" (DESIGN §5.6 step 4).
 const TIP_J_FRACTION: f64 = 1e-8;
 /// Largest admissible friction angle (degrees): the van Eekelen shape with Z = −0.229 is
@@ -328,6 +270,64 @@ pub struct Hmc {
 }
 
 /// Second-order information at one (σ, κ) of the return mapping (DESIGN D30–D31).
+/// The strength argument κ_s as an affine function of the point's own κ, fixed
+/// for one stress update ([`StrengthVariable`]): local κ_s = κ; nonlocal
+/// κ_s = max(0, κ̄_nb + w (κ − κ_n)) with w = 1 − m the weight of the own
+/// increment (κ̄ is a non-negative average: the clamp guards round-off and
+/// m > 1). With w = 0 the κ row of D29 is dropped (DESIGN §5.6, nonlocal) and
+/// κ follows from Δλ afterwards.
+#[derive(Clone, Copy, Debug)]
+struct StrengthArg {
+    offset: f64,
+    slope: f64,
+    nonlocal: bool,
+}
+
+impl StrengthArg {
+    const LOCAL: Self = Self {
+        offset: 0.0,
+        slope: 1.0,
+        nonlocal: false,
+    };
+
+    fn new(strength: StrengthVariable, kappa_n: f64) -> Self {
+        match strength {
+            StrengthVariable::Local => Self::LOCAL,
+            StrengthVariable::Nonlocal {
+                neighbours,
+                own_weight,
+            } => Self {
+                offset: neighbours - own_weight * kappa_n,
+                slope: own_weight,
+                nonlocal: true,
+            },
+        }
+    }
+
+    /// κ_s depends on the update's own plastic flow: the κ row of D29 is solved.
+    fn couples_kappa(&self) -> bool {
+        self.slope != 0.0
+    }
+
+    /// κ_s at own κ.
+    fn at(&self, kappa: f64) -> f64 {
+        self.at_generic(kappa)
+    }
+
+    /// κ_s at own κ, generic for exact κ-derivatives.
+    fn at_generic<T: Real>(&self, kappa: T) -> T {
+        if self.nonlocal {
+            (T::cst(self.offset) + kappa * T::cst(self.slope)).max_by_value(T::cst(0.0))
+        } else {
+            kappa
+        }
+    }
+
+    fn is_finite(&self) -> bool {
+        self.offset.is_finite() && self.slope.is_finite()
+    }
+}
+
 #[derive(Clone, Copy, Debug)]
 struct Linearisation {
     f: f64,

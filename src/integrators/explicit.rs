@@ -301,7 +301,8 @@ impl Simulation {
                 p.stress[i] = stress[i];
                 p.state[i] = state[i];
             }
-            if let Some(i) = (0..p.len()).find(|&i| stop && !grid.contains(p.position[i])) {
+            let outside = (0..p.len()).find(|&i| !grid.contains(p.position[i]));
+            if let Some(i) = outside.filter(|_| stop) {
                 return Err(RunError::ParticleLeftGrid {
                     step,
                     time: t + dt,
