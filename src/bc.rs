@@ -317,7 +317,7 @@ impl TractionPoints {
 ///   moving with the surface (x_s += Σ N_i(x_s) Δu_i, with the grid motion
 ///   that moves the material points), so the tie never jumps from a grid row
 ///   to the next (DESIGN's reason for not using nodal rows). Explicit runs
-///   are stable up to CFL 0.7 with it (0.9 with `top_points`).
+///   are stable up to CFL 0.9 with it (1.0 with `top_points`).
 ///   The first step then equals a bilinear FE model with the top nodes
 ///   tied: 12,635 kN/m per m on the biaxial at h = 1/300 m, as an independent
 ///   FE computation gives (`tests/rigid_contact.rs`).

@@ -995,10 +995,10 @@ impl Scene {
             .rigid
             .iter()
             .any(|r| r.contact == ContactKind::Surface);
-        if self.scene.analysis == AnalysisKind::Explicit && surface_contact && self.solver.cfl > 0.7
+        if self.scene.analysis == AnalysisKind::Explicit && surface_contact && self.solver.cfl > 0.9
         {
             w.push(format!(
-                "solver.cfl {} > 0.7 with a surface-tied rigid body: explicit runs with contact = \"surface\" were measured stable only up to CFL 0.7",
+                "solver.cfl {} > 0.9 with a surface-tied rigid body: explicit runs with contact = \"surface\" were measured stable only up to CFL 0.9",
                 self.solver.cfl
             ));
         }
