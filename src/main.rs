@@ -149,6 +149,12 @@ fn main() -> ExitCode {
                         sim.solver_usage.halvings,
                         sim.solver_usage.stagnated_steps
                     );
+                    if let (Some((lo, hi)), Some(by)) = (
+                        sim.solver_usage.explicit_time_step,
+                        &sim.solver_usage.time_step_limited_by,
+                    ) {
+                        eprintln!("explicit time step {lo:.3e} to {hi:.3e} s (limited by {by})");
+                    }
                     if let Some(first) = sim.lost_points.first() {
                         let mass: f64 = sim.lost_points.iter().map(|l| l.mass).sum();
                         let total: f64 = sim.particles.mass.iter().sum::<f64>() + mass;

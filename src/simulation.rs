@@ -70,6 +70,11 @@ pub struct SolverUsage {
     /// Steps accepted on the force criterion alone because the residual had
     /// stagnated (the energy criterion of D18 cannot be met by iterating).
     pub stagnated_steps: usize,
+    /// Explicit runs: smallest and largest time step taken, s (before the last
+    /// step is shortened to end at `end_time`).
+    pub explicit_time_step: Option<(f64, f64)>,
+    /// Explicit runs: what limited the stable time step at the last step.
+    pub time_step_limited_by: Option<String>,
 }
 
 /// A material point dropped from the run after it left the grid

@@ -119,9 +119,9 @@ fn particle_leaving_the_grid_stops_the_run_and_keeps_the_curve() {
         text.contains("left the grid") && text.contains("material point"),
         "{text}"
     );
-    // the failing step number from the message, e.g. "step 812 (t = ...)"
+    // the failing step number from the message, e.g. "run stopped: step 812 (t = ...)"
     let step: usize = text
-        .split("step ")
+        .split("run stopped: step ")
         .nth(1)
         .and_then(|s| s.split_whitespace().next())
         .and_then(|s| s.parse().ok())

@@ -170,6 +170,12 @@ impl Simulation {
             Some(fixed) => fixed,
             None => cfl_dt,
         };
+        let usage = &mut self.solver_usage;
+        usage.explicit_time_step = Some(match usage.explicit_time_step {
+            Some((lo, hi)) => (lo.min(dt), hi.max(dt)),
+            None => (dt, dt),
+        });
+        usage.time_step_limited_by = Some(reason);
         let end = self.scene.scene.end_time.unwrap_or(f64::INFINITY);
         let dt = dt.min(end - t).max(0.0);
         if dt <= 0.0 || !dt.is_finite() {
