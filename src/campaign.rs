@@ -113,7 +113,6 @@ fn read_curve(path: &Path) -> Vec<(f64, f64)> {
         .collect()
 }
 
-/// Last value of column `name` of a CSV file.
 /// M5 energy balance of a run at its last step, kJ/m.
 #[derive(Debug, Clone, Copy)]
 pub struct EnergyBalance {
@@ -133,6 +132,7 @@ impl EnergyBalance {
     }
 }
 
+/// Last value of column `name` of a CSV file.
 fn last_value(path: &Path, name: &str) -> Option<f64> {
     let mut reader = csv::Reader::from_path(path).ok()?;
     let column = reader.headers().ok()?.iter().position(|h| h == name)?;
@@ -390,9 +390,9 @@ fn run_one(name: &str, scene: Scene, out: &Path, step_factor: usize) -> Campaign
             run.profile = outcome.simulation.profile.table(outcome.wall_seconds);
         }
     }
-    run.curve = read_curve(&out.join("curve.csv"));
-    run.dissipation = last_value(&out.join("curve.csv"), "dissipation");
     let curve = out.join("curve.csv");
+    run.curve = read_curve(&curve);
+    run.dissipation = last_value(&curve, "dissipation");
     run.energy = match (
         last_value(&curve, "external_work"),
         last_value(&curve, "internal_work"),

@@ -103,6 +103,9 @@ fn main() -> ExitCode {
         Command::Check { scene, overrides } => match Scene::load(&scene, &overrides) {
             Ok(s) => match mpm_geo::simulation::Simulation::new(s) {
                 Ok(sim) => {
+                    for w in sim.scene.warnings() {
+                        eprintln!("warning: {w}");
+                    }
                     println!(
                         "{}: valid ({} material points, {}×{} cells)",
                         scene.display(),

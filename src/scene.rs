@@ -135,7 +135,7 @@ pub struct NonlocalSpec {
     /// ε_κ of DESIGN D18 (third criterion).
     #[serde(default = "default_kappa_tolerance")]
     pub tolerance: f64,
-    /// Over-nonlocal factor m ≥ 1 (Vermeer & Brinkgreve 1994): κ̄ = κ̄(n) +
+    /// Over-nonlocal factor m in [1, 3] (Vermeer & Brinkgreve 1994): κ̄ = κ̄(n) +
     /// m Σ_q W_pq Δκ_q + (1 − m) Δκ_p. The default 1 is DESIGN D35.
     #[serde(default = "default_over_nonlocal")]
     pub over_nonlocal: f64,
@@ -987,6 +987,15 @@ impl Scene {
                     "grid.cell_size {} m > 0.2 l_s = {} m: the paper finds nonlocal results mesh-objective only for h <= 0.2 l_s",
                     self.grid.cell_size,
                     0.2 * nl.length_scale
+                ));
+            }
+        }
+        let gravity = self.loads.gravity != 0.0 || self.loads.gravity_ramp.is_some();
+        for m in &self.monitor {
+            if gravity && m.kind == MonitorKind::ExternalWork {
+                w.push(format!(
+                    "monitor {} (external_work) leaves out the work of gravity",
+                    m.name
                 ));
             }
         }
