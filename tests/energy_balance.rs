@@ -38,6 +38,8 @@ fn external_work_equals_internal_work_plus_kinetic_energy_in_an_elastic_run() {
         assert!(external > 1e-2, "{analysis}: W = {external}");
         let loss = (external - internal - kinetic) / external;
         println!("{analysis}: W = {external:.6e}, W_int = {internal:.6e}, K = {kinetic:.2e}, loss {loss:.2e}");
-        assert!(loss.abs() <= 1e-3, "{analysis}: relative imbalance {loss}");
+        // the Newmark damping (γ = 0.6) of the start-up oscillation is the largest
+        // physical loss here, ~1e-5 W; trapezoidal follower work adds less
+        assert!(loss.abs() <= 2e-4, "{analysis}: relative imbalance {loss}");
     }
 }

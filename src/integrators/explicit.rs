@@ -295,8 +295,9 @@ impl Simulation {
                 source,
             })?;
         let start = std::time::Instant::now();
-        self.dissipated_energy += self.step_dissipation(&trial);
-        self.internal_work += self.step_internal_work(&trial);
+        let (internal_work, dissipation) = self.step_energies(&trial);
+        self.internal_work += internal_work;
+        self.dissipated_energy += dissipation;
         let (stress, state) = self
             .finalize_stresses(&bins, &shapes, &trial, nonlocal.as_mut())
             .map_err(|e| RunError::NonFinite {
@@ -312,14 +313,15 @@ impl Simulation {
                 p.stress[i] = stress[i];
                 p.state[i] = state[i];
             }
-            let outside = (0..p.len()).find(|&i| !grid.contains(p.position[i]));
-            if let Some(i) = outside.filter(|_| stop) {
-                return Err(RunError::ParticleLeftGrid {
-                    step,
-                    time: t + dt,
-                    particle: i,
-                    position: p.position[i],
-                });
+            if stop {
+                if let Some(i) = (0..p.len()).find(|&i| !grid.contains(p.position[i])) {
+                    return Err(RunError::ParticleLeftGrid {
+                        step,
+                        time: t + dt,
+                        particle: i,
+                        position: p.position[i],
+                    });
+                }
             }
             if let Some(i) = (0..p.len()).find(|&i| p.stress[i].iter().any(|s| !s.is_finite())) {
                 return Err(RunError::NonFinite {

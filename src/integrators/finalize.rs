@@ -23,31 +23,32 @@ impl Simulation {
         }
     }
 
-    /// Work of the stresses on the converged step's strain increments (M5):
-    /// Σ_p V_p(n) · ½(σ_p(n+1) + σ_p^R(n)) · Δε_p, with the constitutive stresses
-    /// before double mapping (Voigt dot product, engineering shear), kJ per metre
-    /// run. Minus the dissipation of D43 it is the elastic energy stored.
-    pub(crate) fn step_internal_work(&self, trial: &TrialStresses) -> f64 {
+    /// Energies of the converged step (M5), kJ per metre run, from the
+    /// constitutive stresses before double mapping (Voigt dot products,
+    /// engineering shear), with one strain increment Δε per point:
+    /// - internal work Σ_p V_p(n) · ½(σ_p(n+1) + σ_p^R(n)) · Δε_p (elastic
+    ///   energy stored plus dissipation);
+    /// - plastic dissipation (DESIGN D43) Σ_p V_p(n) · ½(σ_p(n+1) + σ_p^R(n)) · Δε^p_p
+    ///   with Δε^p = Δε − C(σ(n+1) − σ^R(n)); elastic materials contribute nothing.
+    pub(crate) fn step_energies(&self, trial: &TrialStresses) -> (f64, f64) {
         let p = &self.particles;
-        (0..p.len())
+        let strain: Vec<Voigt> = trial
+            .gradient
+            .iter()
+            .map(|l| crate::transfer::strain_and_spin(l).0)
+            .collect();
+        let internal_work = (0..p.len())
             .map(|i| {
-                let strain = crate::transfer::strain_and_spin(&trial.gradient[i]).0;
                 let (now, before) = (&trial.stress[i], &trial.rotated[i]);
-                let work: f64 = (0..4).map(|k| 0.5 * (now[k] + before[k]) * strain[k]).sum();
+                let work: f64 = (0..4)
+                    .map(|k| 0.5 * (now[k] + before[k]) * strain[i][k])
+                    .sum();
                 p.volume[i] * work
             })
-            .sum()
-    }
-
-    /// Plastic dissipation of the converged step (DESIGN D43, M5):
-    /// Σ_p V_p(n) · ½(σ_p(n+1) + σ_p^R(n)) · Δε^p_p with Δε^p = Δε − C(σ(n+1) − σ^R(n)),
-    /// using the constitutive stresses before double mapping; elastic materials
-    /// contribute nothing. kJ per metre run.
-    pub(crate) fn step_dissipation(&self, trial: &TrialStresses) -> f64 {
+            .sum();
         if self.materials.iter().all(|m| m.is_elastic()) {
-            return 0.0;
+            return (internal_work, 0.0);
         }
-        let p = &self.particles;
         // elastic points dissipate nothing: give them zero weight
         let volumes: Vec<f64> = (0..p.len())
             .map(|i| {
@@ -58,24 +59,20 @@ impl Simulation {
                 }
             })
             .collect();
-        let strain: Vec<Voigt> = trial
-            .gradient
-            .iter()
-            .map(|l| crate::transfer::strain_and_spin(l).0)
-            .collect();
         let compliance: Vec<crate::constitutive::Mat4> = p
             .material
             .iter()
             .map(|&m| self.compliances[m as usize])
             .collect();
-        crate::metrics::dissipation_increment(
+        let dissipation = crate::metrics::dissipation_increment(
             &volumes,
             &trial.stress,
             &trial.rotated,
             &strain,
             crate::metrics::ComplianceSource::PerPoint(&compliance),
         )
-        .unwrap_or(f64::NAN)
+        .unwrap_or(f64::NAN);
+        (internal_work, dissipation)
     }
 
     /// Stresses and states to commit for the converged trial state.

@@ -758,8 +758,9 @@ impl Simulation {
                 ));
             }
         }
-        self.dissipated_energy += self.step_dissipation(trial);
-        self.internal_work += self.step_internal_work(trial);
+        let (internal_work, dissipation) = self.step_energies(trial);
+        self.internal_work += internal_work;
+        self.dissipated_energy += dissipation;
         let (stress, state) = self
             .finalize_stresses(&sg.bins, &sg.shapes, trial, nonlocal)
             .map_err(|e| StepFailure::NonFinite(format!("nonlocal average: {e}"), Vec::new()))?;
