@@ -372,7 +372,7 @@ fn run_one(name: &str, scene: Scene, out: &Path, step_factor: usize) -> Campaign
     match run_scene(scene, out, false) {
         Err(e) => run.error = Some(e.to_string()),
         Ok(outcome) => {
-            let p = &outcome.simulation.particles;
+            let p = &outcome.simulation.model.particles;
             run.positions = p.position.clone();
             run.eps_q = p.def_grad.iter().map(deviatoric_hencky_strain).collect();
             if run.length_scale.is_some() {
@@ -383,7 +383,7 @@ fn run_one(name: &str, scene: Scene, out: &Path, step_factor: usize) -> Campaign
                     .collect();
             }
             run.error = outcome.error.map(|e| e.to_string());
-            let sim = &outcome.simulation;
+            let sim = &outcome.simulation.model;
             let lost_mass: f64 = sim.lost_points.iter().map(|l| l.mass).sum();
             let total_mass = sim.particles.mass.iter().sum::<f64>() + lost_mass;
             run.lost_points = (sim.lost_points.len(), lost_mass / total_mass);

@@ -1,97 +1,28 @@
-//! Errors of a run. Every variant names the step, the time and the cause; the
-//! CLI prints them as they are.
+//! Errors of a run. A failed step is a [`RunError::Step`]: the step and time
+//! are filled in once, by the time loop, around a typed [`StepError`] cause
+//! raised by the integrator; the CLI prints them as they are.
+
+use std::fmt;
+
+use mpm_solvers::SolverError;
 
 use crate::constitutive::ConstitutiveError;
+use crate::nonlocal::NonlocalError;
 
 /// Why a run stopped before its end.
 #[derive(Debug, thiserror::Error)]
 pub enum RunError {
-    /// A material point left the background grid.
-    #[error("step {step} (t = {time:.6e} s): material point {particle} left the grid at ({:.6}, {:.6}) m", position[0], position[1])]
-    ParticleLeftGrid {
-        /// Step being computed.
+    /// A step failed; outputs up to the previous step are kept.
+    #[error("step {step} (t = {time:.6e} s): {cause}")]
+    Step {
+        /// Step being computed (1-based).
         step: usize,
-        /// Time at the end of that step, s.
+        /// Time reached when it failed (the start of the failed step or
+        /// sub-step), s.
         time: f64,
-        /// Particle index.
-        particle: usize,
-        /// Where it went, m.
-        position: [f64; 2],
-    },
-    /// A boundary point (a traction point carrying a pressure, or a rigid
-    /// body's surface contact point) left the background grid.
-    #[error("step {step} (t = {time:.6e} s): {kind} point {point} left the grid at ({:.6}, {:.6}) m", position[0], position[1])]
-    BoundaryPointLeftGrid {
-        /// Step being computed.
-        step: usize,
-        /// Time, s.
-        time: f64,
-        /// `traction` or `contact`.
-        kind: &'static str,
-        /// Index of the point among the points of its kind.
-        point: usize,
-        /// Where it went, m.
-        position: [f64; 2],
-    },
-    /// Newton–Raphson failed even after the allowed step halvings.
-    #[error("step {step} (t = {time:.6e} s): Newton did not converge after {halvings} step halvings: {cause}; residual history {history:?}")]
-    NewtonFailed {
-        /// Step being computed.
-        step: usize,
-        /// Time at the end of the failed (sub-)step, s.
-        time: f64,
-        /// Number of halvings tried.
-        halvings: usize,
-        /// Cause of the last failure.
-        cause: String,
-        /// ‖R‖ per iteration of the last attempt, kN/m.
-        history: Vec<f64>,
-    },
-    /// The stress update failed at a material point.
-    #[error("step {step} (t = {time:.6e} s): stress update failed at material point {particle}: {source}")]
-    Constitutive {
-        /// Step being computed.
-        step: usize,
-        /// Time, s.
-        time: f64,
-        /// Particle index.
-        particle: usize,
-        /// The constitutive error.
-        source: ConstitutiveError,
-    },
-    /// A NaN or infinite value appeared.
-    #[error("step {step} (t = {time:.6e} s): non-finite value: {what}")]
-    NonFinite {
-        /// Step being computed.
-        step: usize,
-        /// Time, s.
-        time: f64,
-        /// Where it appeared.
-        what: String,
-    },
-    /// The explicit time step exceeds the stability limit.
-    #[error("step {step} (t = {time:.6e} s): explicit time step {dt:.4e} s exceeds the stability limit {limit:.4e} s ({reason})")]
-    UnstableTimeStep {
-        /// Step being computed.
-        step: usize,
-        /// Time, s.
-        time: f64,
-        /// The time step, s.
-        dt: f64,
-        /// The limit, s.
-        limit: f64,
-        /// Which limit (wave speed or penalty springs).
-        reason: String,
-    },
-    /// The linear solver failed.
-    #[error("step {step} (t = {time:.6e} s): linear solver: {message}")]
-    Solver {
-        /// Step being computed.
-        step: usize,
-        /// Time, s.
-        time: f64,
-        /// The solver's message.
-        message: String,
+        /// What went wrong.
+        #[source]
+        cause: StepError,
     },
     /// Writing an output failed.
     #[error("output {path}: {message}")]
@@ -100,5 +31,225 @@ pub enum RunError {
         path: String,
         /// Why.
         message: String,
+    },
+}
+
+impl RunError {
+    /// The step error, if the run stopped in a step.
+    pub fn cause(&self) -> Option<&StepError> {
+        match self {
+            RunError::Step { cause, .. } => Some(cause),
+            RunError::Output { .. } => None,
+        }
+    }
+}
+
+/// Which kind of boundary point left the grid.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BoundaryPointKind {
+    /// A traction point carrying a follower pressure.
+    Traction,
+    /// A rigid body's surface contact point.
+    Contact,
+}
+
+impl fmt::Display for BoundaryPointKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            BoundaryPointKind::Traction => "traction",
+            BoundaryPointKind::Contact => "contact",
+        })
+    }
+}
+
+/// What limits the explicit stable time step (DESIGN D20, §4).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TimeStepLimit {
+    /// h / (c_p + |v_p|) of the material points.
+    WaveSpeed,
+    /// The wave limit combined with the penalty springs of driven points.
+    WaveSpeedAndSprings,
+}
+
+impl fmt::Display for TimeStepLimit {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            TimeStepLimit::WaveSpeed => "wave speed, DESIGN D20",
+            TimeStepLimit::WaveSpeedAndSprings => {
+                "wave speed and penalty springs of driven points, DESIGN §4"
+            }
+        })
+    }
+}
+
+impl serde::Serialize for TimeStepLimit {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.collect_str(self)
+    }
+}
+
+/// A D18 criterion of the implicit Newton loop.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Criterion {
+    /// ‖R‖ ≤ ε_R F_ref.
+    Force,
+    /// |δu · R| ≤ ε_E |δu⁰ · R⁰|.
+    Energy,
+    /// κ̄ lagged one iteration has settled (nonlocal runs).
+    NonlocalKappa,
+}
+
+impl fmt::Display for Criterion {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Criterion::Force => "force",
+            Criterion::Energy => "energy",
+            Criterion::NonlocalKappa => "nonlocal κ̄",
+        })
+    }
+}
+
+/// Why the last attempt at an implicit (sub-)step failed.
+#[derive(Debug, Clone, PartialEq)]
+pub enum NewtonFailure {
+    /// The residual grew in three consecutive iterations.
+    Diverged,
+    /// The iteration limit was reached with D18 criteria unmet.
+    IterationLimit {
+        /// The limit.
+        iterations: usize,
+        /// The criteria still unmet at the last iterate.
+        unmet: Vec<Criterion>,
+        /// The force reference F_ref of D18, kN/m.
+        reference: f64,
+    },
+    /// A non-finite residual or solution.
+    NonFinite(&'static str),
+    /// A point moved more than half a cell in one dynamic step (DESIGN §3).
+    Motion {
+        /// The point.
+        particle: usize,
+        /// Its position at the start of the step, m.
+        position: [f64; 2],
+        /// How far it moved, m.
+        distance: f64,
+    },
+}
+
+impl fmt::Display for NewtonFailure {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            NewtonFailure::Diverged => write!(f, "residual grew in 3 consecutive iterations"),
+            NewtonFailure::IterationLimit {
+                iterations,
+                unmet,
+                reference,
+            } => {
+                let unmet: Vec<String> = unmet.iter().map(|c| c.to_string()).collect();
+                write!(
+                    f,
+                    "no convergence within {iterations} iterations (unmet D18 criteria: {}; force reference F_ref = {reference:.3e})",
+                    unmet.join(", ")
+                )
+            }
+            NewtonFailure::NonFinite(what) => write!(f, "non-finite {what}"),
+            NewtonFailure::Motion {
+                particle,
+                position,
+                distance,
+            } => write!(
+                f,
+                "material point {particle} at ({:.6}, {:.6}) m moved {distance:.3e} m > h/2 in one step",
+                position[0], position[1]
+            ),
+        }
+    }
+}
+
+/// Why a step failed.
+#[derive(Debug, thiserror::Error)]
+pub enum StepError {
+    /// A material point left the background grid.
+    #[error("material point {particle} left the grid at ({:.6}, {:.6}) m", position[0], position[1])]
+    ParticleLeftGrid {
+        /// Particle index.
+        particle: usize,
+        /// Where it went, m.
+        position: [f64; 2],
+    },
+    /// A boundary point left the background grid.
+    #[error("{kind} point {point} left the grid at ({:.6}, {:.6}) m", position[0], position[1])]
+    BoundaryPointLeftGrid {
+        /// Traction or contact point.
+        kind: BoundaryPointKind,
+        /// Index of the point among the points of its kind.
+        point: usize,
+        /// Where it went, m.
+        position: [f64; 2],
+    },
+    /// Newton–Raphson failed even after the allowed step halvings.
+    #[error("Newton did not converge after {halvings} step halvings: {cause}; residual history {history:?}")]
+    NewtonFailed {
+        /// Number of halvings tried.
+        halvings: usize,
+        /// Cause of the last failure.
+        cause: NewtonFailure,
+        /// ‖R‖ per iteration of the last attempt, kN/m.
+        history: Vec<f64>,
+    },
+    /// The stress update failed at a material point.
+    #[error("stress update failed at material point {particle}: {source}")]
+    Constitutive {
+        /// Particle index.
+        particle: usize,
+        /// The constitutive error.
+        source: ConstitutiveError,
+    },
+    /// A stress became NaN or infinite.
+    #[error("non-finite value: stress of material point {particle}")]
+    NonFiniteStress {
+        /// Particle index.
+        particle: usize,
+    },
+    /// The explicit time step is not a positive finite number.
+    #[error("non-finite value: explicit time step {dt}")]
+    InvalidTimeStep {
+        /// The time step, s.
+        dt: f64,
+    },
+    /// The explicit time step exceeds the stability limit.
+    #[error(
+        "explicit time step {dt:.4e} s exceeds the stability limit {limit:.4e} s ({limited_by})"
+    )]
+    UnstableTimeStep {
+        /// The time step, s.
+        dt: f64,
+        /// The limit, s.
+        limit: f64,
+        /// Which limit.
+        limited_by: TimeStepLimit,
+    },
+    /// The linear solver (or the pattern of its system) failed.
+    #[error("linear solver: {0}")]
+    Solver(#[from] SolverError),
+    /// The nonlocal averaging failed.
+    #[error("nonlocal averaging: {0}")]
+    Nonlocal(#[from] NonlocalError),
+    /// Double mapping of the stresses failed (its force-restoring solve).
+    #[error("double mapping: {0}")]
+    DoubleMapping(#[source] SolverError),
+    /// The integrator asked of the run does not offer this (e.g. a tangent
+    /// of an explicit run).
+    #[error("{0}")]
+    NotAvailable(&'static str),
+    /// Verification access with inputs of the wrong size.
+    #[error("{what}: {given} values given for {expected}")]
+    WrongLength {
+        /// Which call.
+        what: &'static str,
+        /// Values given.
+        given: usize,
+        /// Values expected.
+        expected: usize,
     },
 }

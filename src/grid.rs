@@ -126,7 +126,7 @@ impl Grid {
 
     /// The four global node indices of cell `(ci, cj)` in row-major order
     /// (lower-left, lower-right, upper-left, upper-right), the order of the
-    /// 8×8 cell blocks of `transfer::system_blocks`.
+    /// 8×8 cell blocks of `stiffness::system_blocks`.
     pub fn cell_nodes_row_major(&self, ci: usize, cj: usize) -> [u32; 4] {
         let [ll, lr, ur, ul] = self.cell_nodes(ci, cj);
         [ll, lr, ul, ur]

@@ -103,6 +103,7 @@ fn main() -> ExitCode {
         Command::Check { scene, overrides } => match Scene::load(&scene, &overrides) {
             Ok(s) => match mpm_geo::simulation::Simulation::new(s) {
                 Ok(sim) => {
+                    let sim = &sim.model;
                     for w in sim.scene.warnings() {
                         eprintln!("warning: {w}");
                     }
@@ -140,22 +141,22 @@ fn main() -> ExitCode {
             match run_scene(loaded, &out, !quiet) {
                 Err(e) => fail(2, &e.to_string()),
                 Ok(outcome) => {
-                    let sim = &outcome.simulation;
-                    eprintln!("{}", sim.profile.table(outcome.wall_seconds));
+                    eprintln!("{}", outcome.simulation.profile.table(outcome.wall_seconds));
+                    let usage = outcome.simulation.integrator.usage();
+                    let sim = &outcome.simulation.model;
                     eprintln!(
                         "steps {}  time {:.6e} s  Newton iterations {}  factorisations: Cholesky {} LU {}  halvings {}  stagnated steps {}",
                         sim.step,
                         sim.time,
-                        sim.solver_usage.newton_iterations,
-                        sim.solver_usage.cholesky,
-                        sim.solver_usage.lu,
-                        sim.solver_usage.halvings,
-                        sim.solver_usage.stagnated_steps
+                        usage.newton_iterations,
+                        usage.cholesky,
+                        usage.lu,
+                        usage.halvings,
+                        usage.stagnated_steps
                     );
-                    if let (Some((lo, hi)), Some(by)) = (
-                        sim.solver_usage.explicit_time_step,
-                        &sim.solver_usage.time_step_limited_by,
-                    ) {
+                    if let (Some((lo, hi)), Some(by)) =
+                        (usage.explicit_time_step, &usage.time_step_limited_by)
+                    {
                         eprintln!("explicit time step {lo:.3e} to {hi:.3e} s (limited by {by})");
                     }
                     if let Some(first) = sim.lost_points.first() {

@@ -2,8 +2,8 @@
 
 use crate::bc::nodes_on_line;
 use crate::constitutive::{deviatoric_stress, mean_stress};
+use crate::model::Model;
 use crate::scene::{GridLine, MonitorKind, MonitorSpec, StressQuantity, VectorComponent};
-use crate::simulation::Simulation;
 
 /// A monitor with its target resolved against the seeded model.
 #[derive(Clone, Debug)]
@@ -26,13 +26,13 @@ enum Target {
 impl Monitor {
     /// Resolve `spec`: the material point initially nearest `point`, the grid
     /// nodes of `line`, or the rigid body named `rigid`.
-    pub fn resolve(spec: &MonitorSpec, sim: &Simulation) -> Self {
+    pub fn resolve(spec: &MonitorSpec, model: &Model) -> Self {
         let target = match spec.kind {
             MonitorKind::PointDisplacement
             | MonitorKind::PointVelocity
             | MonitorKind::PointStress => {
                 let x = spec.point.unwrap_or_default();
-                let p = sim
+                let p = model
                     .particles
                     .position0
                     .iter()
@@ -46,14 +46,15 @@ impl Monitor {
             MonitorKind::Reaction => {
                 let line = spec.line.as_deref().and_then(|l| GridLine::parse(l).ok());
                 Target::Nodes(
-                    line.map(|l| nodes_on_line(&sim.grid, l))
+                    line.map(|l| nodes_on_line(&model.grid, l))
                         .unwrap_or_default(),
                 )
             }
             MonitorKind::RigidForce | MonitorKind::RigidDisplacement => {
                 let name = spec.rigid.clone().unwrap_or_default();
                 Target::Rigid(
-                    sim.driven
+                    model
+                        .driven
                         .names
                         .iter()
                         .position(|n| *n == name)
@@ -79,7 +80,7 @@ impl Monitor {
 
     /// Follow the monitored point to its index after points were removed
     /// (`new_index[old]`; the caller keeps monitored points).
-    pub(crate) fn remap_particle(&mut self, new_index: &[Option<usize>]) {
+    pub fn remap_particle(&mut self, new_index: &[Option<usize>]) {
         if let Target::Particle(p) = &mut self.target {
             if let Some(new) = new_index[*p] {
                 *p = new;
@@ -88,14 +89,14 @@ impl Monitor {
     }
 
     /// Current value (scale · raw + offset).
-    pub fn value(&self, sim: &Simulation) -> f64 {
+    pub fn value(&self, model: &Model) -> f64 {
         let component = self.spec.component.unwrap_or(VectorComponent::Y);
         let pick = |v: [f64; 2]| match component {
             VectorComponent::X => v[0],
             VectorComponent::Y => v[1],
             VectorComponent::Norm => (v[0] * v[0] + v[1] * v[1]).sqrt(),
         };
-        let p = &sim.particles;
+        let p = &model.particles;
         let raw = match (&self.target, self.spec.kind) {
             (Target::Particle(i), MonitorKind::PointDisplacement) => pick(p.displacement(*i)),
             (Target::Particle(i), MonitorKind::PointVelocity) => pick(p.velocity[*i]),
@@ -113,7 +114,7 @@ impl Monitor {
             (Target::Nodes(nodes), _) => {
                 let mut sum = [0.0; 2];
                 for &n in nodes {
-                    if let Some(r) = sim.reaction.get(n) {
+                    if let Some(r) = model.reaction.get(n) {
                         sum[0] += r[0];
                         sum[1] += r[1];
                     }
@@ -121,20 +122,20 @@ impl Monitor {
                 pick(sum)
             }
             (Target::Rigid(r), MonitorKind::RigidDisplacement) => {
-                pick(sim.driven.mean_displacement(*r, p))
+                pick(model.driven.mean_displacement(*r, p))
             }
-            (Target::Rigid(r), _) => pick(sim.driven.force_on_soil(*r, p, sim.time)),
-            (_, MonitorKind::KineticEnergy) => sim.kinetic_energy(),
-            (_, MonitorKind::StrainEnergy) => sim.strain_energy(),
-            (_, MonitorKind::ExternalWork) => sim.external_work,
-            (_, MonitorKind::InternalWork) => sim.internal_work,
+            (Target::Rigid(r), _) => pick(model.driven.force_on_soil(*r, p, model.time)),
+            (_, MonitorKind::KineticEnergy) => model.kinetic_energy(),
+            (_, MonitorKind::StrainEnergy) => model.strain_energy(),
+            (_, MonitorKind::ExternalWork) => model.external_work,
+            (_, MonitorKind::InternalWork) => model.internal_work,
             (_, MonitorKind::MaxPlasticStrain) => p
                 .state
                 .iter()
                 .map(|s| s.plastic_strain_eq)
                 .fold(0.0, f64::max),
-            (_, MonitorKind::DissipatedEnergy) => sim.dissipated_energy,
-            (_, MonitorKind::Gravity) => sim.scene.loads.gravity_at(sim.time),
+            (_, MonitorKind::DissipatedEnergy) => model.dissipated_energy,
+            (_, MonitorKind::Gravity) => model.scene.loads.gravity_at(model.time),
             _ => f64::NAN,
         };
         self.spec.scale * raw + self.spec.offset

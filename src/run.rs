@@ -8,10 +8,11 @@ use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
 
 use crate::error::RunError;
+use crate::integrators::StepReport;
 use crate::output::{write_json, write_vtu, CurveWriter};
 use crate::profile::Stage;
 use crate::scene::{AnalysisKind, Scene};
-use crate::simulation::{Observer, Simulation, StepReport};
+use crate::simulation::{Observer, Simulation};
 
 /// Writes a run's outputs as it goes.
 pub struct OutputObserver {
@@ -31,9 +32,9 @@ impl OutputObserver {
         let names: Vec<String> = sim.monitors.iter().map(|m| m.name.clone()).collect();
         let curve = CurveWriter::create(&dir.join("curve.csv"), &names)?;
         let progress = if show_progress {
-            let total = match sim.analysis() {
+            let total = match sim.model.analysis() {
                 AnalysisKind::Explicit => 1000,
-                _ => sim.scene.scene.steps.unwrap_or(0) as u64,
+                _ => sim.model.scene.scene.steps.unwrap_or(0) as u64,
             };
             let bar = ProgressBar::new(total);
             let template = "{bar:30} {pos}/{len} [{elapsed_precise} < {eta_precise}] {msg}";
@@ -54,62 +55,53 @@ impl OutputObserver {
     }
 
     fn snapshot_due(sim: &Simulation) -> bool {
-        let o = &sim.scene.output;
-        o.snapshots.contains(&sim.step)
-            || (o.snapshot_every > 0 && sim.step.is_multiple_of(o.snapshot_every))
+        let o = &sim.model.scene.output;
+        let step = sim.model.step;
+        o.snapshots.contains(&step)
+            || (o.snapshot_every > 0 && step.is_multiple_of(o.snapshot_every))
     }
 
     fn write_snapshot(&self, sim: &Simulation) -> Result<(), RunError> {
         write_vtu(
-            &self.dir.join(format!("particles_{:06}.vtu", sim.step)),
-            &sim.particles,
+            &self
+                .dir
+                .join(format!("particles_{:06}.vtu", sim.model.step)),
+            &sim.model.particles,
         )
+    }
+
+    fn write_row(&mut self, sim: &Simulation) -> Result<(), RunError> {
+        let model = &sim.model;
+        self.curve
+            .row(model.step, model.time, &sim.monitor_values())?;
+        self.last_row_step = model.step;
+        Ok(())
     }
 
     /// Write the last row if it was skipped by `curve_every` (call at the end or on failure).
     pub fn finish(&mut self, sim: &Simulation) -> Result<(), RunError> {
-        self.progress.finish_and_clear();
-        if self.last_row_step != sim.step {
-            self.curve.row(sim.step, sim.time, &sim.monitor_values())?;
-            self.last_row_step = sim.step;
-        }
-        Ok(())
-    }
-}
-
-impl Observer for OutputObserver {
-    fn on_start(&mut self, sim: &Simulation) -> Result<(), RunError> {
-        self.curve.row(0, sim.time, &sim.monitor_values())?;
-        self.last_row_step = 0;
-        if Self::snapshot_due(sim) {
-            self.write_snapshot(sim)?;
-        }
-        Ok(())
+        sim.profile.time(Stage::Output, || {
+            self.progress.finish_and_clear();
+            if self.last_row_step != sim.model.step {
+                self.write_row(sim)?;
+            }
+            Ok(())
+        })
     }
 
-    fn on_step(&mut self, sim: &Simulation, report: &StepReport) -> Result<(), RunError> {
-        let start = Instant::now();
-        let every = sim.scene.output.curve_every.max(1);
-        if sim.step.is_multiple_of(every) || sim.finished() {
-            self.curve.row(sim.step, sim.time, &sim.monitor_values())?;
-            self.last_row_step = sim.step;
-        }
-        if Self::snapshot_due(sim) {
-            self.write_snapshot(sim)?;
-        }
-        sim.profile
-            .add(Stage::Output, start.elapsed().as_secs_f64());
-        match sim.analysis() {
+    fn show_progress(&self, sim: &Simulation, report: &StepReport) {
+        match sim.model.analysis() {
             AnalysisKind::Explicit => {
-                let end = sim.scene.scene.end_time.unwrap_or(1.0);
-                self.progress.set_position((1000.0 * sim.time / end) as u64);
+                let end = sim.model.scene.scene.end_time.unwrap_or(1.0);
+                self.progress
+                    .set_position((1000.0 * sim.model.time / end) as u64);
                 self.progress.set_message(format!(
                     "step {} t={:.4e} s dt={:.2e} s",
                     report.step, report.time, report.dt
                 ));
             }
             _ => {
-                self.progress.set_position(sim.step as u64);
+                self.progress.set_position(sim.model.step as u64);
                 self.progress.set_message(format!(
                     "t={:.4e} Newton {} it{}",
                     report.time,
@@ -122,7 +114,32 @@ impl Observer for OutputObserver {
                 ));
             }
         }
-        Ok(())
+    }
+}
+
+impl Observer for OutputObserver {
+    fn on_start(&mut self, sim: &Simulation) -> Result<(), RunError> {
+        sim.profile.time(Stage::Output, || {
+            self.write_row(sim)?;
+            if Self::snapshot_due(sim) {
+                self.write_snapshot(sim)?;
+            }
+            Ok(())
+        })
+    }
+
+    fn on_step(&mut self, sim: &Simulation, report: &StepReport) -> Result<(), RunError> {
+        sim.profile.time(Stage::Output, || {
+            let every = sim.model.scene.output.curve_every.max(1);
+            if sim.model.step.is_multiple_of(every) || sim.finished() {
+                self.write_row(sim)?;
+            }
+            if Self::snapshot_due(sim) {
+                self.write_snapshot(sim)?;
+            }
+            self.show_progress(sim, report);
+            Ok(())
+        })
     }
 }
 
@@ -146,7 +163,9 @@ pub fn run_scene(
 ) -> Result<RunOutcome, Box<dyn std::error::Error + Send + Sync>> {
     let start = Instant::now();
     let mut sim = Simulation::new(scene)?;
-    let mut observer = OutputObserver::new(out, &sim, show_progress)?;
+    let mut observer = sim.profile.time(Stage::Output, || {
+        OutputObserver::new(out, &sim, show_progress)
+    })?;
     let result = sim.run(&mut observer);
     observer.finish(&sim)?;
     let wall_seconds = start.elapsed().as_secs_f64();
@@ -166,32 +185,33 @@ pub fn write_run_json(
     wall_seconds: f64,
     error: Option<&RunError>,
 ) -> Result<(), RunError> {
-    let materials: Vec<_> = sim
+    let model = &sim.model;
+    let materials: Vec<_> = model
         .material_names
         .iter()
-        .zip(&sim.materials)
+        .zip(&model.materials)
         .map(|(name, m)| json!({"name": name, "model": m.name(), "symmetric_tangent": m.has_symmetric_tangent()}))
         .collect();
     let value = json!({
         "mpm_geo_version": env!("CARGO_PKG_VERSION"),
         "status": if error.is_some() { "failed" } else { "completed" },
-        "warnings": sim.scene.warnings(),
+        "warnings": model.scene.warnings(),
         "error": error.map(|e| e.to_string()),
-        "steps_completed": sim.step,
-        "time": sim.time,
-        "particles": sim.particles.len(),
-        "lost_points": sim.lost_points,
-        "grid_cells": sim.grid.cells,
+        "steps_completed": model.step,
+        "time": model.time,
+        "particles": model.particles.len(),
+        "lost_points": model.lost_points,
+        "grid_cells": model.grid.cells,
         "wall_seconds": wall_seconds,
         "rayon_threads": rayon::current_num_threads(),
         "materials": materials,
         "solver": {
-            "analysis": sim.analysis(),
-            "linear_solver_policy": sim.scene.solver.linear_solver,
-            "usage": sim.solver_usage,
+            "analysis": model.analysis(),
+            "linear_solver_policy": model.scene.solver.linear_solver,
+            "usage": sim.integrator.usage(),
         },
-        "profile": sim.profile.totals(),
-        "scene": sim.scene,
+        "profile": sim.profile.totals(wall_seconds),
+        "scene": model.scene,
     });
     write_json(path, &value)
 }

@@ -13,9 +13,10 @@ use serde::{Deserialize, Serialize};
 
 use mpm_solvers::{Assembler, DirectSolver, SolverError, SolverOptions, SolverPolicy};
 
-use crate::bc::DofMap;
 use crate::constitutive::{ConstitutiveModel, Mat4, PointState, Voigt};
+use crate::dofs::DofMap;
 use crate::grid::{Grid, ShapeAt, MAX_SUPPORT};
+use crate::stiffness;
 use crate::transfer::{self, ParticleBins, NONE};
 
 /// What restores equilibrium after smoothing: the point volumes V_p(n) and the
@@ -205,7 +206,7 @@ pub fn restore_internal_forces(
         [0.0, 0.0, 0.0, 1.0],
     ];
     let identities = vec![identity; volume.len()];
-    let blocks = transfer::cell_stiffness_blocks(
+    let blocks = stiffness::cell_stiffness_blocks(
         frame.grid,
         frame.bins,
         frame.shapes,
@@ -213,9 +214,9 @@ pub fn restore_internal_forces(
         &identities,
         None,
     );
-    let blocks = transfer::system_blocks(frame.grid, frame.bins, blocks, None);
+    let blocks = stiffness::system_blocks(frame.grid, frame.bins, blocks, None);
     let element_dofs = dofs.element_dofs(frame.grid, frame.bins);
-    let coupling = transfer::patch_coupling(frame.grid);
+    let coupling = stiffness::patch_coupling(frame.grid);
     let assembler = Assembler::with_couplings(n, &element_dofs, coupling)?;
     let mut gram = assembler.assemble(&blocks)?;
     let max_diagonal = (0..n).map(|i| gram.get(i, i)).fold(0.0, f64::max);

@@ -20,14 +20,20 @@ fn run(cells_per_metre: usize) -> (f64, f64) {
     }
     let load = sim.monitor_values()[common::column(&sim, "load")];
     let eps_q: Vec<f64> = sim
+        .model
         .particles
         .def_grad
         .iter()
         .map(deviatoric_hencky_strain)
         .collect();
     let eps_q = clip_outliers(&eps_q, 0.99);
-    let band =
-        shear_band_width(&sim.particles.position, &eps_q, sim.grid.cell_size, 0.0).expect("a band");
+    let band = shear_band_width(
+        &sim.model.particles.position,
+        &eps_q,
+        sim.model.grid.cell_size,
+        0.0,
+    )
+    .expect("a band");
     println!(
         "local h = 1/{cells_per_metre} m: F(δ = 2 mm) = {load:.3} kN/m, band width {:.2} mm",
         band.width * 1e3

@@ -14,10 +14,10 @@ fn run(overrides: &[&str]) -> (f64, f64) {
     let mut sim: Simulation = common::simulation(SCENE, overrides);
     let history = common::run_history(&mut sim);
     let settlement = history.last().unwrap().1[common::column(&sim, "top_settlement")];
-    let scene = &sim.scene;
+    let scene = &sim.model.scene;
     let g = scene.loads.gravity_ramp.as_ref().unwrap().max;
     let rho = scene.materials["soil"].density();
-    let p = &sim.particles;
+    let p = &sim.model.particles;
     let sum: f64 = (0..p.len())
         .map(|i| {
             let exact = -rho * g * (1.0 - p.position0[i][1]);

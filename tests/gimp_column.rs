@@ -31,8 +31,8 @@ fn run_gimp(steps: usize) -> (f64, f64) {
     let mut sim = common::simulation(SCENE, &overrides);
     let history = common::run_history(&mut sim);
     let settlement = -history.last().unwrap().1[common::column(&sim, "top_settlement")];
-    let rho = sim.scene.materials["soil"].density();
-    let p = &sim.particles;
+    let rho = sim.model.scene.materials["soil"].density();
+    let p = &sim.model.particles;
     let sum: f64 = (0..p.len())
         .map(|i| (p.stress[i][1] + rho * 9.81 * (1.0 - p.position0[i][1])).powi(2))
         .sum();

@@ -5,7 +5,7 @@
 
 mod common;
 
-use mpm_geo::error::RunError;
+use mpm_geo::error::{RunError, StepError};
 
 const SCENE: &str = "lost_points/block_leaves_grid.toml";
 const SPEED: f64 = 1.0;
@@ -14,23 +14,28 @@ const EDGE: f64 = 0.4;
 #[test]
 fn points_crossing_the_edge_are_removed_and_the_rest_translate_rigidly() {
     let mut sim = common::simulation(SCENE, &[]);
-    let initial_mass: f64 = sim.particles.mass.iter().sum();
-    let initial_count = sim.particles.len();
+    let initial_mass: f64 = sim.model.particles.mass.iter().sum();
+    let initial_count = sim.model.particles.len();
     let history = common::run_history(&mut sim);
-    let end_time = sim.time;
-    let dt = end_time / sim.step as f64;
+    let end_time = sim.model.time;
+    let dt = end_time / sim.model.step as f64;
 
     // Ballistic prediction: a point leaves iff x0 + v t_end > 0.4, i.e. the
     // points seeded right of x = 0.2 (half of the 8 columns, 16 of 32).
     assert_eq!(initial_count, 32);
-    assert_eq!(sim.lost_points.len(), 16, "{:?}", sim.lost_points);
-    let lost_mass: f64 = sim.lost_points.iter().map(|l| l.mass).sum();
-    let kept_mass: f64 = sim.particles.mass.iter().sum();
+    assert_eq!(
+        sim.model.lost_points.len(),
+        16,
+        "{:?}",
+        sim.model.lost_points
+    );
+    let lost_mass: f64 = sim.model.lost_points.iter().map(|l| l.mass).sum();
+    let kept_mass: f64 = sim.model.particles.mass.iter().sum();
     assert!(((lost_mass + kept_mass) / initial_mass - 1.0).abs() < 1e-12);
     assert!((lost_mass / initial_mass - 0.5).abs() < 1e-12);
 
     // Each point is removed in the step it crosses the edge, still moving at v.
-    for lost in &sim.lost_points {
+    for lost in &sim.model.lost_points {
         let overshoot = lost.position[0] - EDGE;
         assert!(
             overshoot > 0.0 && overshoot <= SPEED * dt * (1.0 + 1e-9),
@@ -41,13 +46,13 @@ fn points_crossing_the_edge_are_removed_and_the_rest_translate_rigidly() {
     }
 
     // The points that stay translate rigidly: displacement v t_end, velocity v, no stress.
-    for p in 0..sim.particles.len() {
-        assert!(sim.particles.position0[p][0] < 0.2);
-        let u = sim.particles.displacement(p);
+    for p in 0..sim.model.particles.len() {
+        assert!(sim.model.particles.position0[p][0] < 0.2);
+        let u = sim.model.particles.displacement(p);
         assert!((u[0] - SPEED * end_time).abs() < 1e-9, "point {p}: {u:?}");
         assert!(u[1].abs() < 1e-9, "point {p}: {u:?}");
-        assert!((sim.particles.velocity[p][0] - SPEED).abs() < 1e-9);
-        let stress = sim.particles.stress[p];
+        assert!((sim.model.particles.velocity[p][0] - SPEED).abs() < 1e-9);
+        let stress = sim.model.particles.stress[p];
         assert!(stress.iter().all(|s| s.abs() < 1e-9), "{stress:?}");
     }
 
@@ -69,10 +74,14 @@ fn with_stop_the_first_point_to_cross_ends_the_run() {
         }
     };
     match first_crossing {
-        RunError::ParticleLeftGrid { time, position, .. } => {
+        RunError::Step {
+            time,
+            cause: StepError::ParticleLeftGrid { position, .. },
+            ..
+        } => {
             // first out: the right-most column, seeded at x0 = 0.275 + 0.025/√3
             let x0 = 0.275 + 0.025 / 3f64.sqrt();
-            let dt = sim.time / sim.step as f64;
+            let dt = sim.model.time / sim.model.step as f64;
             assert!(position[0] > EDGE);
             assert!(
                 (time - (EDGE - x0) / SPEED).abs() <= dt * (1.0 + 1e-9),
@@ -81,5 +90,5 @@ fn with_stop_the_first_point_to_cross_ends_the_run() {
         }
         other => panic!("unexpected error {other}"),
     }
-    assert!(sim.lost_points.is_empty());
+    assert!(sim.model.lost_points.is_empty());
 }

@@ -30,7 +30,7 @@ fn column_errors(cell_size: f64, layout: &str, shift: [f64; 2]) -> (f64, f64) {
     let r = format!("bc.fixed.1.line=\"x={}\"", 2.0 * cell_size);
     let l = format!("grid.point_layout=\"{layout}\"");
     let mut sim = common::simulation("elastic/oedometer.toml", &[&h, &w, &b, &r, &l]);
-    for x in sim.particles.position.iter_mut() {
+    for x in sim.model.particles.position.iter_mut() {
         x[0] += shift[0] * cell_size;
         x[1] += shift[1] * cell_size;
     }
@@ -38,14 +38,14 @@ fn column_errors(cell_size: f64, layout: &str, shift: [f64; 2]) -> (f64, f64) {
     let m = constrained_modulus(10000.0, 0.3);
     let top = exact_settlement(H, m).abs();
     let mut nodal = 0.0f64;
-    for (node, du) in sim.last_increment.iter().enumerate() {
-        let y = sim.grid.node_position(node)[1];
+    for (node, du) in sim.model.last_increment.iter().enumerate() {
+        let y = sim.model.grid.node_position(node)[1];
         nodal = nodal.max((du[1] - exact_settlement(y, m)).abs() / top);
     }
     let mut stress = 0.0f64;
-    for p in 0..sim.particles.len() {
-        let y0 = sim.particles.position0[p][1] + shift[1] * cell_size;
-        stress = stress.max((sim.particles.stress[p][1] + RHO * G * (H - y0)).abs());
+    for p in 0..sim.model.particles.len() {
+        let y0 = sim.model.particles.position0[p][1] + shift[1] * cell_size;
+        stress = stress.max((sim.model.particles.stress[p][1] + RHO * G * (H - y0)).abs());
     }
     (nodal, stress)
 }

@@ -70,7 +70,8 @@ fn softening_tangent_with_rotation_matches_directional_differences() {
         sim.step_once().unwrap_or_else(|e| panic!("{e}"));
     }
     assert!(
-        sim.particles
+        sim.model
+            .particles
             .state
             .iter()
             .any(|s| s.plastic_strain_eq > 1e-3),

@@ -168,6 +168,19 @@ pub fn mat4_mul_vec(m: &Mat4, a: &Voigt) -> Voigt {
     out
 }
 
+/// Inverse of a 4×4 matrix (nalgebra LU); zero matrix if singular.
+pub fn invert4(m: &Mat4) -> Mat4 {
+    let a = nalgebra::Matrix4::from_fn(|i, j| m[i][j]);
+    let inv = a.try_inverse().unwrap_or_else(nalgebra::Matrix4::zeros);
+    let mut out = [[0.0; 4]; 4];
+    for (i, row) in out.iter_mut().enumerate() {
+        for (j, v) in row.iter_mut().enumerate() {
+            *v = inv[(i, j)];
+        }
+    }
+    out
+}
+
 /// Compression-positive mean stress p = −(σxx + σyy + σzz)/3 (DESIGN D1), kPa.
 pub fn mean_stress(stress: &Voigt) -> f64 {
     -(stress[0] + stress[1] + stress[2]) / 3.0

@@ -1,16 +1,126 @@
-//! Time integrators. Both use the same transfer kernels (`crate::transfer`),
-//! the same constitutive interface and the same boundary-condition devices;
-//! they differ only in how the nodal displacement increment of a step is found:
+//! Time integrators. Each is a type that owns its caches and advances the
+//! [`Model`] by one step with `step(&mut self, model, profile)`, as a short
+//! list of named, timed stages in the order of paper Fig. 1:
 //!
-//! * [`implicit`]: Newton–Raphson on the nodal equilibrium, quasi-static or
-//!   Newmark trapezoidal (paper eq. 2, DESIGN D15–D19), sparse direct solves;
-//! * [`explicit`]: MUSL central difference, matrix-free (DESIGN §4).
+//! | stage | implicit ([`ImplicitIntegrator`]) | explicit ([`ExplicitIntegrator`]) |
+//! |---|---|---|
+//! | setup | [`StepSetup`] | [`StepSetup`] |
+//! | P2G | mass, v_n, a_n, f_ext | mass, momentum, forces |
+//! | solve | [`newton`] on Δu (stress update, tangent, factorisation) | [`time_step`], nodal momentum update |
+//! | G2P | [`g2p`] (Newmark) | [`g2p`] (forward) |
+//! | remap | — | MUSL re-map, stress update |
+//! | stresses | [`stresses`]: energies, κ̄(n+1), double mapping | the same |
+//! | commit | [`commit`]: F, V, σ, boundary points, lost points | the same |
+//!
+//! Both use the same transfer kernels ([`crate::transfer`]), the same
+//! constitutive interface and the same boundary-condition devices.
 
+pub mod commit;
 pub mod explicit;
-mod finalize;
+pub mod g2p;
 pub mod implicit;
+pub mod newton;
+pub mod p2g;
 mod regularisation;
+pub mod setup;
 mod stress;
+pub mod stresses;
+pub mod tangent;
+pub mod time_step;
 
+pub use explicit::ExplicitIntegrator;
+pub use implicit::ImplicitIntegrator;
 pub(crate) use regularisation::NonlocalStep;
+pub use setup::StepSetup;
 pub(crate) use stress::{evaluate_stresses, TrialStresses};
+
+use crate::error::{StepError, TimeStepLimit};
+use crate::model::{Model, PointRemap};
+use crate::profile::Profile;
+use crate::scene::{AnalysisKind, SceneError};
+
+/// What one completed step did.
+#[derive(Clone, Debug, Default)]
+pub struct StepReport {
+    /// Step number (1-based) after the step.
+    pub step: usize,
+    /// Time after the step, s.
+    pub time: f64,
+    /// Time step used, s.
+    pub dt: f64,
+    /// Newton iterations (implicit; summed over sub-steps), 0 for explicit.
+    pub iterations: usize,
+    /// Number of sub-steps the step needed (1 without halving).
+    pub substeps: usize,
+    /// Index remaps of the points removed in the step, in order (each maps
+    /// the indices left by the previous one).
+    pub removed_points: Vec<PointRemap>,
+}
+
+/// Counts of what the integrator did (written to `run.json`).
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct SolverUsage {
+    /// Factorisations done with sparse Cholesky.
+    pub cholesky: usize,
+    /// Factorisations done with sparse LU.
+    pub lu: usize,
+    /// Largest system size, unknowns.
+    pub max_unknowns: usize,
+    /// Total Newton iterations.
+    pub newton_iterations: usize,
+    /// Step halvings.
+    pub halvings: usize,
+    /// Steps accepted on the force criterion alone because the residual had
+    /// stagnated (the energy criterion of D18 cannot be met by iterating).
+    pub stagnated_steps: usize,
+    /// Explicit runs: smallest and largest time step taken, s (before the last
+    /// step is shortened to end at `end_time`).
+    pub explicit_time_step: Option<(f64, f64)>,
+    /// Explicit runs: what limited the stable time step at the last step.
+    pub time_step_limited_by: Option<TimeStepLimit>,
+}
+
+/// The integrator of a run, chosen by `scene.analysis`.
+pub enum Integrator {
+    /// Quasi-static or Newmark implicit (DESIGN §3); boxed, it holds the
+    /// solver's caches.
+    Implicit(Box<ImplicitIntegrator>),
+    /// MUSL explicit (DESIGN §4).
+    Explicit(ExplicitIntegrator),
+}
+
+impl Integrator {
+    /// The integrator the scene asks for, with its checks before the run.
+    pub fn for_model(model: &Model) -> Result<Self, SceneError> {
+        Ok(match model.analysis() {
+            AnalysisKind::QuasiStatic | AnalysisKind::ImplicitDynamic => {
+                Integrator::Implicit(Box::new(ImplicitIntegrator::new(model)))
+            }
+            AnalysisKind::Explicit => Integrator::Explicit(ExplicitIntegrator::new(model)?),
+        })
+    }
+
+    /// Advance the model by one step.
+    pub fn step(&mut self, model: &mut Model, profile: &Profile) -> Result<StepReport, StepError> {
+        match self {
+            Integrator::Implicit(implicit) => implicit.step(model, profile),
+            Integrator::Explicit(explicit) => explicit.step(model, profile),
+        }
+    }
+
+    /// What the integrator did so far.
+    pub fn usage(&self) -> &SolverUsage {
+        match self {
+            Integrator::Implicit(implicit) => &implicit.usage,
+            Integrator::Explicit(explicit) => &explicit.usage,
+        }
+    }
+
+    /// The implicit integrator, if the run has one.
+    pub fn implicit(&mut self) -> Option<&mut ImplicitIntegrator> {
+        match self {
+            Integrator::Implicit(implicit) => Some(implicit),
+            Integrator::Explicit(_) => None,
+        }
+    }
+}

@@ -4,7 +4,7 @@
 //! criterion of D18), and the value committed at the end of the step.
 
 use crate::constitutive::StrengthVariable;
-use crate::nonlocal::{NonlocalAverager, NonlocalParameters};
+use crate::nonlocal::{NonlocalAverager, NonlocalError, NonlocalParameters};
 use crate::particles::Particles;
 use crate::scene::{NonlocalSpec, NonlocalUpdate};
 
@@ -52,7 +52,7 @@ impl NonlocalStep {
         spec: &NonlocalSpec,
         particles: &Particles,
         force_step_update: bool,
-    ) -> Result<Self, String> {
+    ) -> Result<Self, NonlocalError> {
         let params = NonlocalParameters {
             length_scale: spec.length_scale,
             cutoff_factor: spec.cutoff_factor,
@@ -62,8 +62,7 @@ impl NonlocalStep {
             &particles.position,
             &particles.volume,
             &particles.material,
-        )
-        .map_err(|e| e.to_string())?;
+        )?;
         let start: Vec<f64> = particles
             .state
             .iter()
@@ -107,7 +106,7 @@ impl NonlocalStep {
         &mut self,
         particles: &Particles,
         trial_kappa: impl Fn(usize) -> f64,
-    ) -> Result<&[f64], String> {
+    ) -> Result<&[f64], NonlocalError> {
         for (p, inc) in self.scratch_increment.iter_mut().enumerate() {
             *inc = trial_kappa(p) - particles.state[p].plastic_strain_eq;
         }
@@ -121,13 +120,10 @@ impl NonlocalStep {
             return Ok(&self.scratch_average);
         }
         if self.update == NonlocalUpdate::Iteration {
-            self.averager
-                .cache_sources(&self.scratch_increment)
-                .map_err(|e| e.to_string())?;
+            self.averager.cache_sources(&self.scratch_increment)?;
         }
         self.averager
-            .average(&self.scratch_increment, &mut self.scratch_average)
-            .map_err(|e| e.to_string())?;
+            .average(&self.scratch_increment, &mut self.scratch_average)?;
         self.memo_increment.copy_from_slice(&self.scratch_increment);
         self.memo_valid = true;
         Ok(&self.scratch_average)
@@ -141,7 +137,7 @@ impl NonlocalStep {
         &mut self,
         particles: &Particles,
         trial_kappa: impl Fn(usize) -> f64,
-    ) -> Result<bool, String> {
+    ) -> Result<bool, NonlocalError> {
         if self.update == NonlocalUpdate::Step {
             return Ok(true);
         }
@@ -169,7 +165,7 @@ impl NonlocalStep {
         &mut self,
         particles: &Particles,
         trial_kappa: impl Fn(usize) -> f64,
-    ) -> Result<Vec<f64>, String> {
+    ) -> Result<Vec<f64>, NonlocalError> {
         let m = self.over_nonlocal;
         self.averaged(particles, trial_kappa)?;
         Ok(self

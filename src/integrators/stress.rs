@@ -28,7 +28,7 @@ pub struct TrialStresses {
     pub gradient: Vec<[f64; 4]>,
     /// σ^R(n): the committed stress rotated by the step's spin (D13).
     pub rotated: Vec<Voigt>,
-    /// dσ_{n+1}/dω = D_alg C g (see `transfer::add_spin_stiffness`); filled only
+    /// dσ_{n+1}/dω = D_alg C g (see `stiffness::add_spin_stiffness`); filled only
     /// when compliances are passed (unsymmetric tangents).
     pub spin_sensitivity: Vec<Voigt>,
 }

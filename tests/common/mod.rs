@@ -28,10 +28,10 @@ pub fn simulation(path: &str, overrides: &[&str]) -> Simulation {
 
 /// Run to the end, recording (time, monitor values) after every step (and at t = 0).
 pub fn run_history(sim: &mut Simulation) -> Vec<(f64, Vec<f64>)> {
-    let mut history = vec![(sim.time, sim.monitor_values())];
+    let mut history = vec![(sim.model.time, sim.monitor_values())];
     while !sim.finished() {
         sim.step_once().unwrap_or_else(|e| panic!("{e}"));
-        history.push((sim.time, sim.monitor_values()));
+        history.push((sim.model.time, sim.monitor_values()));
     }
     history
 }

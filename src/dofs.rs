@@ -1,0 +1,72 @@
+//! Numbering of the unknowns of one step (DESIGN §3 "Linear system"): the
+//! free degrees of freedom of the active nodes, and the system indices of
+//! every element of the tangent.
+
+use crate::bc::{Constraints, DofConstraint};
+use crate::grid::Grid;
+use crate::transfer::{ParticleBins, NONE};
+
+/// Numbering of the free dofs of the active nodes for one step.
+#[derive(Clone, Debug)]
+pub struct DofMap {
+    /// For every grid dof, its index in the system, or [`NONE`].
+    pub index: Vec<u32>,
+    /// Number of unknowns.
+    pub n_free: usize,
+}
+
+impl DofMap {
+    /// Number the free dofs of active nodes in grid-dof order (deterministic).
+    pub fn new(bins: &ParticleBins, constraints: &Constraints) -> Self {
+        let mut index = vec![NONE; constraints.dof.len()];
+        let mut n_free = 0;
+        for (node, &active) in bins.node_active.iter().enumerate() {
+            if !active {
+                continue;
+            }
+            for c in 0..2 {
+                let d = 2 * node + c;
+                if constraints.dof[d] == DofConstraint::Free {
+                    index[d] = n_free as u32;
+                    n_free += 1;
+                }
+            }
+        }
+        Self { index, n_free }
+    }
+
+    /// The system indices of every element's dofs ([`NONE`] where constrained
+    /// or outside the grid), in the order of `stiffness::system_blocks`: each
+    /// active cell's node patch (row-major), then each GIMP-reached cell's four
+    /// nodes (row-major).
+    pub fn element_dofs(&self, grid: &Grid, bins: &ParticleBins) -> Vec<Vec<u32>> {
+        let dofs_of = |nodes: &[Option<u32>]| -> Vec<u32> {
+            nodes
+                .iter()
+                .flat_map(|node| {
+                    (0..2).map(move |k| node.map_or(NONE, |n| self.index[2 * n as usize + k]))
+                })
+                .collect()
+        };
+        let patches = bins.active_cells.iter().map(|&c| {
+            let (ci, cj) = grid.cell_ij(c as usize);
+            dofs_of(&grid.patch_nodes(ci, cj))
+        });
+        let reached = bins.reached_cells.iter().map(|&c| {
+            let (ci, cj) = grid.cell_ij(c as usize);
+            dofs_of(&grid.cell_nodes_row_major(ci, cj).map(Some))
+        });
+        patches.chain(reached).collect()
+    }
+}
+
+/// The free-dof entries of a nodal field, in system order.
+pub fn gather_free(dofs: &DofMap, nodal: &[[f64; 2]]) -> Vec<f64> {
+    let mut out = vec![0.0; dofs.n_free];
+    for (d, &index) in dofs.index.iter().enumerate() {
+        if index != NONE {
+            out[index as usize] = nodal[d / 2][d % 2];
+        }
+    }
+    out
+}

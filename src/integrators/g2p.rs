@@ -1,0 +1,62 @@
+//! The grid-to-particle kernel both integrators use (DESIGN D14, §3, §4):
+//! positions, velocities and accelerations of the material points from the
+//! step's nodal solution. Deformation gradients, volumes and stresses follow
+//! in the commit stage.
+
+use crate::grid::ShapeAt;
+use crate::particles::Particles;
+use crate::transfer::interpolate;
+
+/// How a point's velocity follows its new acceleration a_p(n+1) = Σ_i N_ip a_i.
+#[derive(Clone, Copy, Debug)]
+pub enum VelocityUpdate {
+    /// Explicit (symplectic Euler, DESIGN §4 step 3): v += Δt a(n+1).
+    Forward,
+    /// Newmark (DESIGN §3): v += Δt ((1 − γ) a(n) + γ a(n+1)).
+    Newmark {
+        /// γ of the scheme.
+        gamma: f64,
+    },
+}
+
+/// The nodal fields one step maps back to its points.
+pub struct GridMotion<'a> {
+    /// Time step Δt, s.
+    pub dt: f64,
+    /// The nodal field whose interpolation, times `scale`, moves the points:
+    /// Δu_i with scale 1 (implicit) or v_i with scale Δt (explicit).
+    pub displacement: &'a [[f64; 2]],
+    /// Scale of `displacement`.
+    pub scale: f64,
+    /// New nodal accelerations a_i(n+1) and how velocities follow them;
+    /// `None` in quasi-static runs (no velocities or accelerations).
+    pub acceleration: Option<(&'a [[f64; 2]], VelocityUpdate)>,
+}
+
+/// x_p += scale Σ_i N_ip u_i; with accelerations, a_p = Σ_i N_ip a_i and v_p
+/// by the velocity rule.
+pub fn g2p(particles: &mut Particles, shapes: &[ShapeAt], motion: &GridMotion) {
+    let dt = motion.dt;
+    for (i, shape) in shapes.iter().enumerate() {
+        if let Some((nodal_acceleration, rule)) = motion.acceleration {
+            let a = interpolate(shape, nodal_acceleration);
+            let v = &mut particles.velocity[i];
+            match rule {
+                VelocityUpdate::Forward => {
+                    v[0] += dt * a[0];
+                    v[1] += dt * a[1];
+                }
+                VelocityUpdate::Newmark { gamma } => {
+                    let before = particles.acceleration[i];
+                    for c in 0..2 {
+                        v[c] += dt * ((1.0 - gamma) * before[c] + gamma * a[c]);
+                    }
+                }
+            }
+            particles.acceleration[i] = a;
+        }
+        let u = interpolate(shape, motion.displacement);
+        particles.position[i][0] += motion.scale * u[0];
+        particles.position[i][1] += motion.scale * u[1];
+    }
+}

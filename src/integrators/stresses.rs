@@ -1,0 +1,163 @@
+//! The stresses stage, shared by both integrators: what a converged step's
+//! trial stresses become at the material points — the step's energies (M5),
+//! the nonlocal variable κ̄(n+1) (DESIGN D35) and the double-mapped stresses
+//! (D37–D39).
+
+use super::{NonlocalStep, StepSetup, TrialStresses};
+use crate::constitutive::{Mat4, PointState, Voigt};
+use crate::dofs::DofMap;
+use crate::error::StepError;
+use crate::metrics::{dissipation_increment, ComplianceSource};
+use crate::model::Model;
+use crate::profile::{Profile, Stage};
+use crate::smoothing::{double_map, DoubleMapping, Equilibrium, MappingFrame};
+use crate::transfer::strain_and_spin;
+
+/// Stresses, states and energies of a converged step, ready to commit.
+pub struct ConvergedStresses {
+    /// σ(n+1) after double mapping, kPa.
+    pub stress: Vec<Voigt>,
+    /// State with κ̄(n+1).
+    pub state: Vec<PointState>,
+    /// Work of the stresses on the step's strain increments, kJ/m.
+    pub internal_work: f64,
+    /// Plastic dissipation of the step (DESIGN D43), kJ/m.
+    pub dissipation: f64,
+}
+
+/// The converged step's stresses and states to commit (times its nonlocal
+/// and double-mapping parts under their own stages).
+pub fn converged_stresses(
+    model: &Model,
+    setup: &StepSetup,
+    trial: &TrialStresses,
+    nonlocal: Option<&mut NonlocalStep>,
+    profile: &Profile,
+) -> Result<ConvergedStresses, StepError> {
+    let (internal_work, dissipation) = step_energies(model, trial);
+    let mut state = trial.state.clone();
+    let kappa_bar = match nonlocal {
+        Some(nl) => Some(profile.time(Stage::Nonlocal, || {
+            nl.committed(&model.particles, |p| trial.state[p].plastic_strain_eq)
+        })?),
+        None => None,
+    };
+    if let Some(kappa_bar) = &kappa_bar {
+        for (s, k) in state.iter_mut().zip(kappa_bar) {
+            s.plastic_strain_eq_nonlocal = *k;
+        }
+    }
+    let mut stress = trial.stress.clone();
+    let mode = model.double_mapping();
+    if mode != DoubleMapping::Off {
+        profile.time(Stage::DoubleMapping, || {
+            smooth(
+                model,
+                setup,
+                trial,
+                mode,
+                &state,
+                kappa_bar.as_deref(),
+                &mut stress,
+            )
+        })?;
+    }
+    Ok(ConvergedStresses {
+        stress,
+        state,
+        internal_work,
+        dissipation,
+    })
+}
+
+/// Double mapping of the step's stresses (DESIGN D37–D39), with the
+/// force-restoring correction when the scene asks for it.
+fn smooth(
+    model: &Model,
+    setup: &StepSetup,
+    trial: &TrialStresses,
+    mode: DoubleMapping,
+    state: &[PointState],
+    kappa_bar: Option<&[f64]>,
+    stress: &mut [Voigt],
+) -> Result<(), StepError> {
+    let frame = MappingFrame {
+        grid: &model.grid,
+        bins: &setup.bins,
+        shapes: &setup.shapes,
+        mass: &model.particles.mass,
+    };
+    let dofs = model
+        .scene
+        .smoothing
+        .restore_forces
+        .then(|| DofMap::new(&setup.bins, &model.constraints));
+    let equilibrium = dofs.as_ref().map(|dofs| Equilibrium {
+        volume: &model.particles.volume,
+        dofs,
+    });
+    double_map(
+        mode,
+        &frame,
+        equilibrium,
+        &trial.rotated,
+        stress,
+        &model.materials,
+        &model.particles.material,
+        state,
+        kappa_bar,
+    )
+    .map_err(StepError::DoubleMapping)
+}
+
+/// Energies of the converged step (M5), kJ per metre run, from the
+/// constitutive stresses before double mapping (Voigt dot products,
+/// engineering shear), with one strain increment Δε per point:
+/// - internal work Σ_p V_p(n) · ½(σ_p(n+1) + σ_p^R(n)) · Δε_p (elastic
+///   energy stored plus dissipation);
+/// - plastic dissipation (DESIGN D43) Σ_p V_p(n) · ½(σ_p(n+1) + σ_p^R(n)) · Δε^p_p
+///   with Δε^p = Δε − C(σ(n+1) − σ^R(n)); elastic materials contribute nothing.
+fn step_energies(model: &Model, trial: &TrialStresses) -> (f64, f64) {
+    let p = &model.particles;
+    let strain: Vec<Voigt> = trial
+        .gradient
+        .iter()
+        .map(|l| strain_and_spin(l).0)
+        .collect();
+    let internal_work = (0..p.len())
+        .map(|i| {
+            let (now, before) = (&trial.stress[i], &trial.rotated[i]);
+            let work: f64 = (0..4)
+                .map(|k| 0.5 * (now[k] + before[k]) * strain[i][k])
+                .sum();
+            p.volume[i] * work
+        })
+        .sum();
+    if model.materials.iter().all(|m| m.is_elastic()) {
+        return (internal_work, 0.0);
+    }
+    // elastic points dissipate nothing: give them zero weight
+    let volumes: Vec<f64> = (0..p.len())
+        .map(|i| {
+            if model.materials[p.material[i] as usize].is_elastic() {
+                0.0
+            } else {
+                p.volume[i]
+            }
+        })
+        .collect();
+    let compliance: Vec<Mat4> = p
+        .material
+        .iter()
+        .map(|&m| model.compliances[m as usize])
+        .collect();
+    let dissipation = dissipation_increment(
+        &volumes,
+        &trial.stress,
+        &trial.rotated,
+        &strain,
+        ComplianceSource::PerPoint(&compliance),
+    )
+    .unwrap_or(f64::NAN);
+    (internal_work, dissipation)
+}

@@ -1,0 +1,184 @@
+//! The implicit tangent (DESIGN D17, D19, D41): its sparsity pattern, built
+//! once per step, the assembly of K_T (+ M/(βΔt²) when dynamic) from the
+//! cell blocks, and the sparse direct factorisation and solve (faer
+//! Cholesky or LU).
+
+use mpm_solvers::{Assembler, DirectSolver, FactorKind, SolverPolicy, SparseMatrix};
+
+use super::newton::StepSystem;
+use super::{SolverUsage, TrialStresses};
+use crate::constitutive::LinearElastic;
+use crate::error::StepError;
+use crate::grid::Grid;
+use crate::model::Model;
+use crate::profile::{Profile, Stage};
+use crate::scene::{LinearSolverChoice, Scene};
+use crate::stiffness;
+use crate::transfer::NONE;
+
+/// The tangent of the implicit integrator and its caches.
+pub struct Tangent {
+    /// Sparse direct solver (keeps the symbolic factorisation while the pattern holds).
+    solver: DirectSolver,
+    /// The elements' system dofs and the assembler of the pattern they make.
+    pattern: Option<(Vec<Vec<u32>>, Assembler)>,
+    /// Whether `pattern` belongs to the current step.
+    pattern_current: bool,
+    /// Every material's tangent is symmetric: Cholesky allowed.
+    symmetric: bool,
+}
+
+impl Tangent {
+    /// The tangent of `model`'s scene, with its solver policy.
+    pub fn new(model: &Model) -> Self {
+        let policy = match model.scene.solver.linear_solver {
+            LinearSolverChoice::Auto => SolverPolicy::Auto,
+            LinearSolverChoice::Cholesky => SolverPolicy::Cholesky,
+            LinearSolverChoice::Lu => SolverPolicy::Lu,
+        };
+        Self {
+            solver: DirectSolver::new(policy),
+            pattern: None,
+            pattern_current: false,
+            symmetric: model.symmetric_tangent(),
+        }
+    }
+
+    /// A new step: its pattern is checked at the first assembly.
+    pub fn begin_step(&mut self) {
+        self.pattern_current = false;
+    }
+
+    /// Assemble K_T (+ M/(βΔt²) when dynamic) at `trial` (DESIGN D17, D19, D41).
+    pub fn assemble(
+        &mut self,
+        system: &StepSystem,
+        trial: &TrialStresses,
+        profile: &Profile,
+    ) -> Result<SparseMatrix, StepError> {
+        profile.time(Stage::Assembly, || {
+            if !self.pattern_current {
+                self.update_pattern(system)?;
+            }
+            let Some((_, assembler)) = self.pattern.as_ref() else {
+                return Err(StepError::NotAvailable("no sparsity pattern was built"));
+            };
+            let blocks = cell_blocks(system, trial);
+            let diagonal = system.mass_diagonal();
+            Ok(assembler.assemble_with_diagonal(&blocks, diagonal.as_deref())?)
+        })
+    }
+
+    /// Assemble and factorise the tangent, then solve K δu = R for the
+    /// correction (Cholesky when every material's tangent is symmetric).
+    pub fn solve(
+        &mut self,
+        system: &StepSystem,
+        trial: &TrialStresses,
+        residual: &[f64],
+        usage: &mut SolverUsage,
+        profile: &Profile,
+    ) -> Result<Vec<f64>, StepError> {
+        let matrix = self.assemble(system, trial, profile)?;
+        let symmetric = self.symmetric;
+        let kind = profile.time(Stage::Factorisation, || {
+            self.solver.factorize(&matrix, symmetric)
+        })?;
+        match kind {
+            FactorKind::Cholesky => usage.cholesky += 1,
+            FactorKind::Lu => usage.lu += 1,
+        }
+        usage.max_unknowns = usage.max_unknowns.max(matrix.n());
+        let mut correction = residual.to_vec();
+        profile.time(Stage::Solve, || self.solver.solve_in_place(&mut correction))?;
+        Ok(correction)
+    }
+
+    /// The pattern of this step's elements: the previous one while every
+    /// element keeps its dofs, else a new one (GIMP patches drop the
+    /// couplings of nodes three apart, `stiffness::patch_coupling`).
+    fn update_pattern(&mut self, system: &StepSystem) -> Result<(), StepError> {
+        let grid = &system.model.grid;
+        let element_dofs = system.dofs.element_dofs(grid, &system.setup.bins);
+        let n = system.dofs.n_free;
+        let same =
+            matches!(&self.pattern, Some((key, a)) if *key == element_dofs && a.n_dofs() == n);
+        if !same {
+            let coupling = stiffness::patch_coupling(grid);
+            let assembler = Assembler::with_couplings(n, &element_dofs, coupling)?;
+            self.pattern = Some((element_dofs, assembler));
+        }
+        self.pattern_current = true;
+        Ok(())
+    }
+}
+
+/// The system's element blocks: every active cell's patch stiffness (with
+/// the spin term when the tangent is unsymmetric), the penalty springs of
+/// driven points, and the background stiffness.
+fn cell_blocks(system: &StepSystem, trial: &TrialStresses) -> Vec<Vec<f64>> {
+    let (model, setup) = (system.model, system.setup);
+    let spin = (!trial.spin_sensitivity.is_empty()).then_some(trial.spin_sensitivity.as_slice());
+    let mut blocks = stiffness::cell_stiffness_blocks(
+        &model.grid,
+        &setup.bins,
+        &setup.shapes,
+        &model.particles.volume,
+        &trial.tangent,
+        spin,
+    );
+    let dofs = stiffness::patch_dofs(&model.grid);
+    model
+        .driven
+        .add_stiffness(&setup.driven_shapes, &setup.bins, dofs, &mut blocks);
+    stiffness::system_blocks(
+        &model.grid,
+        &setup.bins,
+        blocks,
+        Some(&system.background_block),
+    )
+}
+
+impl StepSystem<'_> {
+    /// M/(βΔt²) at the free dofs (dynamic runs; `None` when quasi-static).
+    fn mass_diagonal(&self) -> Option<Vec<f64>> {
+        let newmark = self.newmark.as_ref()?;
+        let mut diag = vec![0.0; self.dofs.n_free];
+        for (d, &index) in self.dofs.index.iter().enumerate() {
+            if index != NONE {
+                diag[index as usize] = self.nodal.mass[d / 2] / (newmark.beta * self.dt * self.dt);
+            }
+        }
+        Some(diag)
+    }
+}
+
+/// ε_bg times the 2×2-Gauss bilinear elastic stiffness of a full cell with the
+/// stiffest material's E and its ν (DESIGN D19), over the cell's nodes in
+/// row-major order (see `stiffness::system_blocks`).
+pub fn background_block(scene: &Scene, grid: &Grid) -> [f64; 64] {
+    let mut block = [0.0; 64];
+    let reference = scene
+        .materials
+        .values()
+        .max_by(|a, b| a.youngs_modulus().total_cmp(&b.youngs_modulus()));
+    let Some(reference) = reference else {
+        return block;
+    };
+    let d = LinearElastic::new(reference.youngs_modulus(), reference.poisson_ratio()).stiffness();
+    let h = grid.cell_size;
+    let grid = Grid::bilinear(grid.origin, h, grid.cells);
+    let g = 0.5 / 3f64.sqrt();
+    for (gx, gy) in [(-g, -g), (g, -g), (g, g), (-g, g)] {
+        let x = [
+            grid.origin[0] + (0.5 + gx) * h,
+            grid.origin[1] + (0.5 + gy) * h,
+        ];
+        let shape = grid.shape_in_cell(0, 0, x);
+        stiffness::add_particle_stiffness(&mut block, 8, &shape, 0.25 * h * h, &d);
+    }
+    block
+        .iter_mut()
+        .for_each(|v| *v *= scene.solver.background_stiffness);
+    block
+}

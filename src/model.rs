@@ -1,0 +1,356 @@
+//! The state of the model: grid, materials, material points, boundary
+//! devices and time, plus what the committed steps have accumulated
+//! (reactions, energies, removed points). Integrators advance it; the run
+//! ([`crate::simulation`]) reads it for monitors and outputs.
+
+use std::sync::Arc;
+
+use crate::bc::{Constraints, DrivenPoints, TractionPoints};
+use crate::constitutive::{invert4, ConstitutiveModel, LinearElastic, Mat4};
+use crate::error::StepError;
+use crate::grid::{Grid, ShapeFunctions};
+use crate::particles::Particles;
+use crate::scene::{
+    AnalysisKind, FieldError, LostPointPolicy, MaterialSpec, Scene, SceneError, ShapeFunctionChoice,
+};
+use crate::seeding::seed_particles;
+use crate::smoothing::DoubleMapping;
+
+/// A material point dropped from the run after it left the grid
+/// (`[grid] lost_points = "remove"`), as it was at that moment.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct LostPoint {
+    /// Step during which the point left the grid.
+    pub step: usize,
+    /// Index of the point just before its removal (later points move down by one).
+    pub index: usize,
+    /// Position outside the grid, m.
+    pub position: [f64; 2],
+    /// Velocity, m/s.
+    pub velocity: [f64; 2],
+    /// Mass, t per metre run.
+    pub mass: f64,
+    /// Mean stress p = −tr σ / 3, kPa.
+    pub mean_stress: f64,
+    /// Local equivalent plastic strain κ.
+    pub plastic_strain_eq: f64,
+}
+
+/// New index of every old material point after points were removed
+/// (`None` for a removed point).
+pub type PointRemap = Vec<Option<usize>>;
+
+/// The model and its evolving state.
+pub struct Model {
+    /// The validated scene.
+    pub scene: Scene,
+    /// Background grid.
+    pub grid: Grid,
+    /// Material laws, indexed by particle material id.
+    pub materials: Vec<Arc<dyn ConstitutiveModel>>,
+    /// Material names, same order.
+    pub material_names: Vec<String>,
+    /// Elastic compliance C = D⁻¹ of every material (D22), same order.
+    pub compliances: Vec<Mat4>,
+    /// Material points.
+    pub particles: Particles,
+    /// Dirichlet conditions of every grid dof.
+    pub constraints: Constraints,
+    /// Follower-pressure points.
+    pub traction: TractionPoints,
+    /// Penalty-tied points of rigid bodies.
+    pub driven: DrivenPoints,
+    /// Points that must not be removed when they leave the grid (those the
+    /// run's monitors follow); kept current when points are removed.
+    pub pinned_points: Vec<usize>,
+    /// Current time, s.
+    pub time: f64,
+    /// Completed steps.
+    pub step: usize,
+    /// Support reactions at the grid nodes after the last step (kN/m), f_int + M a − f_ext.
+    pub reaction: Vec<[f64; 2]>,
+    /// Nodal displacement increment of the last (sub-)step, per grid node, m.
+    pub last_increment: Vec<[f64; 2]>,
+    /// Accumulated plastic dissipation D (DESIGN D43), kJ per metre run.
+    pub dissipated_energy: f64,
+    /// Work W of the external loads on the soil so far, kJ per metre run: the
+    /// follower pressures (trapezoidal per step) and the rigid bodies (their
+    /// force on the soil times their prescribed motion, trapezoidal per step;
+    /// the penalty springs' own energy, ½ k gap², is left out). Gravity is not
+    /// included. Energy balance (DESIGN §9, M5): W = W_int + ΔK + numerical losses.
+    pub external_work: f64,
+    /// Work of the stresses on the strain increments so far (DESIGN D43 with the
+    /// total strain increment), kJ per metre run: elastic energy stored plus
+    /// plastic dissipation.
+    pub internal_work: f64,
+    /// Points removed after leaving the grid (`[grid] lost_points = "remove"`).
+    pub lost_points: Vec<LostPoint>,
+    /// Force of every rigid body on the soil at the end of the last step, kN/m.
+    rigid_force: Vec<[f64; 2]>,
+}
+
+/// Build a material law from its scene entry; the problems of an invalid
+/// one name the scene field.
+pub fn build_material(
+    name: &str,
+    spec: &MaterialSpec,
+) -> Result<Arc<dyn ConstitutiveModel>, Vec<FieldError>> {
+    Ok(match spec {
+        MaterialSpec::LinearElastic(e) => Arc::new(LinearElastic::new(e.youngs_modulus, e.nu)),
+        MaterialSpec::Hmc(h) => {
+            Arc::new(crate::constitutive::hmc::Hmc::new(*h).map_err(|problems| {
+                problems
+                    .into_iter()
+                    .map(|message| FieldError {
+                        field: format!("materials.{name}"),
+                        message,
+                    })
+                    .collect::<Vec<_>>()
+            })?)
+        }
+    })
+}
+
+impl Model {
+    /// Build the model of a validated scene: seed material points, place
+    /// traction and driven points. Geometry problems that only show once
+    /// points are seeded (a body with no point, a platen touching none) are
+    /// reported as field errors.
+    pub fn new(scene: Scene) -> Result<Self, SceneError> {
+        let grid = build_grid(&scene);
+        let material_names: Vec<String> = scene.materials.keys().cloned().collect();
+        let mut errors = Vec::new();
+        let mut materials: Vec<Arc<dyn ConstitutiveModel>> = Vec::new();
+        for (name, spec) in &scene.materials {
+            match build_material(name, spec) {
+                Ok(m) => materials.push(m),
+                Err(problems) => {
+                    errors.extend(problems);
+                    materials.push(Arc::new(LinearElastic::new(1.0, 0.0)));
+                }
+            }
+        }
+        let particles = seed_particles(&scene, &grid, &material_names, &mut errors);
+        let driven = build_driven_points(&scene, &particles, &mut errors);
+        if !errors.is_empty() {
+            return Err(SceneError::Invalid {
+                path: scene.scene.name.clone(),
+                errors,
+            });
+        }
+        let n_nodes = grid.node_count();
+        Ok(Model {
+            constraints: Constraints::from_scene(&scene, &grid),
+            traction: TractionPoints::from_scene(&scene),
+            compliances: materials
+                .iter()
+                .map(|m| invert4(&m.elastic_stiffness()))
+                .collect(),
+            grid,
+            materials,
+            material_names,
+            particles,
+            driven,
+            pinned_points: Vec::new(),
+            time: 0.0,
+            step: 0,
+            reaction: vec![[0.0; 2]; n_nodes],
+            last_increment: vec![[0.0; 2]; n_nodes],
+            dissipated_energy: 0.0,
+            external_work: 0.0,
+            internal_work: 0.0,
+            lost_points: Vec::new(),
+            rigid_force: Vec::new(),
+            scene,
+        })
+    }
+
+    /// The analysis type.
+    pub fn analysis(&self) -> AnalysisKind {
+        self.scene.scene.analysis
+    }
+
+    /// Whether the run has reached its last step / end time.
+    pub fn finished(&self) -> bool {
+        match self.analysis() {
+            AnalysisKind::Explicit => {
+                self.time >= self.scene.scene.end_time.unwrap_or(0.0) * (1.0 - 1e-12)
+            }
+            _ => self.step >= self.scene.scene.steps.unwrap_or(0),
+        }
+    }
+
+    /// True when every material has a symmetric tangent (Cholesky allowed).
+    pub fn symmetric_tangent(&self) -> bool {
+        self.materials.iter().all(|m| m.has_symmetric_tangent())
+    }
+
+    /// Largest Young's modulus of the materials, kPa.
+    pub fn max_youngs_modulus(&self) -> f64 {
+        self.scene
+            .materials
+            .values()
+            .map(|m| m.youngs_modulus())
+            .fold(0.0, f64::max)
+    }
+
+    /// The double-mapping mode in force: `auto` means `increment` when some
+    /// material can soften (the paper's use), else `off`.
+    pub fn double_mapping(&self) -> DoubleMapping {
+        match self.scene.smoothing.double_mapping {
+            DoubleMapping::Auto if self.materials.iter().any(|m| m.can_soften()) => {
+                DoubleMapping::Increment
+            }
+            DoubleMapping::Auto => DoubleMapping::Off,
+            mode => mode,
+        }
+    }
+
+    /// Material points a cell needs to carry traction points (half the seeding count).
+    pub fn traction_min_points(&self) -> usize {
+        (self.scene.grid.points_per_cell.pow(2) / 2).max(1)
+    }
+
+    /// Σ ½ m_p |v_p|², kJ per metre run.
+    pub fn kinetic_energy(&self) -> f64 {
+        let p = &self.particles;
+        (0..p.len())
+            .map(|i| 0.5 * p.mass[i] * (p.velocity[i][0].powi(2) + p.velocity[i][1].powi(2)))
+            .sum()
+    }
+
+    /// Elastic strain energy Σ ½ V_p σ_pᵀ C σ_p, kJ per metre run (C = D⁻¹ of the
+    /// particle's material).
+    pub fn strain_energy(&self) -> f64 {
+        let p = &self.particles;
+        let compliance: Vec<Mat4> = p
+            .material
+            .iter()
+            .map(|&m| self.compliances[m as usize])
+            .collect();
+        crate::metrics::elastic_energy(
+            &p.volume,
+            &p.stress,
+            crate::metrics::ComplianceSource::PerPoint(&compliance),
+        )
+        .unwrap_or(f64::NAN)
+    }
+
+    /// Add the work of the rigid bodies on the soil over the step that began at
+    /// `start`: ½ (R_n + R_n+1)·v Δt per body (R of DESIGN D40).
+    pub fn account_rigid_work(&mut self, start: f64) {
+        let bodies = self.driven.velocity.len();
+        self.rigid_force.resize(bodies, [0.0; 2]);
+        let dt = self.time - start;
+        for r in 0..bodies {
+            let now = self.driven.force_on_soil(r, &self.particles, self.time);
+            let before = self.rigid_force[r];
+            let v = self.driven.velocity[r];
+            self.external_work +=
+                0.5 * dt * ((before[0] + now[0]) * v[0] + (before[1] + now[1]) * v[1]);
+            self.rigid_force[r] = now;
+        }
+    }
+
+    /// With `[grid] lost_points = "remove"`, drop every material point outside
+    /// the grid and record it in [`Self::lost_points`]; the rigid-body ties and
+    /// [`Self::pinned_points`] follow, and the remap is returned for whoever
+    /// else holds point indices (`None` when no point was removed). A point a
+    /// rigid body is tied to or that is pinned is not dropped, nor is the last
+    /// point of the run: the first such point is reported as having left the
+    /// grid. With `stop` this does nothing.
+    pub fn drop_lost_points(&mut self) -> Result<Option<PointRemap>, StepError> {
+        if self.scene.grid.lost_points == LostPointPolicy::Stop {
+            return Ok(None);
+        }
+        let p = &self.particles;
+        let keep: Vec<bool> = p.position.iter().map(|&x| self.grid.contains(x)).collect();
+        if keep.iter().all(|&k| k) {
+            return Ok(None);
+        }
+        let held =
+            |i: usize| self.driven.particle.contains(&Some(i)) || self.pinned_points.contains(&i);
+        // A run with no material left has nothing to compute: report the first point out.
+        let nothing_left = !keep.iter().any(|&k| k);
+        if let Some(i) = (0..keep.len()).find(|&i| !keep[i] && (nothing_left || held(i))) {
+            return Err(StepError::ParticleLeftGrid {
+                particle: i,
+                position: p.position[i],
+            });
+        }
+        for (removed, i) in (0..keep.len()).filter(|&i| !keep[i]).enumerate() {
+            self.lost_points.push(LostPoint {
+                step: self.step + 1,
+                index: i - removed,
+                position: p.position[i],
+                velocity: p.velocity[i],
+                mass: p.mass[i],
+                mean_stress: crate::constitutive::mean_stress(&p.stress[i]),
+                plastic_strain_eq: p.state[i].plastic_strain_eq,
+            });
+        }
+        let remap = remap_of(&keep);
+        for tie in self.driven.particle.iter_mut().flatten() {
+            *tie = remap[*tie].unwrap_or(*tie);
+        }
+        for pinned in &mut self.pinned_points {
+            *pinned = remap[*pinned].unwrap_or(*pinned);
+        }
+        self.particles.retain(&keep);
+        Ok(Some(remap))
+    }
+}
+
+/// New indices of the kept points, in order.
+fn remap_of(keep: &[bool]) -> PointRemap {
+    let mut next = 0;
+    keep.iter()
+        .map(|&k| {
+            k.then(|| {
+                next += 1;
+                next - 1
+            })
+        })
+        .collect()
+}
+
+fn build_grid(scene: &Scene) -> Grid {
+    let shape_functions = match scene.grid.shape_functions {
+        ShapeFunctionChoice::Bilinear => ShapeFunctions::Bilinear,
+        ShapeFunctionChoice::Gimp => ShapeFunctions::Gimp {
+            half_width: 0.5 * scene.grid.cell_size / scene.grid.points_per_cell as f64,
+        },
+    };
+    Grid {
+        origin: scene.grid.origin,
+        cell_size: scene.grid.cell_size,
+        cells: scene.grid_cells(),
+        shape_functions,
+    }
+}
+
+/// The rigid bodies' tied points, with the penalty factor of the analysis
+/// (DESIGN §8.0: β_pen = 1e3 implicit, 10 explicit).
+fn build_driven_points(
+    scene: &Scene,
+    particles: &Particles,
+    errors: &mut Vec<FieldError>,
+) -> DrivenPoints {
+    let youngs: Vec<f64> = scene
+        .materials
+        .values()
+        .map(|m| m.youngs_modulus())
+        .collect();
+    let explicit = scene.scene.analysis == AnalysisKind::Explicit;
+    let penalty_factor = scene
+        .solver
+        .penalty_factor
+        .unwrap_or(if explicit { 10.0 } else { 1e3 });
+    DrivenPoints::from_scene(scene, particles, penalty_factor, &youngs).unwrap_or_else(|r| {
+        errors.push(FieldError {
+            field: format!("bc.rigid[{r}].footprint"),
+            message: "must be a non-empty range on the top of its body that selects points".into(),
+        });
+        DrivenPoints::default()
+    })
+}
