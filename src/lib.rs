@@ -5,14 +5,21 @@
 //! dependence and regularisation in the MPM". Equations are cited as *paper
 //! eq. N* and as *DESIGN DN* (the physics reference `shared/DESIGN.md`).
 //!
-//! Layout, one module per concept: [`grid`] and [`shape`] (background grid,
-//! bilinear shape functions), [`particles`] (material points), [`transfer`]
-//! (the P2G/G2P kernels both integrators share), [`constitutive`] (stress
-//! updates), [`nonlocal`] (averaging of the equivalent plastic strain),
-//! [`integrators`] (implicit Newton/Newmark and explicit MUSL), [`bc`]
-//! (Dirichlet lines, traction points, driven points), [`scene`] (TOML input
-//! and its validation), [`simulation`] (the time loop), [`monitor`],
-//! [`output`], [`run`] and [`profile`] (what a run writes and measures).
+//! Layout, one module per concept:
+//! - the model: [`grid`] and [`shape`] (background grid, bilinear and GIMP
+//!   shape functions), [`particles`] and [`seeding`] (material points),
+//!   [`constitutive`] (stress updates), [`bc`] (Dirichlet lines, traction
+//!   points, driven points), [`model`] (all of it and its state in time);
+//! - the kernels: [`transfer`] (the P2G/G2P kernels both integrators share),
+//!   [`stiffness`] (tangent blocks), [`dofs`] (numbering of the unknowns),
+//!   [`nonlocal`] (averaging of the equivalent plastic strain), [`smoothing`]
+//!   (double mapping);
+//! - the step: [`integrators`] (implicit Newton/Newmark and explicit MUSL,
+//!   each a list of named stages in the order of paper Fig. 1);
+//! - the run: [`simulation`] (time loop, monitors), [`monitor`], [`output`],
+//!   [`run`] and [`profile`] (what a run writes and measures), [`scene`]
+//!   (TOML input and its validation), [`campaign`] and [`metrics`] (mesh
+//!   studies), [`error`].
 
 // Index loops over nodes, components and Voigt entries mirror the equations
 // (B_a, D_ij, N_a) more readably than iterator chains.

@@ -35,11 +35,7 @@ fn profile_of(scene: &str, overrides: &[&str]) -> (Vec<(String, u64, f64)>, f64)
 /// 2 % of it in `other`, and that each named stage ran.
 fn assert_adds_up(scene: &str, overrides: &[&str], stages_that_ran: &[&str]) {
     let (rows, wall) = profile_of(scene, overrides);
-    let staged: f64 = rows
-        .iter()
-        .filter(|r| r.0 != "other")
-        .map(|r| r.2)
-        .sum();
+    let staged: f64 = rows.iter().filter(|r| r.0 != "other").map(|r| r.2).sum();
     let other = rows.iter().find(|r| r.0 == "other").unwrap().2;
     println!("{scene}: stages {staged:.4} s + other {other:.4} s, wall {wall:.4} s");
     for row in &rows {

@@ -14,9 +14,9 @@ use crate::transfer::strain_and_spin;
 /// The nodal results of the step the model keeps.
 pub struct NodalResults<'a> {
     /// Support reactions per grid node, kN/m.
-    pub reaction: Vec<[f64; 2]>,
+    pub reaction: &'a [[f64; 2]],
     /// Displacement increment Δu per grid node (moves the traction points).
-    pub increment: Vec<[f64; 2]>,
+    pub increment: &'a [[f64; 2]],
     /// Nodal motion that moves the rigid bodies' surface contact points: the
     /// one that moved the material points.
     pub contact_motion: &'a [[f64; 2]],
@@ -53,12 +53,12 @@ pub fn commit(
     }
     model.external_work += model
         .traction
-        .advect(&setup.traction_shapes, &nodal.increment);
+        .advect(&setup.traction_shapes, nodal.increment);
     model
         .driven
         .advect(&setup.driven_shapes, nodal.contact_motion);
-    model.reaction = nodal.reaction;
-    model.last_increment = nodal.increment;
+    model.reaction = nodal.reaction.to_vec();
+    model.last_increment = nodal.increment.to_vec();
     model.drop_lost_points()
 }
 

@@ -75,14 +75,11 @@ impl ExplicitIntegrator {
         let setup = profile.time(Stage::Setup, || StepSetup::new(model))?;
         let mut nonlocal = profile.time(Stage::Nonlocal, || start_nonlocal(model))?;
         let nodal = profile.time(Stage::P2G, || map_to_grid(model, &setup, t));
-        let dt = profile.time(Stage::TimeStep, || self.time_step(model, &setup, &nodal))?;
-        let grid = profile.time(Stage::TimeStep, || update_momentum(model, nodal, dt));
-        let motion = GridMotion {
-            dt,
-            displacement: &grid.velocity,
-            scale: dt,
-            acceleration: Some((&grid.acceleration, VelocityUpdate::Forward)),
-        };
+        let (dt, grid) = profile.time(Stage::TimeStep, || {
+            let dt = self.time_step(model, &setup, &nodal)?;
+            Ok::<_, StepError>((dt, update_momentum(model, nodal, dt)))
+        })?;
+        let motion = grid.motion(dt);
         profile.time(Stage::G2P, || {
             g2p(&mut model.particles, &setup.shapes, &motion)
         });
@@ -96,8 +93,8 @@ impl ExplicitIntegrator {
         let removed = profile.time(Stage::Commit, || {
             let contact_motion = contact_motion(model, &grid, dt);
             let nodal = NodalResults {
-                reaction: grid.reaction,
-                increment: du,
+                reaction: &grid.reaction,
+                increment: &du,
                 contact_motion: &contact_motion,
             };
             commit(model, &setup, &trial, converged, nodal)
@@ -147,6 +144,19 @@ impl ExplicitIntegrator {
             return Err(StepError::InvalidTimeStep { dt });
         }
         Ok(dt)
+    }
+}
+
+impl UpdatedGrid {
+    /// G2P of the updated grid (DESIGN §4 step 3): v_p += Δt Σ N a_i,
+    /// x_p += Δt Σ N p_i/m_i.
+    fn motion(&self, dt: f64) -> GridMotion<'_> {
+        GridMotion {
+            dt,
+            displacement: &self.velocity,
+            scale: dt,
+            acceleration: Some((&self.acceleration, VelocityUpdate::Forward)),
+        }
     }
 }
 

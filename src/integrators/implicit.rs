@@ -122,44 +122,26 @@ impl ImplicitIntegrator {
                 profile,
             )
         })?;
-        let acceleration = self
-            .newmark
-            .map(|n| system.nodal_acceleration(&n, &solution.du));
-        let Solution {
-            du,
-            trial,
-            residual,
-            iterations,
-            history,
-        } = solution;
-        self.last_residuals = (history, residual.reference);
-        let motion = GridMotion {
-            dt,
-            displacement: &du,
-            scale: 1.0,
-            acceleration: acceleration
-                .as_deref()
-                .zip(self.newmark)
-                .map(|(a, n)| (a, VelocityUpdate::Newmark { gamma: n.gamma })),
-        };
+        let grid = ConvergedGrid::new(&system, solution);
+        self.last_residuals = (grid.history.clone(), grid.reference);
+        let motion = grid.motion(dt, self.newmark);
         profile.time(Stage::G2P, || {
             g2p(&mut model.particles, &setup.shapes, &motion)
         });
         let converged = profile.time(Stage::Stresses, || {
-            converged_stresses(model, &setup, &trial, nonlocal.as_mut(), profile)
+            converged_stresses(model, &setup, &grid.trial, nonlocal.as_mut(), profile)
         })?;
         let removed = profile.time(Stage::Commit, || {
-            let reaction = residual.residual.iter().map(|r| [-r[0], -r[1]]).collect();
             let nodal = NodalResults {
-                reaction,
-                increment: du.clone(),
-                contact_motion: &du,
+                reaction: &grid.reaction,
+                increment: &grid.du,
+                contact_motion: &grid.du,
             };
-            commit(model, &setup, &trial, converged, nodal)
+            commit(model, &setup, &grid.trial, converged, nodal)
         })?;
         report.removed_points.extend(removed);
         model.time = t + dt;
-        Ok(iterations)
+        Ok(grid.iterations)
     }
 
     /// The nonlinear system of a (sub-)step.
@@ -247,6 +229,58 @@ impl ImplicitIntegrator {
     /// Number of unknowns of the next step.
     pub fn unknowns(model: &Model) -> Result<usize, StepError> {
         Ok(step_setup(model)?.1.n_free)
+    }
+}
+
+/// A converged (sub-)step's nodal solution, for the G2P and commit stages.
+struct ConvergedGrid {
+    /// Δu per grid node.
+    du: Vec<[f64; 2]>,
+    /// a_{n+1} per grid node (dynamic runs).
+    acceleration: Option<Vec<[f64; 2]>>,
+    /// Support reactions −R per grid node.
+    reaction: Vec<[f64; 2]>,
+    /// Stresses, states and tangents at Δu.
+    trial: TrialStresses,
+    /// Newton iterations.
+    iterations: usize,
+    /// ‖R‖ per iteration, kN/m.
+    history: Vec<f64>,
+    /// F_ref of D18 at convergence.
+    reference: f64,
+}
+
+impl ConvergedGrid {
+    fn new(system: &StepSystem, solution: Solution) -> Self {
+        let Solution {
+            du,
+            trial,
+            residual,
+            iterations,
+            history,
+        } = solution;
+        Self {
+            acceleration: system
+                .newmark
+                .map(|newmark| system.nodal_acceleration(&newmark, &du)),
+            reaction: residual.residual.iter().map(|r| [-r[0], -r[1]]).collect(),
+            reference: residual.reference,
+            du,
+            trial,
+            iterations,
+            history,
+        }
+    }
+
+    /// G2P (DESIGN §3): x_p += Σ N Δu_i; dynamic: a_p = Σ N a_i, Newmark v_p.
+    fn motion(&self, dt: f64, newmark: Option<Newmark>) -> GridMotion<'_> {
+        let rule = newmark.map(|n| VelocityUpdate::Newmark { gamma: n.gamma });
+        GridMotion {
+            dt,
+            displacement: &self.du,
+            scale: 1.0,
+            acceleration: self.acceleration.as_deref().zip(rule),
+        }
     }
 }
 
