@@ -398,16 +398,10 @@ impl MaterialSpec {
                 );
             }
             MaterialSpec::Hmc(h) => {
-                for problem in h.validate(prefix) {
-                    // messages read "<field> = <value> ..."; keep the field path separate
-                    let (field, message) = problem
-                        .split_once(' ')
-                        .unwrap_or((prefix, problem.as_str()));
-                    errors.push(FieldError {
-                        field: field.to_string(),
-                        message: message.trim_start_matches("= ").to_string(),
-                    });
-                }
+                errors.extend(h.validate().into_iter().map(|problem| FieldError {
+                    field: format!("{prefix}.{}", problem.key),
+                    message: problem.message,
+                }));
             }
         }
     }

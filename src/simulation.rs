@@ -7,7 +7,7 @@ use std::sync::Arc;
 use mpm_solvers::{DirectSolver, SolverPolicy};
 
 use crate::bc::{Constraints, DrivenPoints, TractionPoints};
-use crate::constitutive::{ConstitutiveModel, LinearElastic, Mat4};
+use crate::constitutive::{ConstitutiveModel, LinearElastic, Mat4, ParameterProblem};
 use crate::error::RunError;
 use crate::grid::{Grid, ShapeFunctions};
 use crate::monitor::Monitor;
@@ -178,8 +178,10 @@ fn gauss_rule(n: usize) -> (Vec<f64>, Vec<f64>) {
     }
 }
 
-/// Build a material law from its scene entry (parameter problems as messages).
-pub fn build_material(spec: &MaterialSpec) -> Result<Arc<dyn ConstitutiveModel>, Vec<String>> {
+/// Build a material law from its scene entry (every parameter problem if it is invalid).
+pub fn build_material(
+    spec: &MaterialSpec,
+) -> Result<Arc<dyn ConstitutiveModel>, Vec<ParameterProblem>> {
     Ok(match spec {
         MaterialSpec::LinearElastic(e) => Arc::new(LinearElastic::new(e.youngs_modulus, e.nu)),
         MaterialSpec::Hmc(h) => Arc::new(crate::constitutive::hmc::Hmc::new(*h)?),
@@ -211,9 +213,9 @@ impl Simulation {
             match build_material(spec) {
                 Ok(m) => materials.push(m),
                 Err(problems) => {
-                    errors.extend(problems.into_iter().map(|message| FieldError {
-                        field: format!("materials.{name}"),
-                        message,
+                    errors.extend(problems.into_iter().map(|problem| FieldError {
+                        field: format!("materials.{name}.{}", problem.key),
+                        message: problem.message,
                     }));
                     materials.push(Arc::new(LinearElastic::new(1.0, 0.0)));
                 }

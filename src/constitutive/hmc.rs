@@ -16,8 +16,8 @@ use super::flow_rule::{strain_norm, PressureScaledFlow};
 use super::softening::ThreeLevelSoftening;
 use super::yield_surface::{HyperbolicMohrCoulomb, Invariants, SurfaceStrength};
 use super::{
-    mat4_mul_vec, ConstitutiveError, ConstitutiveModel, LinearElastic, Mat4, PointState,
-    StrengthVariable, StressUpdate, Voigt,
+    mat4_mul_vec, ConstitutiveError, ConstitutiveModel, LinearElastic, Mat4, ParameterProblem,
+    PointState, StrengthVariable, StressUpdate, Voigt,
 };
 
 /// Newton iterations per (sub)step before sub-stepping (DESIGN §5.6 step 3).
@@ -113,15 +113,16 @@ impl HmcParameters {
         }
     }
 
-    /// Check every parameter; one message per problem, naming `{prefix}.{key}` and the allowed range.
+    /// Check every parameter; one [`ParameterProblem`] per problem, naming the TOML key and the
+    /// allowed range.
     ///
     /// Ranges: E > 0; −1 < ν < 0.5; density > 0; 0 < φ_peak ≤ 46° (van Eekelen convexity, §5.3);
     /// 0 < φ_res ≤ φ_peak; φ_ini = φ_peak (no pre-peak hardening, §5.5); c_ini > 0;
     /// 0 ≤ c_post ≤ c_ini; 0 ≤ p_t,ini ≤ c_ini cot φ_peak; 0 ≤ p_t,post ≤ c_post cot φ_peak (a ≥ 0,
     /// D23); b_post, b_res ≥ 0; 0 ≤ ω ≤ 1 (D26). All values must be finite.
-    pub fn validate(&self, prefix: &str) -> Vec<String> {
+    pub fn validate(&self) -> Vec<ParameterProblem> {
         let mut problems = Vec::new();
-        let fields: [(&str, f64); 13] = [
+        let fields: [(&'static str, f64); 13] = [
             ("E", self.youngs_modulus),
             ("nu", self.poisson_ratio),
             ("density", self.density),
@@ -138,15 +139,21 @@ impl HmcParameters {
         ];
         for (key, value) in fields {
             if !value.is_finite() {
-                problems.push(format!("{prefix}.{key} = {value} must be a finite number"));
+                problems.push(ParameterProblem {
+                    key,
+                    message: format!("{value} must be a finite number"),
+                });
             }
         }
         if !problems.is_empty() {
             return problems;
         }
-        let mut check = |ok: bool, key: &str, value: f64, range: String| {
+        let mut check = |ok: bool, key: &'static str, value: f64, range: String| {
             if !ok {
-                problems.push(format!("{prefix}.{key} = {value} is out of range: {range}"));
+                problems.push(ParameterProblem {
+                    key,
+                    message: format!("{value} is out of range: {range}"),
+                });
             }
         };
         check(
@@ -363,9 +370,9 @@ struct Integrated {
 }
 
 impl Hmc {
-    /// Build the model; returns the validation messages (prefix `material`) if the parameters are invalid.
-    pub fn new(parameters: HmcParameters) -> Result<Self, Vec<String>> {
-        let problems = parameters.validate("material");
+    /// Build the model; returns every parameter problem if the parameters are invalid.
+    pub fn new(parameters: HmcParameters) -> Result<Self, Vec<ParameterProblem>> {
+        let problems = parameters.validate();
         if !problems.is_empty() {
             return Err(problems);
         }
