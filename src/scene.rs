@@ -159,12 +159,27 @@ fn default_kappa_tolerance() -> f64 {
 pub struct SmoothingSpec {
     /// `auto` (on for softening materials), `off`, `increment` or `total` (DESIGN §7).
     #[serde(default)]
-    pub double_mapping: crate::smoothing::DoubleMapping,
+    pub double_mapping: DoubleMapping,
     /// Restore the internal forces of the unsmoothed stresses after smoothing
     /// (default false, the paper's double mapping; see
     /// `smoothing::restore_internal_forces`).
     #[serde(default)]
     pub restore_forces: bool,
+}
+
+/// `[smoothing] double_mapping`: which stress is smoothed (DESIGN §7).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DoubleMapping {
+    /// On for materials that can soften, off otherwise (the paper's use).
+    #[default]
+    Auto,
+    /// No smoothing.
+    Off,
+    /// Smooth the step's stress increment σ(n+1) − σ^R(n) (DESIGN D37–D38).
+    Increment,
+    /// Smooth the total stress σ(n+1).
+    Total,
 }
 
 /// The time integration scheme.

@@ -9,14 +9,15 @@
 
 use std::sync::Arc;
 
-use serde::{Deserialize, Serialize};
-
 use mpm_solvers::{Assembler, DirectSolver, SolverError, SolverOptions, SolverPolicy};
 
 use crate::bc::DofMap;
 use crate::constitutive::{ConstitutiveModel, Mat4, PointState, Voigt};
 use crate::grid::{Grid, ShapeAt, MAX_SUPPORT};
 use crate::transfer::{self, ParticleBins, NONE};
+
+// The configuration enum is defined with the scene schema; the engine's path stays valid.
+pub use crate::scene::DoubleMapping;
 
 /// What restores equilibrium after smoothing: the point volumes V_p(n) and the
 /// free dofs of the step (see [`restore_internal_forces`]).
@@ -25,21 +26,6 @@ pub struct Equilibrium<'a> {
     pub volume: &'a [f64],
     /// Free dofs of the active nodes.
     pub dofs: &'a DofMap,
-}
-
-/// Which stress is smoothed.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum DoubleMapping {
-    /// On for materials that can soften, off otherwise (the paper's use).
-    #[default]
-    Auto,
-    /// No smoothing.
-    Off,
-    /// Smooth the step's stress increment σ(n+1) − σ^R(n) (DESIGN D37–D38).
-    Increment,
-    /// Smooth the total stress σ(n+1).
-    Total,
 }
 
 /// The points and grid a double mapping runs on: the shape functions of the
