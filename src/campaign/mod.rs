@@ -4,8 +4,10 @@
 //!
 //! Scenes are grouped into families by the presence of `[nonlocal]` (local vs
 //! nonlocal); within a family the finest mesh is the reference (DESIGN §9).
-//! Curves are read from each run's `curve.csv`: the abscissa is δ = −`top_uy`
-//! (m), the ordinate the monitor `load` (kN/m). With a step refinement K every
+//! Curves are read from each run's `curve.csv`, in the columns of the scene's
+//! monitors ([`CurveColumns`]): the abscissa is δ = −(displacement monitor) (m,
+//! positive downward), the ordinate the force monitor (kN/m); a scene without
+//! them is reported as having no load curve. With a step refinement K every
 //! scene is also run at Δt / K and each curve's time-step discrepancy is
 //! reported next to the run times (error against run time).
 //!
@@ -15,7 +17,7 @@
 mod report;
 mod run;
 
-pub use report::{compute_metrics, step_convergence, RunMetrics, StepConvergence};
+pub use report::{compute_metrics, step_convergence, CurveColumns, RunMetrics, StepConvergence};
 pub use run::run_campaign;
 
 /// Why a campaign could not run.
@@ -30,6 +32,41 @@ pub enum CampaignError {
     /// An output could not be written.
     #[error("campaign output {0}: {1}")]
     Output(String, String),
+    /// A run's `curve.csv` cannot be read as its load curve.
+    #[error("campaign curve {path}: {problem}")]
+    Curve {
+        /// The curve file.
+        path: String,
+        /// What is wrong with it.
+        problem: CurveProblem,
+    },
+}
+
+/// What is wrong with a run's `curve.csv`.
+#[derive(Debug, thiserror::Error)]
+pub enum CurveProblem {
+    /// The file is missing or cannot be opened.
+    #[error("cannot be opened ({0})")]
+    Missing(String),
+    /// The file is empty or its first line is not a header.
+    #[error("has no header row")]
+    NoHeader,
+    /// A column named by the scene's monitors is not in the header.
+    #[error("has no column `{0}`")]
+    MissingColumn(String),
+    /// A row the CSV reader refuses (wrong number of fields, not UTF-8).
+    #[error("has a row that does not parse: {0}")]
+    BadRow(String),
+    /// A value in a curve column that is not a number.
+    #[error("line {line}: `{value}` in column `{column}` is not a number")]
+    NotANumber {
+        /// Line of the file (1-based).
+        line: u64,
+        /// The column's name.
+        column: String,
+        /// The text found.
+        value: String,
+    },
 }
 
 /// One finished (or stopped) run of a campaign.
@@ -41,8 +78,11 @@ pub struct CampaignRun {
     pub cell_size: f64,
     /// Nonlocal length scale l_s, m (None: local).
     pub length_scale: Option<f64>,
-    /// (δ, F) after every step.
+    /// (δ, F) after every step (empty without a load curve or when the run's setup failed).
     pub curve: Vec<(f64, f64)>,
+    /// The `curve.csv` columns of δ and F, from the scene's monitors (`None`:
+    /// the scene has no load curve).
+    pub curve_columns: Option<CurveColumns>,
     /// Final material-point positions, m.
     pub positions: Vec<[f64; 2]>,
     /// Final deviatoric strain εq (DESIGN D8) per point.
@@ -87,3 +127,6 @@ impl EnergyBalance {
         (self.external - self.internal - self.kinetic) / self.external
     }
 }
+
+#[cfg(test)]
+mod tests;

@@ -5,33 +5,97 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use super::{CampaignError, CampaignRun};
+use super::{CampaignError, CampaignRun, CurveProblem};
 use crate::metrics;
 use crate::plot::{self, Bounds, Panel, Series};
+use crate::scene::{MonitorKind, Scene};
 
-pub(super) fn read_curve(path: &Path) -> Vec<(f64, f64)> {
-    let Ok(mut reader) = csv::Reader::from_path(path) else {
-        return Vec::new();
+/// The two `curve.csv` columns a run's load curve is read from, named by the
+/// scene's monitors.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct CurveColumns {
+    /// Abscissa: the displacement monitor (`rigid_displacement`, else
+    /// `point_displacement`), m; plotted as δ = −value (positive downward).
+    pub displacement: String,
+    /// Ordinate: the force monitor (`rigid_force`, else `reaction`), kN/m.
+    pub force: String,
+}
+
+impl CurveColumns {
+    /// The load-curve columns of `scene`; `None` when it has no displacement
+    /// monitor or no force monitor (the run then has no load curve).
+    pub fn of_scene(scene: &Scene) -> Option<Self> {
+        Some(Self {
+            displacement: first_monitor_of(
+                scene,
+                &[
+                    MonitorKind::RigidDisplacement,
+                    MonitorKind::PointDisplacement,
+                ],
+            )?,
+            force: first_monitor_of(scene, &[MonitorKind::RigidForce, MonitorKind::Reaction])?,
+        })
+    }
+}
+
+/// Name of the scene's first monitor of the first kind in `kinds` it has.
+fn first_monitor_of(scene: &Scene, kinds: &[MonitorKind]) -> Option<String> {
+    kinds.iter().find_map(|kind| {
+        scene
+            .monitor
+            .iter()
+            .find(|m| m.kind == *kind)
+            .map(|m| m.name.clone())
+    })
+}
+
+/// The load curve (δ, F) of a run's `curve.csv`: δ = −(displacement column),
+/// F = force column. A run that stopped mid-way has the rows up to its last
+/// step. A file that is missing, has no header, lacks a column or holds a row
+/// that does not parse is refused.
+pub(super) fn read_curve(
+    path: &Path,
+    columns: &CurveColumns,
+) -> Result<Vec<(f64, f64)>, CampaignError> {
+    let refuse = |problem| CampaignError::Curve {
+        path: path.display().to_string(),
+        problem,
     };
-    let Ok(headers) = reader.headers().cloned() else {
-        return Vec::new();
+    let mut reader =
+        csv::Reader::from_path(path).map_err(|e| refuse(CurveProblem::Missing(e.to_string())))?;
+    let headers = match reader.headers() {
+        Ok(headers) if !headers.is_empty() => headers.clone(),
+        _ => return Err(refuse(CurveProblem::NoHeader)),
     };
-    let (Some(load), Some(top)) = (
-        headers.iter().position(|h| h == "load"),
-        headers.iter().position(|h| h == "top_uy"),
-    ) else {
-        return Vec::new();
+    let column = |name: &str| {
+        headers
+            .iter()
+            .position(|h| h == name)
+            .ok_or_else(|| refuse(CurveProblem::MissingColumn(name.to_string())))
     };
+    let (displacement, force) = (column(&columns.displacement)?, column(&columns.force)?);
     reader
         .records()
-        .filter_map(|r| r.ok())
-        .filter_map(|r| {
-            Some((
-                -r.get(top)?.parse::<f64>().ok()?,
-                r.get(load)?.parse::<f64>().ok()?,
-            ))
+        .map(|record| {
+            let record = record.map_err(|e| refuse(CurveProblem::BadRow(e.to_string())))?;
+            let value = |index: usize| number_in(&record, index, &headers).map_err(refuse);
+            Ok((-value(displacement)?, value(force)?))
         })
         .collect()
+}
+
+/// The number in column `index` of a curve row.
+fn number_in(
+    record: &csv::StringRecord,
+    index: usize,
+    headers: &csv::StringRecord,
+) -> Result<f64, CurveProblem> {
+    let text = record.get(index).unwrap_or_default();
+    text.parse().map_err(|_| CurveProblem::NotANumber {
+        line: record.position().map_or(0, |p| p.line()),
+        column: headers.get(index).unwrap_or_default().to_string(),
+        value: text.to_string(),
+    })
 }
 
 /// Last value of column `name` of a CSV file.
@@ -364,6 +428,13 @@ pub(super) fn write_outputs(out: &Path, runs: &[CampaignRun]) -> Result<(), Camp
             md,
             "\n- {}: {} material point(s) left the grid and were removed ({:.2e} of the mass; run.json lists them)",
             r.name, r.lost_points.0, r.lost_points.1
+        );
+    }
+    for r in runs.iter().filter(|r| r.curve_columns.is_none()) {
+        let _ = writeln!(
+            md,
+            "\n- {}: no load curve (the scene needs a `rigid_force` or `reaction` monitor and a `rigid_displacement` or `point_displacement` monitor)",
+            r.name
         );
     }
     for r in runs.iter().filter(|r| r.error.is_some()) {

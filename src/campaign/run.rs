@@ -6,7 +6,7 @@ use std::sync::Mutex;
 use std::time::Instant;
 
 use super::report::{last_value, read_curve, write_outputs, write_step_convergence};
-use super::{CampaignError, CampaignRun, EnergyBalance};
+use super::{CampaignError, CampaignRun, CurveColumns, EnergyBalance};
 use crate::output::deviatoric_hencky_strain;
 use crate::run::run_scene;
 use crate::scene::Scene;
@@ -33,7 +33,8 @@ fn scenes_in(dir: &Path) -> Result<Vec<PathBuf>, CampaignError> {
 /// outputs. With `step_refinement = Some(K)` every scene is also run with K
 /// times the steps at Δt / K (into `out/<scene>_dtK/`) and the time-step
 /// discrepancy of each curve is reported (`step_convergence.csv`, report
-/// section). Returns the runs in scene order, refinements after the scenes.
+/// section). Returns the runs in scene order, refinements after the scenes; a
+/// run's unreadable `curve.csv` is an error once every run has finished.
 pub fn run_campaign(
     dir: &Path,
     out: &Path,
@@ -76,23 +77,27 @@ pub fn run_campaign(
                     break;
                 };
                 let run = run_one(&name, scene, &out.join(&name), factor);
-                eprintln!(
-                    "campaign: {name} finished in {:.1} s{}",
-                    run.wall_seconds,
-                    run.error
-                        .as_ref()
-                        .map(|e| format!(" (stopped: {e})"))
-                        .unwrap_or_default()
-                );
+                match &run {
+                    Ok(run) => eprintln!(
+                        "campaign: {name} finished in {:.1} s{}",
+                        run.wall_seconds,
+                        run.error
+                            .as_ref()
+                            .map(|e| format!(" (stopped: {e})"))
+                            .unwrap_or_default()
+                    ),
+                    Err(e) => eprintln!("campaign: {name}: {e}"),
+                }
                 if let Ok(mut r) = results.lock() {
                     r.push((index, run));
                 }
             });
         }
     });
-    let mut runs: Vec<(usize, CampaignRun)> = results.into_inner().unwrap_or_default();
+    let mut runs: Vec<(usize, Result<CampaignRun, CampaignError>)> =
+        results.into_inner().unwrap_or_default();
     runs.sort_by_key(|(i, _)| *i);
-    let runs: Vec<CampaignRun> = runs.into_iter().map(|(_, r)| r).collect();
+    let runs: Vec<CampaignRun> = runs.into_iter().map(|(_, r)| r).collect::<Result<_, _>>()?;
     let scenes_as_written: Vec<CampaignRun> = runs
         .iter()
         .filter(|r| r.step_factor == 1)
@@ -126,15 +131,24 @@ fn refine_steps(name: &str, scene: &Scene, k: usize) -> Result<Scene, CampaignEr
     Ok(refined)
 }
 
-fn run_one(name: &str, scene: Scene, out: &Path, step_factor: usize) -> CampaignRun {
+/// Run one scene into `out` and gather what the report needs; an unreadable
+/// curve is an error.
+fn run_one(
+    name: &str,
+    scene: Scene,
+    out: &Path,
+    step_factor: usize,
+) -> Result<CampaignRun, CampaignError> {
     let cell_size = scene.grid.cell_size;
     let length_scale = scene.nonlocal.as_ref().map(|n| n.length_scale);
+    let curve_columns = CurveColumns::of_scene(&scene);
     let start = Instant::now();
     let mut run = CampaignRun {
         name: name.to_string(),
         cell_size,
         length_scale,
         curve: Vec::new(),
+        curve_columns,
         positions: Vec::new(),
         eps_q: Vec::new(),
         kappa_bar: Vec::new(),
@@ -146,8 +160,11 @@ fn run_one(name: &str, scene: Scene, out: &Path, step_factor: usize) -> Campaign
         profile: String::new(),
         step_factor,
     };
-    match run_scene(scene, out, false) {
-        Err(e) => run.error = Some(e.to_string()),
+    let set_up = match run_scene(scene, out, false) {
+        Err(e) => {
+            run.error = Some(e.to_string());
+            false
+        }
         Ok(outcome) => {
             let p = &outcome.simulation.particles;
             run.positions = p.position.clone();
@@ -165,10 +182,17 @@ fn run_one(name: &str, scene: Scene, out: &Path, step_factor: usize) -> Campaign
             let total_mass = sim.particles.mass.iter().sum::<f64>() + lost_mass;
             run.lost_points = (sim.lost_points.len(), lost_mass / total_mass);
             run.profile = outcome.simulation.profile.table(outcome.wall_seconds);
+            true
+        }
+    };
+    let curve = out.join("curve.csv");
+    // a run whose setup failed may have written no curve: it then has none
+    let curve_written = set_up || curve.exists();
+    if curve_written {
+        if let Some(columns) = &run.curve_columns {
+            run.curve = read_curve(&curve, columns)?;
         }
     }
-    let curve = out.join("curve.csv");
-    run.curve = read_curve(&curve);
     run.dissipation = last_value(&curve, "dissipation");
     run.energy = match (
         last_value(&curve, "external_work"),
@@ -183,5 +207,5 @@ fn run_one(name: &str, scene: Scene, out: &Path, step_factor: usize) -> Campaign
         _ => None,
     };
     run.wall_seconds = start.elapsed().as_secs_f64();
-    run
+    Ok(run)
 }
