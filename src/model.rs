@@ -11,10 +11,10 @@ use crate::error::StepError;
 use crate::grid::{Grid, ShapeFunctions};
 use crate::particles::Particles;
 use crate::scene::{
-    AnalysisKind, FieldError, LostPointPolicy, MaterialSpec, Scene, SceneError, ShapeFunctionChoice,
+    AnalysisKind, DoubleMapping, FieldError, LostPointPolicy, MaterialSpec, Scene, SceneError,
+    ShapeFunctionChoice,
 };
 use crate::seeding::seed_particles;
-use crate::smoothing::DoubleMapping;
 
 /// A material point dropped from the run after it left the grid
 /// (`[grid] lost_points = "remove"`), as it was at that moment.
@@ -101,9 +101,9 @@ pub fn build_material(
             Arc::new(crate::constitutive::hmc::Hmc::new(*h).map_err(|problems| {
                 problems
                     .into_iter()
-                    .map(|message| FieldError {
-                        field: format!("materials.{name}"),
-                        message,
+                    .map(|problem| FieldError {
+                        field: format!("materials.{name}.{}", problem.key),
+                        message: problem.message,
                     })
                     .collect::<Vec<_>>()
             })?)

@@ -10,8 +10,8 @@ use std::path::{Path, PathBuf};
 
 use crate::constitutive::hmc::{Hmc, HmcParameters};
 use crate::constitutive::{
-    deviatoric_stress, mean_stress, ConstitutiveError, ConstitutiveModel, PointState,
-    StrengthVariable, Voigt,
+    deviatoric_stress, mean_stress, ConstitutiveError, ConstitutiveModel, ParameterProblem,
+    PointState, StrengthVariable, Voigt,
 };
 
 /// Width of the quarter biaxial specimen w (m, paper §3.1): load F = −σyy·w (kN/m).
@@ -77,9 +77,9 @@ pub enum PointDriverError {
     /// A `--set` argument is not `KEY=NUMBER`.
     #[error("invalid --set {0:?}: expected KEY=VALUE with a numeric VALUE")]
     BadOverride(String),
-    /// Parameter validation failed (one message per problem).
-    #[error("invalid material parameters:\n  {}", .0.join("\n  "))]
-    InvalidParameters(Vec<String>),
+    /// Parameter validation failed (every problem, keys prefixed `material.`).
+    #[error("invalid material parameters:\n  {}", material_problems(.0))]
+    InvalidParameters(Vec<ParameterProblem>),
     /// A driver option is out of range.
     #[error("invalid option: {0}")]
     InvalidOption(String),
@@ -107,6 +107,15 @@ pub enum PointDriverError {
         /// Error text.
         message: String,
     },
+}
+
+/// One line per problem, `material.<key> = <value> ...`.
+fn material_problems(problems: &[ParameterProblem]) -> String {
+    problems
+        .iter()
+        .map(|problem| format!("material.{problem}"))
+        .collect::<Vec<_>>()
+        .join("\n  ")
 }
 
 /// One row of the stress–strain output.
@@ -169,7 +178,7 @@ pub fn load_parameters(
     let parameters: HmcParameters = toml::Value::Table(table)
         .try_into()
         .map_err(|e: toml::de::Error| PointDriverError::ParseMaterial(e.to_string()))?;
-    let problems = parameters.validate("material");
+    let problems = parameters.validate();
     if problems.is_empty() {
         Ok(parameters)
     } else {

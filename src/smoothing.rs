@@ -9,13 +9,12 @@
 
 use std::sync::Arc;
 
-use serde::{Deserialize, Serialize};
-
 use mpm_solvers::{Assembler, DirectSolver, SolverError, SolverOptions, SolverPolicy};
 
 use crate::constitutive::{ConstitutiveModel, Mat4, PointState, Voigt};
 use crate::dofs::DofMap;
 use crate::grid::{Grid, ShapeAt, MAX_SUPPORT};
+use crate::scene::DoubleMapping;
 use crate::stiffness;
 use crate::transfer::{self, ParticleBins, NONE};
 
@@ -26,21 +25,6 @@ pub struct Equilibrium<'a> {
     pub volume: &'a [f64],
     /// Free dofs of the active nodes.
     pub dofs: &'a DofMap,
-}
-
-/// Which stress is smoothed.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum DoubleMapping {
-    /// On for materials that can soften, off otherwise (the paper's use).
-    #[default]
-    Auto,
-    /// No smoothing.
-    Off,
-    /// Smooth the step's stress increment σ(n+1) − σ^R(n) (DESIGN D37–D38).
-    Increment,
-    /// Smooth the total stress σ(n+1).
-    Total,
 }
 
 /// The points and grid a double mapping runs on: the shape functions of the

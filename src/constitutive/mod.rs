@@ -68,6 +68,18 @@ pub enum ConstitutiveError {
     NonFinite(String),
 }
 
+/// One invalid material parameter: its TOML key and what is wrong with its
+/// value, with the allowed range (`phi_peak`: "50 is out of range: 0 < phi_peak
+/// <= 46 degrees …"). Callers add the key's path (`materials.soil.phi_peak`).
+#[derive(Debug, Clone, thiserror::Error, PartialEq)]
+#[error("{key} = {message}")]
+pub struct ParameterProblem {
+    /// The parameter's TOML key, e.g. `phi_peak`.
+    pub key: &'static str,
+    /// The offending value and the allowed range.
+    pub message: String,
+}
+
 /// A constitutive law as seen by the MPM engine.
 pub trait ConstitutiveModel: Send + Sync + Debug {
     /// Short model name (`"linear_elastic"`, `"hmc"`), written to `run.json`.

@@ -10,7 +10,8 @@ use crate::error::StepError;
 use crate::metrics::{dissipation_increment, ComplianceSource};
 use crate::model::Model;
 use crate::profile::{Profile, Stage};
-use crate::smoothing::{double_map, DoubleMapping, Equilibrium, MappingFrame};
+use crate::scene::DoubleMapping;
+use crate::smoothing::{double_map, Equilibrium, MappingFrame};
 use crate::transfer::strain_and_spin;
 
 /// Stresses, states and energies of a converged step, ready to commit.

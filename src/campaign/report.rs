@@ -1,139 +1,105 @@
-//! A mesh-objectivity campaign: every scene of a directory run side by side,
-//! a combined curve CSV, Fig. 3/4/5-style plots and the objectivity metrics of
-//! DESIGN §9 (M1–M4) in `metrics.csv` and `report.md`.
-//!
-//! Scenes are grouped into families by the presence of `[nonlocal]` (local vs
-//! nonlocal); within a family the finest mesh is the reference (DESIGN §9).
-//! Curves are read from each run's `curve.csv`: the abscissa is δ = −`top_uy`
-//! (m), the ordinate the monitor `load` (kN/m). With a step refinement K every
-//! scene is also run at Δt / K and each curve's time-step discrepancy is
-//! reported next to the run times (error against run time).
+//! Reporting a campaign: the runs' curves, the metrics of DESIGN §9 (M1–M5),
+//! the time-step convergence, `curves.csv`, `metrics.csv`, `report.md` and the
+//! plots.
 
 use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
-use std::sync::Mutex;
-use std::time::Instant;
+use std::path::Path;
 
+use super::{CampaignError, CampaignRun, CurveProblem};
 use crate::metrics;
-use crate::output::deviatoric_hencky_strain;
 use crate::plot::{self, Bounds, Panel, Series};
-use crate::run::run_scene;
-use crate::scene::Scene;
+use crate::scene::{MonitorKind, Scene};
 
-/// Why a campaign could not run.
-#[derive(Debug, thiserror::Error)]
-pub enum CampaignError {
-    /// The directory could not be read or holds no scene.
-    #[error("campaign directory {0}: {1}")]
-    Directory(String, String),
-    /// A scene is invalid (nothing was run).
-    #[error("{0}")]
-    Scene(String),
-    /// An output could not be written.
-    #[error("campaign output {0}: {1}")]
-    Output(String, String),
+/// The two `curve.csv` columns a run's load curve is read from, named by the
+/// scene's monitors.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct CurveColumns {
+    /// Abscissa: the displacement monitor (`rigid_displacement`, else
+    /// `point_displacement`), m; plotted as δ = −value (positive downward).
+    pub displacement: String,
+    /// Ordinate: the force monitor (`rigid_force`, else `reaction`), kN/m.
+    pub force: String,
 }
 
-/// One finished (or stopped) run of a campaign.
-#[derive(Clone, Debug)]
-pub struct CampaignRun {
-    /// Scene file stem.
-    pub name: String,
-    /// Cell size h, m.
-    pub cell_size: f64,
-    /// Nonlocal length scale l_s, m (None: local).
-    pub length_scale: Option<f64>,
-    /// (δ, F) after every step.
-    pub curve: Vec<(f64, f64)>,
-    /// Final material-point positions, m.
-    pub positions: Vec<[f64; 2]>,
-    /// Final deviatoric strain εq (DESIGN D8) per point.
-    pub eps_q: Vec<f64>,
-    /// Final nonlocal equivalent plastic strain κ̄ (D35) per point (nonlocal
-    /// runs only; empty otherwise).
-    pub kappa_bar: Vec<f64>,
-    /// The error that stopped the run, if any.
-    pub error: Option<String>,
-    /// Points that left the grid and were removed (`[grid] lost_points = "remove"`):
-    /// (count, removed mass / initial mass).
-    pub lost_points: (usize, f64),
-    /// Plastic dissipation at the last step (monitor `dissipation`, D43), kJ/m.
-    pub dissipation: Option<f64>,
-    /// Energy balance at the last step, from the monitors `external_work`,
-    /// `internal_work` and `kinetic_energy` (when the scene has all three).
-    pub energy: Option<EnergyBalance>,
-    /// Wall time, s.
-    pub wall_seconds: f64,
-    /// Per-stage profile table.
-    pub profile: String,
-    /// 1 for the scene as written; K for its time-step refinement (K times the
-    /// steps, Δt / K), run with `--step-refinement K`.
-    pub step_factor: usize,
-}
-
-fn scenes_in(dir: &Path) -> Result<Vec<PathBuf>, CampaignError> {
-    let entries = std::fs::read_dir(dir)
-        .map_err(|e| CampaignError::Directory(dir.display().to_string(), e.to_string()))?;
-    let mut paths: Vec<PathBuf> = entries
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.extension().is_some_and(|x| x == "toml"))
-        .collect();
-    paths.sort();
-    if paths.is_empty() {
-        return Err(CampaignError::Directory(
-            dir.display().to_string(),
-            "no .toml scene in it".into(),
-        ));
+impl CurveColumns {
+    /// The load-curve columns of `scene`; `None` when it has no displacement
+    /// monitor or no force monitor (the run then has no load curve).
+    pub fn of_scene(scene: &Scene) -> Option<Self> {
+        Some(Self {
+            displacement: first_monitor_of(
+                scene,
+                &[
+                    MonitorKind::RigidDisplacement,
+                    MonitorKind::PointDisplacement,
+                ],
+            )?,
+            force: first_monitor_of(scene, &[MonitorKind::RigidForce, MonitorKind::Reaction])?,
+        })
     }
-    Ok(paths)
 }
 
-fn read_curve(path: &Path) -> Vec<(f64, f64)> {
-    let Ok(mut reader) = csv::Reader::from_path(path) else {
-        return Vec::new();
+/// Name of the scene's first monitor of the first kind in `kinds` it has.
+fn first_monitor_of(scene: &Scene, kinds: &[MonitorKind]) -> Option<String> {
+    kinds.iter().find_map(|kind| {
+        scene
+            .monitor
+            .iter()
+            .find(|m| m.kind == *kind)
+            .map(|m| m.name.clone())
+    })
+}
+
+/// The load curve (δ, F) of a run's `curve.csv`: δ = −(displacement column),
+/// F = force column. A run that stopped mid-way has the rows up to its last
+/// step. A file that is missing, has no header, lacks a column or holds a row
+/// that does not parse is refused.
+pub(super) fn read_curve(
+    path: &Path,
+    columns: &CurveColumns,
+) -> Result<Vec<(f64, f64)>, CampaignError> {
+    let refuse = |problem| CampaignError::Curve {
+        path: path.display().to_string(),
+        problem,
     };
-    let Ok(headers) = reader.headers().cloned() else {
-        return Vec::new();
+    let mut reader =
+        csv::Reader::from_path(path).map_err(|e| refuse(CurveProblem::Missing(e.to_string())))?;
+    let headers = match reader.headers() {
+        Ok(headers) if !headers.is_empty() => headers.clone(),
+        _ => return Err(refuse(CurveProblem::NoHeader)),
     };
-    let (Some(load), Some(top)) = (
-        headers.iter().position(|h| h == "load"),
-        headers.iter().position(|h| h == "top_uy"),
-    ) else {
-        return Vec::new();
+    let column = |name: &str| {
+        headers
+            .iter()
+            .position(|h| h == name)
+            .ok_or_else(|| refuse(CurveProblem::MissingColumn(name.to_string())))
     };
+    let (displacement, force) = (column(&columns.displacement)?, column(&columns.force)?);
     reader
         .records()
-        .filter_map(|r| r.ok())
-        .filter_map(|r| {
-            Some((
-                -r.get(top)?.parse::<f64>().ok()?,
-                r.get(load)?.parse::<f64>().ok()?,
-            ))
+        .map(|record| {
+            let record = record.map_err(|e| refuse(CurveProblem::BadRow(e.to_string())))?;
+            let value = |index: usize| number_in(&record, index, &headers).map_err(refuse);
+            Ok((-value(displacement)?, value(force)?))
         })
         .collect()
 }
 
-/// M5 energy balance of a run at its last step, kJ/m.
-#[derive(Debug, Clone, Copy)]
-pub struct EnergyBalance {
-    /// Work of the pressures and rigid bodies on the soil.
-    pub external: f64,
-    /// Work of the stresses on the strain increments (stored + dissipated).
-    pub internal: f64,
-    /// Kinetic energy.
-    pub kinetic: f64,
-}
-
-impl EnergyBalance {
-    /// (W − W_int − K) / W: the share of the external work lost by the time
-    /// integration (e.g. Newmark γ > ½ damping a dynamic snap).
-    pub fn relative_loss(&self) -> f64 {
-        (self.external - self.internal - self.kinetic) / self.external
-    }
+/// The number in column `index` of a curve row.
+fn number_in(
+    record: &csv::StringRecord,
+    index: usize,
+    headers: &csv::StringRecord,
+) -> Result<f64, CurveProblem> {
+    let text = record.get(index).unwrap_or_default();
+    text.parse().map_err(|_| CurveProblem::NotANumber {
+        line: record.position().map_or(0, |p| p.line()),
+        column: headers.get(index).unwrap_or_default().to_string(),
+        value: text.to_string(),
+    })
 }
 
 /// Last value of column `name` of a CSV file.
-fn last_value(path: &Path, name: &str) -> Option<f64> {
+pub(super) fn last_value(path: &Path, name: &str) -> Option<f64> {
     let mut reader = csv::Reader::from_path(path).ok()?;
     let column = reader.headers().ok()?.iter().position(|h| h == name)?;
     reader
@@ -143,83 +109,6 @@ fn last_value(path: &Path, name: &str) -> Option<f64> {
         .get(column)?
         .parse()
         .ok()
-}
-
-/// Run every scene of `dir` (validated first, all of them, before anything
-/// runs), `jobs` at a time, into `out/<scene>/`, then write the combined
-/// outputs. With `step_refinement = Some(K)` every scene is also run with K
-/// times the steps at Δt / K (into `out/<scene>_dtK/`) and the time-step
-/// discrepancy of each curve is reported (`step_convergence.csv`, report
-/// section). Returns the runs in scene order, refinements after the scenes.
-pub fn run_campaign(
-    dir: &Path,
-    out: &Path,
-    jobs: usize,
-    overrides: &[String],
-    step_refinement: Option<usize>,
-) -> Result<Vec<CampaignRun>, CampaignError> {
-    let paths = scenes_in(dir)?;
-    let scenes: Vec<(String, Scene)> = paths
-        .iter()
-        .map(|p| {
-            let name = p
-                .file_stem()
-                .map(|s| s.to_string_lossy().into_owned())
-                .unwrap_or_default();
-            Scene::load(p, overrides)
-                .map(|s| (name, s))
-                .map_err(|e| CampaignError::Scene(e.to_string()))
-        })
-        .collect::<Result<_, _>>()?;
-    let mut variants: Vec<(String, Scene, usize)> = Vec::new();
-    if let Some(k) = step_refinement {
-        for (name, scene) in &scenes {
-            variants.push((format!("{name}_dt{k}"), refine_steps(name, scene, k)?, k));
-        }
-    }
-    let all: Vec<(String, Scene, usize)> = scenes
-        .into_iter()
-        .map(|(name, scene)| (name, scene, 1))
-        .chain(variants)
-        .collect();
-    // popped from the back: queue the longest runs (finest meshes, refinements) first
-    let queue = Mutex::new(all.into_iter().enumerate().collect::<Vec<_>>());
-    let results = Mutex::new(Vec::new());
-    std::thread::scope(|scope| {
-        for _ in 0..jobs.max(1) {
-            scope.spawn(|| loop {
-                let next = queue.lock().map(|mut q| q.pop()).unwrap_or(None);
-                let Some((index, (name, scene, factor))) = next else {
-                    break;
-                };
-                let run = run_one(&name, scene, &out.join(&name), factor);
-                eprintln!(
-                    "campaign: {name} finished in {:.1} s{}",
-                    run.wall_seconds,
-                    run.error
-                        .as_ref()
-                        .map(|e| format!(" (stopped: {e})"))
-                        .unwrap_or_default()
-                );
-                if let Ok(mut r) = results.lock() {
-                    r.push((index, run));
-                }
-            });
-        }
-    });
-    let mut runs: Vec<(usize, CampaignRun)> = results.into_inner().unwrap_or_default();
-    runs.sort_by_key(|(i, _)| *i);
-    let runs: Vec<CampaignRun> = runs.into_iter().map(|(_, r)| r).collect();
-    let scenes_as_written: Vec<CampaignRun> = runs
-        .iter()
-        .filter(|r| r.step_factor == 1)
-        .cloned()
-        .collect();
-    write_outputs(out, &scenes_as_written)?;
-    if step_refinement.is_some() {
-        write_step_convergence(out, &runs)?;
-    }
-    Ok(runs)
 }
 
 /// Time-step convergence of one scene: its curve against the curve of its
@@ -280,7 +169,10 @@ pub fn step_convergence(runs: &[CampaignRun]) -> Vec<StepConvergence> {
 }
 
 /// `step_convergence.csv` and a section appended to `report.md`.
-fn write_step_convergence(out: &Path, runs: &[CampaignRun]) -> Result<(), CampaignError> {
+pub(super) fn write_step_convergence(
+    out: &Path,
+    runs: &[CampaignRun],
+) -> Result<(), CampaignError> {
     let io = |p: &Path, e: &dyn std::fmt::Display| {
         CampaignError::Output(p.display().to_string(), e.to_string())
     };
@@ -326,87 +218,6 @@ fn write_step_convergence(out: &Path, runs: &[CampaignRun]) -> Result<(), Campai
     text.push_str(&md);
     std::fs::write(&report, text).map_err(|e| io(&report, &e))?;
     Ok(())
-}
-
-/// The scene with K times the steps at Δt / K (loads are functions of time, so
-/// the loading path is the same); snapshot steps are scaled too.
-fn refine_steps(name: &str, scene: &Scene, k: usize) -> Result<Scene, CampaignError> {
-    if k < 2 {
-        return Err(CampaignError::Scene(format!(
-            "--step-refinement must be at least 2 (got {k})"
-        )));
-    }
-    let mut refined = scene.clone();
-    let analysis = &mut refined.scene;
-    let Some(steps) = analysis.steps else {
-        return Err(CampaignError::Scene(format!(
-            "{name}: --step-refinement needs implicit scenes with `scene.steps` (explicit runs choose their own step)"
-        )));
-    };
-    analysis.steps = Some(steps * k);
-    analysis.dt = Some(analysis.dt.unwrap_or(1.0) / k as f64);
-    refined.output.snapshots = scene.output.snapshots.iter().map(|s| s * k).collect();
-    Ok(refined)
-}
-
-fn run_one(name: &str, scene: Scene, out: &Path, step_factor: usize) -> CampaignRun {
-    let cell_size = scene.grid.cell_size;
-    let length_scale = scene.nonlocal.as_ref().map(|n| n.length_scale);
-    let start = Instant::now();
-    let mut run = CampaignRun {
-        name: name.to_string(),
-        cell_size,
-        length_scale,
-        curve: Vec::new(),
-        positions: Vec::new(),
-        eps_q: Vec::new(),
-        kappa_bar: Vec::new(),
-        error: None,
-        lost_points: (0, 0.0),
-        dissipation: None,
-        energy: None,
-        wall_seconds: 0.0,
-        profile: String::new(),
-        step_factor,
-    };
-    match run_scene(scene, out, false) {
-        Err(e) => run.error = Some(e.to_string()),
-        Ok(outcome) => {
-            let p = &outcome.simulation.model.particles;
-            run.positions = p.position.clone();
-            run.eps_q = p.def_grad.iter().map(deviatoric_hencky_strain).collect();
-            if run.length_scale.is_some() {
-                run.kappa_bar = p
-                    .state
-                    .iter()
-                    .map(|s| s.plastic_strain_eq_nonlocal)
-                    .collect();
-            }
-            run.error = outcome.error.map(|e| e.to_string());
-            let sim = &outcome.simulation.model;
-            let lost_mass: f64 = sim.lost_points.iter().map(|l| l.mass).sum();
-            let total_mass = sim.particles.mass.iter().sum::<f64>() + lost_mass;
-            run.lost_points = (sim.lost_points.len(), lost_mass / total_mass);
-            run.profile = outcome.simulation.profile.table(outcome.wall_seconds);
-        }
-    }
-    let curve = out.join("curve.csv");
-    run.curve = read_curve(&curve);
-    run.dissipation = last_value(&curve, "dissipation");
-    run.energy = match (
-        last_value(&curve, "external_work"),
-        last_value(&curve, "internal_work"),
-        last_value(&curve, "kinetic_energy"),
-    ) {
-        (Some(external), Some(internal), Some(kinetic)) => Some(EnergyBalance {
-            external,
-            internal,
-            kinetic,
-        }),
-        _ => None,
-    };
-    run.wall_seconds = start.elapsed().as_secs_f64();
-    run
 }
 
 /// Per-run metrics of DESIGN §9 against the family reference.
@@ -511,7 +322,7 @@ fn fmt_opt(v: Option<f64>, scale: f64, digits: usize) -> String {
         .unwrap_or_else(|| "–".into())
 }
 
-fn write_outputs(out: &Path, runs: &[CampaignRun]) -> Result<(), CampaignError> {
+pub(super) fn write_outputs(out: &Path, runs: &[CampaignRun]) -> Result<(), CampaignError> {
     let io = |p: &Path, e: &dyn std::fmt::Display| {
         CampaignError::Output(p.display().to_string(), e.to_string())
     };
@@ -617,6 +428,13 @@ fn write_outputs(out: &Path, runs: &[CampaignRun]) -> Result<(), CampaignError> 
             md,
             "\n- {}: {} material point(s) left the grid and were removed ({:.2e} of the mass; run.json lists them)",
             r.name, r.lost_points.0, r.lost_points.1
+        );
+    }
+    for r in runs.iter().filter(|r| r.curve_columns.is_none()) {
+        let _ = writeln!(
+            md,
+            "\n- {}: no load curve (the scene needs a `rigid_force` or `reaction` monitor and a `rigid_displacement` or `point_displacement` monitor)",
+            r.name
         );
     }
     for r in runs.iter().filter(|r| r.error.is_some()) {

@@ -1,0 +1,132 @@
+//! A mesh-objectivity campaign: every scene of a directory run side by side,
+//! a combined curve CSV, Fig. 3/4/5-style plots and the objectivity metrics of
+//! DESIGN §9 (M1–M4) in `metrics.csv` and `report.md`.
+//!
+//! Scenes are grouped into families by the presence of `[nonlocal]` (local vs
+//! nonlocal); within a family the finest mesh is the reference (DESIGN §9).
+//! Curves are read from each run's `curve.csv`, in the columns of the scene's
+//! monitors ([`CurveColumns`]): the abscissa is δ = −(displacement monitor) (m,
+//! positive downward), the ordinate the force monitor (kN/m); a scene without
+//! them is reported as having no load curve. With a step refinement K every
+//! scene is also run at Δt / K and each curve's time-step discrepancy is
+//! reported next to the run times (error against run time).
+//!
+//! `run.rs` finds the scenes and runs them; `report.rs` computes the metrics and
+//! writes the combined outputs.
+
+mod report;
+mod run;
+
+pub use report::{compute_metrics, step_convergence, CurveColumns, RunMetrics, StepConvergence};
+pub use run::run_campaign;
+
+/// Why a campaign could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum CampaignError {
+    /// The directory could not be read or holds no scene.
+    #[error("campaign directory {0}: {1}")]
+    Directory(String, String),
+    /// A scene is invalid (nothing was run).
+    #[error("{0}")]
+    Scene(String),
+    /// An output could not be written.
+    #[error("campaign output {0}: {1}")]
+    Output(String, String),
+    /// A run's `curve.csv` cannot be read as its load curve.
+    #[error("campaign curve {path}: {problem}")]
+    Curve {
+        /// The curve file.
+        path: String,
+        /// What is wrong with it.
+        problem: CurveProblem,
+    },
+}
+
+/// What is wrong with a run's `curve.csv`.
+#[derive(Debug, thiserror::Error)]
+pub enum CurveProblem {
+    /// The file is missing or cannot be opened.
+    #[error("cannot be opened ({0})")]
+    Missing(String),
+    /// The file is empty or its first line is not a header.
+    #[error("has no header row")]
+    NoHeader,
+    /// A column named by the scene's monitors is not in the header.
+    #[error("has no column `{0}`")]
+    MissingColumn(String),
+    /// A row the CSV reader refuses (wrong number of fields, not UTF-8).
+    #[error("has a row that does not parse: {0}")]
+    BadRow(String),
+    /// A value in a curve column that is not a number.
+    #[error("line {line}: `{value}` in column `{column}` is not a number")]
+    NotANumber {
+        /// Line of the file (1-based).
+        line: u64,
+        /// The column's name.
+        column: String,
+        /// The text found.
+        value: String,
+    },
+}
+
+/// One finished (or stopped) run of a campaign.
+#[derive(Clone, Debug)]
+pub struct CampaignRun {
+    /// Scene file stem.
+    pub name: String,
+    /// Cell size h, m.
+    pub cell_size: f64,
+    /// Nonlocal length scale l_s, m (None: local).
+    pub length_scale: Option<f64>,
+    /// (δ, F) after every step (empty without a load curve or when the run's setup failed).
+    pub curve: Vec<(f64, f64)>,
+    /// The `curve.csv` columns of δ and F, from the scene's monitors (`None`:
+    /// the scene has no load curve).
+    pub curve_columns: Option<CurveColumns>,
+    /// Final material-point positions, m.
+    pub positions: Vec<[f64; 2]>,
+    /// Final deviatoric strain εq (DESIGN D8) per point.
+    pub eps_q: Vec<f64>,
+    /// Final nonlocal equivalent plastic strain κ̄ (D35) per point (nonlocal
+    /// runs only; empty otherwise).
+    pub kappa_bar: Vec<f64>,
+    /// The error that stopped the run, if any.
+    pub error: Option<String>,
+    /// Points that left the grid and were removed (`[grid] lost_points = "remove"`):
+    /// (count, removed mass / initial mass).
+    pub lost_points: (usize, f64),
+    /// Plastic dissipation at the last step (monitor `dissipation`, D43), kJ/m.
+    pub dissipation: Option<f64>,
+    /// Energy balance at the last step, from the monitors `external_work`,
+    /// `internal_work` and `kinetic_energy` (when the scene has all three).
+    pub energy: Option<EnergyBalance>,
+    /// Wall time, s.
+    pub wall_seconds: f64,
+    /// Per-stage profile table.
+    pub profile: String,
+    /// 1 for the scene as written; K for its time-step refinement (K times the
+    /// steps, Δt / K), run with `--step-refinement K`.
+    pub step_factor: usize,
+}
+
+/// M5 energy balance of a run at its last step, kJ/m.
+#[derive(Debug, Clone, Copy)]
+pub struct EnergyBalance {
+    /// Work of the pressures and rigid bodies on the soil.
+    pub external: f64,
+    /// Work of the stresses on the strain increments (stored + dissipated).
+    pub internal: f64,
+    /// Kinetic energy.
+    pub kinetic: f64,
+}
+
+impl EnergyBalance {
+    /// (W − W_int − K) / W: the share of the external work lost by the time
+    /// integration (e.g. Newmark γ > ½ damping a dynamic snap).
+    pub fn relative_loss(&self) -> f64 {
+        (self.external - self.internal - self.kinetic) / self.external
+    }
+}
+
+#[cfg(test)]
+mod tests;

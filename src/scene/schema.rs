@@ -1,0 +1,719 @@
+//! The scene file's serde structures and configuration enums: every key of
+//! `docs/scene.md`, with its unit and default.
+
+use std::collections::BTreeMap;
+
+use serde::{Deserialize, Serialize};
+
+/// A complete scene.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Scene {
+    /// Analysis type, step count and time step.
+    pub scene: Analysis,
+    /// Background grid.
+    pub grid: GridSpec,
+    /// Nonlinear and linear solver settings.
+    #[serde(default)]
+    pub solver: SolverSpec,
+    /// Materials by name.
+    pub materials: BTreeMap<String, MaterialSpec>,
+    /// Bodies filled with material points.
+    pub body: Vec<BodySpec>,
+    /// Body loads.
+    #[serde(default)]
+    pub loads: LoadSpec,
+    /// Boundary conditions.
+    #[serde(default)]
+    pub bc: BoundarySpec,
+    /// Output settings.
+    #[serde(default)]
+    pub output: OutputSpec,
+    /// Monitored quantities written to `curve.csv`.
+    #[serde(default)]
+    pub monitor: Vec<MonitorSpec>,
+    /// Nonlocal regularisation (absent: local model).
+    #[serde(default)]
+    pub nonlocal: Option<NonlocalSpec>,
+    /// Stress smoothing.
+    #[serde(default)]
+    pub smoothing: SmoothingSpec,
+}
+
+/// When the nonlocal variable is updated (DESIGN §6).
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum NonlocalUpdate {
+    /// Every Newton iteration, lagged by one (DESIGN D36).
+    #[default]
+    Iteration,
+    /// Once per step after convergence (strength frozen at κ̄(n)); explicit runs always.
+    Step,
+}
+
+/// `[nonlocal]`: averaging of the equivalent plastic strain (paper eq. 6, DESIGN §6).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct NonlocalSpec {
+    /// Length scale l_s, m (> cell size; ≥ 5 cells recommended, the paper's 0.2 l_s rule).
+    pub length_scale: f64,
+    /// Cutoff radius in units of l_s (DESIGN: 3).
+    #[serde(default = "default_cutoff")]
+    pub cutoff_factor: f64,
+    /// `iteration` (default) or `step`.
+    #[serde(default)]
+    pub update: NonlocalUpdate,
+    /// ε_κ of DESIGN D18 (third criterion).
+    #[serde(default = "default_kappa_tolerance")]
+    pub tolerance: f64,
+    /// Over-nonlocal factor m in [1, 3] (Vermeer & Brinkgreve 1994): κ̄ = κ̄(n) +
+    /// m Σ_q W_pq Δκ_q + (1 − m) Δκ_p. The default 1 is DESIGN D35.
+    #[serde(default = "default_over_nonlocal")]
+    pub over_nonlocal: f64,
+}
+
+fn default_over_nonlocal() -> f64 {
+    1.0
+}
+
+fn default_cutoff() -> f64 {
+    3.0
+}
+
+fn default_kappa_tolerance() -> f64 {
+    1e-3
+}
+
+/// `[smoothing]`.
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SmoothingSpec {
+    /// `auto` (on for softening materials), `off`, `increment` or `total` (DESIGN §7).
+    #[serde(default)]
+    pub double_mapping: DoubleMapping,
+    /// Restore the internal forces of the unsmoothed stresses after smoothing
+    /// (default false, the paper's double mapping; see
+    /// `smoothing::restore_internal_forces`).
+    #[serde(default)]
+    pub restore_forces: bool,
+}
+
+/// `[smoothing] double_mapping`: which stress is smoothed (DESIGN §7).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DoubleMapping {
+    /// On for materials that can soften, off otherwise (the paper's use).
+    #[default]
+    Auto,
+    /// No smoothing.
+    Off,
+    /// Smooth the step's stress increment σ(n+1) − σ^R(n) (DESIGN D37–D38).
+    Increment,
+    /// Smooth the total stress σ(n+1).
+    Total,
+}
+
+/// The time integration scheme.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum AnalysisKind {
+    /// Implicit, no inertia (no mass matrix is built; DESIGN §3 quasi-static variant).
+    QuasiStatic,
+    /// Implicit Newmark trapezoidal rule (paper eq. 2, DESIGN D15–D17).
+    ImplicitDynamic,
+    /// Explicit MUSL central difference (DESIGN §4).
+    Explicit,
+}
+
+/// `[scene]`: analysis type and time stepping.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Analysis {
+    /// Free-text name, written to `run.json`.
+    #[serde(default)]
+    pub name: String,
+    /// `quasi_static`, `implicit_dynamic` or `explicit`.
+    pub analysis: AnalysisKind,
+    /// Number of (implicit) steps. Explicit runs end at `end_time` instead.
+    #[serde(default)]
+    pub steps: Option<usize>,
+    /// Time step, s (quasi-static: pseudo-time per step, default 1). Explicit:
+    /// a fixed step that must not exceed the stability limit; omit it to use the CFL rule.
+    #[serde(default)]
+    pub dt: Option<f64>,
+    /// End time, s (explicit runs; implicit runs end after `steps`).
+    #[serde(default)]
+    pub end_time: Option<f64>,
+}
+
+/// `[grid]`: the background grid.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct GridSpec {
+    /// Lower-left corner, m.
+    #[serde(default)]
+    pub origin: [f64; 2],
+    /// Width and height of the grid, m (multiples of `cell_size`).
+    pub size: [f64; 2],
+    /// Cell side h, m.
+    pub cell_size: f64,
+    /// Material points per cell and direction (1–4; the paper uses 2).
+    #[serde(default = "default_points_per_cell")]
+    pub points_per_cell: usize,
+    /// `gauss` (Gauss–Legendre positions, DESIGN §2) or `uniform` (sub-cell centres).
+    #[serde(default)]
+    pub point_layout: PointLayout,
+    /// `bilinear` (DESIGN D9, the paper's) or `gimp` (uGIMP: shape functions
+    /// averaged over each point's square domain of side h/points_per_cell;
+    /// needs `point_layout = "uniform"`).
+    #[serde(default)]
+    pub shape_functions: ShapeFunctionChoice,
+    /// What happens when a material point leaves the grid: `stop` (default, the
+    /// run ends with an error naming the point) or `remove` (the point is
+    /// dropped from the run and listed in `run.json`; points tied to a rigid
+    /// body or followed by a monitor still stop the run).
+    #[serde(default)]
+    pub lost_points: LostPointPolicy,
+}
+
+/// `[grid] lost_points`: the treatment of material points that leave the grid.
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum LostPointPolicy {
+    /// Stop the run with an error naming the point (outputs so far kept).
+    #[default]
+    Stop,
+    /// Drop the point (e.g. a stress-free fragment ejected from a free surface)
+    /// and record it; the run goes on.
+    Remove,
+}
+
+/// Shape functions of the material points.
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum ShapeFunctionChoice {
+    /// Bilinear shape functions of the holding cell (DESIGN D9).
+    #[default]
+    Bilinear,
+    /// Generalised interpolation material point (uGIMP): no cell-crossing error.
+    Gimp,
+}
+
+fn default_points_per_cell() -> usize {
+    2
+}
+
+/// Where material points are seeded inside a cell.
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum PointLayout {
+    /// Gauss–Legendre positions with Gauss-weight volumes (DESIGN §2 choice 14).
+    #[default]
+    Gauss,
+    /// Centres of n×n equal sub-cells.
+    Uniform,
+}
+
+/// Which linear solver factorises the tangent.
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum LinearSolverChoice {
+    /// Cholesky when every material has a symmetric tangent, LU otherwise.
+    #[default]
+    Auto,
+    /// Sparse Cholesky (falls back to LU if the matrix is not positive definite).
+    Cholesky,
+    /// Sparse LU with partial pivoting.
+    Lu,
+}
+
+/// `[solver]`: Newton, linear solver and explicit settings (defaults of DESIGN §3–4).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct SolverSpec {
+    /// ε_R of DESIGN D18 (relative residual force).
+    pub tolerance_force: f64,
+    /// ε_E of DESIGN D18 (relative energy norm).
+    pub tolerance_energy: f64,
+    /// Newton iteration limit per step (default 25 local, 60 nonlocal, DESIGN §3).
+    pub max_iterations: Option<usize>,
+    /// Number of step halvings allowed when Newton fails (DESIGN §3: 4, i.e. 1/16).
+    pub max_halvings: usize,
+    /// `auto`, `cholesky` or `lu`.
+    pub linear_solver: LinearSolverChoice,
+    /// ε_bg of DESIGN D19 (background stiffness added to the tangent only).
+    pub background_stiffness: f64,
+    /// Penalty factor β_pen of DESIGN D41 (k_p = β_pen E); default 1e3 implicit, 10 explicit.
+    pub penalty_factor: Option<f64>,
+    /// Explicit: CFL factor α_CFL of DESIGN D20, in (0, 1].
+    pub cfl: f64,
+    /// Explicit: local (Cundall) damping α_d of DESIGN D21, in [0, 1).
+    pub damping: f64,
+    /// Implicit dynamic: Newmark γ in [0.5, 1], with β = (γ + ½)²/4. The
+    /// default ½ is the trapezoidal rule of paper eq. 2 (D15, no numerical
+    /// damping); γ > ½ damps the highest frequencies.
+    pub newmark_gamma: f64,
+}
+
+impl Default for SolverSpec {
+    fn default() -> Self {
+        Self {
+            tolerance_force: 1e-5,
+            tolerance_energy: 1e-10,
+            max_iterations: None,
+            max_halvings: 4,
+            linear_solver: LinearSolverChoice::Auto,
+            background_stiffness: 1e-6,
+            penalty_factor: None,
+            cfl: 0.5,
+            damping: 0.0,
+            newmark_gamma: 0.5,
+        }
+    }
+}
+
+/// A material, tagged by `model`.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(tag = "model", rename_all = "snake_case")]
+pub enum MaterialSpec {
+    /// Isotropic linear elasticity (DESIGN D22).
+    LinearElastic(ElasticSpec),
+    /// Hyperbolic Mohr–Coulomb with exponential softening (paper eq. 3–5, DESIGN §5),
+    /// keys named as in the paper's Table 1.
+    Hmc(crate::constitutive::hmc::HmcParameters),
+}
+
+/// Parameters of `model = "linear_elastic"`.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ElasticSpec {
+    /// Young's modulus, kPa.
+    #[serde(rename = "E")]
+    pub youngs_modulus: f64,
+    /// Poisson's ratio, in (−1, 0.5).
+    pub nu: f64,
+    /// Density, t/m³.
+    pub density: f64,
+}
+
+impl MaterialSpec {
+    /// Density ρ, t/m³.
+    pub fn density(&self) -> f64 {
+        match self {
+            MaterialSpec::LinearElastic(e) => e.density,
+            MaterialSpec::Hmc(h) => h.density,
+        }
+    }
+
+    /// Young's modulus E, kPa (penalty stiffness and background stiffness scale).
+    pub fn youngs_modulus(&self) -> f64 {
+        match self {
+            MaterialSpec::LinearElastic(e) => e.youngs_modulus,
+            MaterialSpec::Hmc(h) => h.youngs_modulus,
+        }
+    }
+
+    /// Poisson's ratio ν.
+    pub fn poisson_ratio(&self) -> f64 {
+        match self {
+            MaterialSpec::LinearElastic(e) => e.nu,
+            MaterialSpec::Hmc(h) => h.poisson_ratio,
+        }
+    }
+}
+
+/// Initial velocity profile of a body.
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum VelocityProfile {
+    /// v = `velocity0` everywhere.
+    #[default]
+    Uniform,
+    /// v = `velocity0` · sin(π (y − y_min) / (2 H)), H the body height (the bar's first mode, DESIGN §8.4).
+    QuarterSineY,
+}
+
+/// Geostatic (K0) initial stress: σyy = −γ (y_s − y), σxx = σzz = K0 σyy.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct K0Spec {
+    /// Lateral earth pressure coefficient K0 ≥ 0.
+    pub k0: f64,
+    /// Unit weight γ, kN/m³.
+    pub unit_weight: f64,
+    /// Level y_s of the free surface, m.
+    pub surface_y: f64,
+}
+
+/// `[[body]]`: a region filled with material points.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct BodySpec {
+    /// Name used by boundary conditions (default `body<i>`).
+    #[serde(default)]
+    pub name: Option<String>,
+    /// Name of a `[materials.*]` entry.
+    pub material: String,
+    /// Axis-aligned rectangle `[[x_min, y_min], [x_max, y_max]]`, m.
+    #[serde(default, rename = "box")]
+    pub rectangle: Option<[[f64; 2]; 2]>,
+    /// Polygon vertices (counter-clockwise or clockwise), m; alternative to `box`.
+    #[serde(default)]
+    pub polygon: Option<Vec<[f64; 2]>>,
+    /// Uniform initial stress `[σxx, σyy, σzz, σxy]`, kPa, tension positive.
+    #[serde(default)]
+    pub stress0: Option<[f64; 4]>,
+    /// Geostatic initial stress (added to `stress0`).
+    #[serde(default)]
+    pub k0: Option<K0Spec>,
+    /// Initial velocity, m/s.
+    #[serde(default)]
+    pub velocity0: Option<[f64; 2]>,
+    /// Initial velocity profile.
+    #[serde(default)]
+    pub velocity_profile: VelocityProfile,
+}
+
+impl BodySpec {
+    /// The body's outline as a polygon.
+    pub fn outline(&self) -> Vec<[f64; 2]> {
+        if let Some([lo, hi]) = self.rectangle {
+            vec![lo, [hi[0], lo[1]], hi, [lo[0], hi[1]]]
+        } else {
+            self.polygon.clone().unwrap_or_default()
+        }
+    }
+
+    /// Bounding box `[[x_min, y_min], [x_max, y_max]]`.
+    pub fn bounds(&self) -> [[f64; 2]; 2] {
+        let pts = self.outline();
+        let mut b = [[f64::INFINITY; 2], [f64::NEG_INFINITY; 2]];
+        for p in pts {
+            for c in 0..2 {
+                b[0][c] = b[0][c].min(p[c]);
+                b[1][c] = b[1][c].max(p[c]);
+            }
+        }
+        b
+    }
+
+    /// Name of body `index`.
+    pub fn name_or_default(&self, index: usize) -> String {
+        self.name.clone().unwrap_or_else(|| format!("body{index}"))
+    }
+}
+
+/// Time-dependent gravity in steps: g(t) = min(max, increment · ⌈t / interval⌉)
+/// (the paper's vertical cut: 0.1 g every 1 ms up to 60 g).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct GravityRamp {
+    /// Gravity added per interval, m/s².
+    pub increment: f64,
+    /// Interval, s.
+    pub interval: f64,
+    /// Final gravity, m/s².
+    pub max: f64,
+}
+
+/// `[loads]`: body forces.
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct LoadSpec {
+    /// Constant gravity acceleration along −y, m/s² (from the first step on).
+    #[serde(default)]
+    pub gravity: f64,
+    /// Stepped gravity ramp (replaces `gravity`).
+    #[serde(default)]
+    pub gravity_ramp: Option<GravityRamp>,
+}
+
+impl LoadSpec {
+    /// Gravity magnitude g(t), m/s² (acts along −y).
+    pub fn gravity_at(&self, t: f64) -> f64 {
+        match &self.gravity_ramp {
+            Some(r) => (r.increment * (t / r.interval - 1e-9).ceil().max(0.0)).min(r.max),
+            None => self.gravity,
+        }
+    }
+}
+
+/// A grid line `x=value` or `y=value`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GridLine {
+    /// 0 for `x = value`, 1 for `y = value`.
+    pub axis: usize,
+    /// Coordinate of the line, m.
+    pub value: f64,
+}
+
+impl GridLine {
+    /// Parse `"x=0.03"` / `"y = 0"`.
+    pub fn parse(text: &str) -> Result<Self, String> {
+        let (lhs, rhs) = text
+            .split_once('=')
+            .ok_or_else(|| format!("`{text}` is not of the form `x=<value>` or `y=<value>`"))?;
+        let axis = match lhs.trim() {
+            "x" => 0,
+            "y" => 1,
+            other => return Err(format!("axis `{other}` must be `x` or `y`")),
+        };
+        let value: f64 = rhs
+            .trim()
+            .parse()
+            .map_err(|_| format!("`{}` is not a number", rhs.trim()))?;
+        if !value.is_finite() {
+            return Err("the coordinate must be finite".into());
+        }
+        Ok(Self { axis, value })
+    }
+}
+
+/// A displacement component.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum Component {
+    /// Horizontal.
+    X,
+    /// Vertical.
+    Y,
+}
+
+impl Component {
+    /// 0 for x, 1 for y.
+    pub fn index(self) -> usize {
+        match self {
+            Component::X => 0,
+            Component::Y => 1,
+        }
+    }
+}
+
+/// `[[bc.fixed]]`: homogeneous Dirichlet condition on a grid line (roller or fixity).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct FixedSpec {
+    /// Grid line `x=<value>` or `y=<value>` (must coincide with a grid line).
+    pub line: String,
+    /// Fixed components, `["x"]`, `["y"]` or `["x", "y"]`.
+    pub dofs: Vec<Component>,
+}
+
+/// `[[bc.prescribed]]`: a prescribed nodal displacement on a grid line
+/// (validation scenes): u(t, x) = t · (rate + gradient · x).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct PrescribedSpec {
+    /// Grid line `x=<value>` or `y=<value>`.
+    pub line: String,
+    /// Prescribed component.
+    pub dof: Component,
+    /// Displacement rate, m per unit time.
+    #[serde(default)]
+    pub rate: f64,
+    /// Spatial gradient of the rate, 1/time (for homogeneous strain fields).
+    #[serde(default)]
+    pub gradient: [f64; 2],
+}
+
+/// Side of a rectangular body.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum Side {
+    /// x = x_min.
+    Left,
+    /// x = x_max.
+    Right,
+    /// y = y_min.
+    Bottom,
+    /// y = y_max.
+    Top,
+}
+
+/// `[[bc.pressure]]`: a follower pressure on a side of a rectangular body (DESIGN §8.0 traction points).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct PressureSpec {
+    /// Body name (default: the first body).
+    #[serde(default)]
+    pub body: Option<String>,
+    /// Loaded side.
+    pub side: Side,
+    /// Pressure, kPa (positive pushes into the body).
+    pub p: f64,
+}
+
+/// `[[bc.rigid]]`: a rigid, perfectly rough platen or footing driving the top
+/// material points of a body (DESIGN D40–D41).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct RigidSpec {
+    /// Name (used by monitors).
+    pub name: String,
+    /// Body name (default: the first body).
+    #[serde(default)]
+    pub body: Option<String>,
+    /// Horizontal extent `[x_min, x_max]` of the contact, m.
+    pub footprint: [f64; 2],
+    /// Prescribed rigid velocity, m per unit time (quasi-static: per step with dt = 1).
+    pub velocity: [f64; 2],
+    /// Where the body is tied to the soil: `top_points` (the top row of
+    /// material points, DESIGN §8.0) or `surface` (points on the soil surface).
+    #[serde(default)]
+    pub contact: ContactKind,
+}
+
+/// Where a rigid body's penalty springs hold the soil (DESIGN D40–D41).
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum ContactKind {
+    /// The material points of the body's top point row inside the footprint
+    /// (DESIGN §8.0). The soil between that row and the surface moves with the
+    /// rigid body, which stiffens the response by O(h).
+    #[default]
+    TopPoints,
+    /// Massless points on the body's top surface inside the footprint, two per
+    /// cell-wide segment, moving with the soil surface: the tie acts where the
+    /// body touches the soil.
+    Surface,
+}
+
+/// `[bc]`: all boundary conditions.
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct BoundarySpec {
+    /// Homogeneous Dirichlet lines.
+    #[serde(default)]
+    pub fixed: Vec<FixedSpec>,
+    /// Prescribed nodal displacements.
+    #[serde(default)]
+    pub prescribed: Vec<PrescribedSpec>,
+    /// Pressures on body sides.
+    #[serde(default)]
+    pub pressure: Vec<PressureSpec>,
+    /// Rigid platens / footings.
+    #[serde(default)]
+    pub rigid: Vec<RigidSpec>,
+}
+
+/// `[output]`.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct OutputSpec {
+    /// Write a `curve.csv` row every this many steps (the last step is always written).
+    pub curve_every: usize,
+    /// Steps at which to write particle snapshots (`.vtu`); step 0 is the initial state.
+    pub snapshots: Vec<usize>,
+    /// Also write a snapshot every this many steps (0 = never).
+    pub snapshot_every: usize,
+}
+
+impl Default for OutputSpec {
+    fn default() -> Self {
+        Self {
+            curve_every: 1,
+            snapshots: Vec::new(),
+            snapshot_every: 0,
+        }
+    }
+}
+
+/// What a monitor measures.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum MonitorKind {
+    /// Displacement of the material point initially nearest `point`.
+    PointDisplacement,
+    /// Velocity of the material point initially nearest `point`.
+    PointVelocity,
+    /// Stress quantity (`quantity`) at the material point initially nearest `point`.
+    PointStress,
+    /// Reaction force on the constrained nodes of grid line `line` (kN/m).
+    Reaction,
+    /// Force exerted by rigid body `rigid` on the soil (kN/m, DESIGN D40).
+    RigidForce,
+    /// Mean displacement of the points tied to rigid body `rigid` (m): the
+    /// displacement of the contact surface for `contact = "surface"`.
+    RigidDisplacement,
+    /// Total kinetic energy Σ ½ m_p |v_p|², kJ/m.
+    KineticEnergy,
+    /// Total elastic strain energy Σ ½ V_p σ_pᵀ C σ_p, kJ/m.
+    StrainEnergy,
+    /// Work of the pressures and rigid bodies on the soil so far, kJ/m (gravity
+    /// not included; see `Simulation::external_work`).
+    ExternalWork,
+    /// Work of the stresses on the strain increments so far (elastic energy
+    /// stored plus dissipation), kJ/m.
+    InternalWork,
+    /// Maximum equivalent plastic strain over all material points.
+    MaxPlasticStrain,
+    /// Accumulated plastic dissipation (DESIGN D43, M5), kJ/m.
+    DissipatedEnergy,
+    /// Current gravity, m/s².
+    Gravity,
+}
+
+/// A component selector for vector monitors.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum VectorComponent {
+    /// x component.
+    X,
+    /// y component.
+    Y,
+    /// Euclidean norm.
+    Norm,
+}
+
+/// A stress quantity for `point_stress`.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum StressQuantity {
+    /// σxx, kPa.
+    Sxx,
+    /// σyy, kPa.
+    Syy,
+    /// σzz, kPa.
+    Szz,
+    /// σxy, kPa.
+    Sxy,
+    /// Mean stress p (compression positive, DESIGN D1), kPa.
+    P,
+    /// Deviatoric stress q (paper eq. 7, DESIGN D5), kPa.
+    Q,
+}
+
+/// `[[monitor]]`: one column of `curve.csv`, value = `scale` · raw + `offset`.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct MonitorSpec {
+    /// Column name in `curve.csv`.
+    pub name: String,
+    /// What is measured.
+    pub kind: MonitorKind,
+    /// Point for `point_*` monitors, m.
+    #[serde(default)]
+    pub point: Option<[f64; 2]>,
+    /// Grid line for `reaction`.
+    #[serde(default)]
+    pub line: Option<String>,
+    /// Rigid body name for `rigid_force`.
+    #[serde(default)]
+    pub rigid: Option<String>,
+    /// Component for vector monitors (default `y`).
+    #[serde(default)]
+    pub component: Option<VectorComponent>,
+    /// Quantity for `point_stress`.
+    #[serde(default)]
+    pub quantity: Option<StressQuantity>,
+    /// Scale factor (default 1).
+    #[serde(default = "one")]
+    pub scale: f64,
+    /// Offset (default 0).
+    #[serde(default)]
+    pub offset: f64,
+}
+
+fn one() -> f64 {
+    1.0
+}

@@ -1,0 +1,89 @@
+use super::*;
+
+const MINIMAL: &str = r#"
+        [scene]
+        analysis = "quasi_static"
+        steps = 1
+        [grid]
+        size = [1.0, 2.0]
+        cell_size = 0.5
+        [materials.soil]
+        model = "linear_elastic"
+        E = 1000.0
+        nu = 0.3
+        density = 2.0
+        [[body]]
+        material = "soil"
+        box = [[0.0, 0.0], [1.0, 1.0]]
+    "#;
+
+#[test]
+fn minimal_scene_loads_with_defaults() {
+    let s = Scene::from_str_with_overrides(MINIMAL, "t", &[]).unwrap();
+    assert_eq!(s.grid.points_per_cell, 2);
+    assert_eq!(s.solver.tolerance_force, 1e-5);
+    assert_eq!(s.grid_cells(), [2, 4]);
+}
+
+#[test]
+fn overrides_change_values_and_reject_unknown_paths() {
+    let s = Scene::from_str_with_overrides(
+        MINIMAL,
+        "t",
+        &[
+            "grid.cell_size=0.25".into(),
+            "body.0.box=[[0.0,0.0],[0.5,0.5]]".into(),
+        ],
+    )
+    .unwrap();
+    assert_eq!(s.grid.cell_size, 0.25);
+    assert_eq!(s.body[0].rectangle, Some([[0.0, 0.0], [0.5, 0.5]]));
+    let e =
+        Scene::from_str_with_overrides(MINIMAL, "t", &["gird.cell_size=0.25".into()]).unwrap_err();
+    assert!(e.to_string().contains("gird"), "{e}");
+    // a new key inside a known table is refused by deny_unknown_fields
+    let e =
+        Scene::from_str_with_overrides(MINIMAL, "t", &["grid.cel_size=0.25".into()]).unwrap_err();
+    assert!(e.to_string().contains("cel_size"), "{e}");
+}
+
+#[test]
+fn invalid_values_are_all_reported_with_field_names() {
+    let bad = MINIMAL
+        .replace("nu = 0.3", "nu = 0.5")
+        .replace("cell_size = 0.5", "cell_size = 0.3");
+    let e = Scene::from_str_with_overrides(&bad, "t", &[])
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("materials.soil.nu") && e.contains("(-1, 0.5)"),
+        "{e}"
+    );
+    assert!(
+        e.contains("grid.size[0]") && e.contains("whole number of cells"),
+        "{e}"
+    );
+}
+
+#[test]
+fn gravity_ramp_steps_like_the_vertical_cut() {
+    let l = LoadSpec {
+        gravity: 0.0,
+        gravity_ramp: Some(GravityRamp {
+            increment: 0.981,
+            interval: 0.001,
+            max: 588.6,
+        }),
+    };
+    assert!((l.gravity_at(0.001) - 0.981).abs() < 1e-12);
+    assert!((l.gravity_at(0.0015) - 2.0 * 0.981).abs() < 1e-12);
+    assert!((l.gravity_at(0.8) - 588.6).abs() < 1e-12);
+    assert_eq!(l.gravity_at(0.0), 0.0);
+}
+
+#[test]
+fn polygon_point_test() {
+    let tri = [[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]];
+    assert!(polygon_contains(&tri, [0.2, 0.2]));
+    assert!(!polygon_contains(&tri, [0.6, 0.6]));
+}
