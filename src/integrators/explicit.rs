@@ -73,7 +73,7 @@ impl ExplicitIntegrator {
     pub fn step(&mut self, model: &mut Model, profile: &Profile) -> Result<StepReport, StepError> {
         let t = model.time;
         let setup = profile.time(Stage::Setup, || StepSetup::new(model))?;
-        let mut nonlocal = profile.time(Stage::Nonlocal, || start_nonlocal(model))?;
+        let mut nonlocal = NonlocalStep::start(model, true, profile)?;
         let nodal = profile.time(Stage::P2G, || map_to_grid(model, &setup, t));
         let (dt, grid) = profile.time(Stage::TimeStep, || {
             let dt = self.time_step(model, &setup, &nodal)?;
@@ -157,15 +157,6 @@ impl UpdatedGrid {
             scale: dt,
             acceleration: Some((&self.acceleration, VelocityUpdate::Forward)),
         }
-    }
-}
-
-/// Nonlocal weights from the start-of-step configuration; explicit runs
-/// update κ̄ once per step (DESIGN §4, mode "step").
-fn start_nonlocal(model: &Model) -> Result<Option<NonlocalStep>, StepError> {
-    match &model.scene.nonlocal {
-        Some(spec) => Ok(Some(NonlocalStep::new(spec, &model.particles, true)?)),
-        None => Ok(None),
     }
 }
 

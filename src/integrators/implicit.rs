@@ -111,7 +111,7 @@ impl ImplicitIntegrator {
     ) -> Result<usize, NewtonError> {
         let (setup, dofs) = profile.time(Stage::Setup, || step_setup(model))?;
         let nodal = profile.time(Stage::P2G, || self.map_to_grid(model, &setup, t + dt));
-        let mut nonlocal = profile.time(Stage::Nonlocal, || start_nonlocal(model))?;
+        let mut nonlocal = NonlocalStep::start(model, false, profile).map_err(StepError::from)?;
         let system = self.system(model, &setup, dofs, nodal, t, dt);
         let solution = profile.time(Stage::Newton, || {
             newton::solve(
@@ -289,15 +289,6 @@ fn step_setup(model: &Model) -> Result<(StepSetup, DofMap), StepError> {
     let setup = StepSetup::new(model)?;
     let dofs = DofMap::new(&setup.bins, &model.constraints);
     Ok((setup, dofs))
-}
-
-/// Nonlocal weights (D34) from the start-of-step configuration, κ̄ updated
-/// per the scene's `nonlocal.update` (D36).
-fn start_nonlocal(model: &Model) -> Result<Option<NonlocalStep>, StepError> {
-    match &model.scene.nonlocal {
-        Some(spec) => Ok(Some(NonlocalStep::new(spec, &model.particles, false)?)),
-        None => Ok(None),
-    }
 }
 
 fn divide_by_mass(weighted: &[[f64; 2]], mass: &[f64]) -> Vec<[f64; 2]> {

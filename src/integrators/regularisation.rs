@@ -4,8 +4,10 @@
 //! criterion of D18), and the value committed at the end of the step.
 
 use crate::constitutive::StrengthVariable;
+use crate::model::Model;
 use crate::nonlocal::{NonlocalAverager, NonlocalError, NonlocalParameters};
 use crate::particles::Particles;
+use crate::profile::{Profile, Stage};
 use crate::scene::{NonlocalSpec, NonlocalUpdate};
 
 /// The strength variable of every point for one iteration's stress updates.
@@ -46,6 +48,26 @@ pub struct NonlocalStep {
 }
 
 impl NonlocalStep {
+    /// The step's nonlocal bookkeeping for a nonlocal scene (`None` for a
+    /// local one, which does no averaging): weights (D34) from the
+    /// start-of-step configuration, timed as the nonlocal stage. κ̄ is updated
+    /// per the scene's `nonlocal.update` (D36), or once per step when
+    /// `step_update` (explicit runs, DESIGN §4).
+    pub fn start(
+        model: &Model,
+        step_update: bool,
+        profile: &Profile,
+    ) -> Result<Option<Self>, NonlocalError> {
+        let Some(spec) = &model.scene.nonlocal else {
+            return Ok(None);
+        };
+        profile
+            .time(Stage::Nonlocal, || {
+                Self::new(spec, &model.particles, step_update)
+            })
+            .map(Some)
+    }
+
     /// Weights (D34) for the start-of-step configuration; MPs of different
     /// materials never average together.
     pub fn new(
