@@ -123,7 +123,7 @@ impl Simulation {
             time: model.time,
             cause,
         };
-        match self.integrator.implicit() {
+        match self.integrator.implicit_mut() {
             Some(implicit) => implicit
                 .linearize(&self.model, free_increment)
                 .map_err(|cause| step_error(&self.model, cause)),

@@ -195,7 +195,7 @@ fn newmark_gamma_above_half_damps_at_the_predicted_rate() {
     }
     let omega = 2.0 * std::f64::consts::PI / PERIOD;
     let (dt, t_end) = (
-        sim.model.scene.scene.dt.unwrap_or(1.0),
+        sim.integrator.implicit().expect("an implicit run").dt(),
         history.last().unwrap().0,
     );
     let predicted = (gamma - 0.5) * omega * omega * dt * t_end;

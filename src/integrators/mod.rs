@@ -117,7 +117,15 @@ impl Integrator {
     }
 
     /// The implicit integrator, if the run has one.
-    pub fn implicit(&mut self) -> Option<&mut ImplicitIntegrator> {
+    pub fn implicit(&self) -> Option<&ImplicitIntegrator> {
+        match self {
+            Integrator::Implicit(implicit) => Some(implicit),
+            Integrator::Explicit(_) => None,
+        }
+    }
+
+    /// The implicit integrator, mutable (verification access: `linearize`).
+    pub fn implicit_mut(&mut self) -> Option<&mut ImplicitIntegrator> {
         match self {
             Integrator::Implicit(implicit) => Some(implicit),
             Integrator::Explicit(_) => None,

@@ -482,7 +482,9 @@ pub fn solve(
     let mut du = system.initial_increment(&vec![0.0; system.dofs.n_free]);
     let mut trial = TrialStresses::default();
     let mut res = system.evaluate(&du, nonlocal.as_deref(), &mut trial, profile)?;
-    for iteration in 0..=convergence.max_iterations {
+    // `judge` ends the loop: at convergence, or with an error at the iteration limit
+    let mut iteration = 0;
+    loop {
         let free_residual = gather_free(&system.dofs, &res.residual);
         let kappa_settled = || match nonlocal.as_deref_mut() {
             Some(nl) => Ok(profile.time(Stage::Nonlocal, || {
@@ -545,14 +547,8 @@ pub fn solve(
         du = candidate.du;
         trial = candidate.trial;
         res = candidate.residual;
+        iteration += 1;
     }
-    // not reached: `judge` fails at the last iteration
-    let cause = NewtonFailure::IterationLimit {
-        iterations: convergence.max_iterations,
-        unmet: Vec::new(),
-        reference: f64::NAN,
-    };
-    Err(NewtonError::failed(cause, &convergence.history))
 }
 
 /// True when each of the last three iterations changed the residual norm by
