@@ -5,8 +5,9 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
+use mpm_geo::campaign::CampaignOptions;
 use mpm_geo::run::run_scene;
-use mpm_geo::scene::Scene;
+use mpm_geo::scene::{Formulation, Scene};
 
 /// 2D plane-strain material point method for brittle geomaterials.
 #[derive(Parser)]
@@ -50,6 +51,12 @@ enum Command {
         /// the time-step discrepancy of each curve (step_convergence.csv).
         #[arg(long, value_name = "K")]
         step_refinement: Option<usize>,
+        /// `ours` (the scenes as written: GIMP, m as written, no double
+        /// mapping) or `paper` (bilinear cells, Gauss points, m = 1, double
+        /// mapping of the stress increment); the paper's runs go to
+        /// out/campaign-<dir name>-paper by default.
+        #[arg(long, value_enum, default_value_t = FormulationArg::Ours)]
+        formulation: FormulationArg,
     },
     /// Homogeneous test on one material point (biaxial, triaxial, simple shear) → CSV.
     Point(mpm_geo::point_driver::PointArgs),
@@ -63,6 +70,15 @@ enum Command {
     },
 }
 
+/// `--formulation`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum FormulationArg {
+    /// The scenes as written.
+    Ours,
+    /// The paper's literal formulation.
+    Paper,
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
@@ -72,13 +88,25 @@ fn main() -> ExitCode {
             jobs,
             overrides,
             step_refinement,
+            formulation,
         } => {
             let name = dir
                 .file_name()
                 .map(|s| s.to_string_lossy().into_owned())
                 .unwrap_or_else(|| "campaign".into());
-            let out = out.unwrap_or_else(|| PathBuf::from("out").join(format!("campaign-{name}")));
-            match mpm_geo::campaign::run_campaign(&dir, &out, jobs, &overrides, step_refinement) {
+            let (formulation, suffix) = match formulation {
+                FormulationArg::Ours => (Formulation::AsWritten, ""),
+                FormulationArg::Paper => (Formulation::Paper, "-paper"),
+            };
+            let out = out
+                .unwrap_or_else(|| PathBuf::from("out").join(format!("campaign-{name}{suffix}")));
+            let options = CampaignOptions {
+                jobs,
+                overrides,
+                step_refinement,
+                formulation,
+            };
+            match mpm_geo::campaign::run_campaign(&dir, &out, &options) {
                 Ok(runs) => {
                     let stopped = runs.iter().filter(|r| r.error.is_some()).count();
                     eprintln!(

@@ -18,6 +18,9 @@
 
 use thiserror::Error;
 
+mod time_history;
+pub use time_history::{fall_roughness, first_exceedance, reversals, value_at};
+
 /// Number of sample points of the M1 discrepancy \[D42\].
 pub const M1_SAMPLES: usize = 101;
 

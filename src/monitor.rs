@@ -136,6 +136,11 @@ impl Monitor {
                 .fold(0.0, f64::max),
             (_, MonitorKind::DissipatedEnergy) => model.dissipated_energy,
             (_, MonitorKind::Gravity) => model.scene.loads.gravity_at(model.time),
+            (_, MonitorKind::RunOut) => p
+                .position
+                .iter()
+                .map(|x| x[0])
+                .fold(f64::NEG_INFINITY, f64::max),
             _ => f64::NAN,
         };
         self.spec.scale * raw + self.spec.offset

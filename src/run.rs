@@ -9,7 +9,7 @@ use serde_json::json;
 
 use crate::error::RunError;
 use crate::integrators::StepReport;
-use crate::output::{write_json, write_vtu, CurveWriter};
+use crate::output::{deviatoric_hencky_strain, write_json, write_vtu, CurveWriter};
 use crate::profile::Stage;
 use crate::scene::{AnalysisKind, Scene};
 use crate::simulation::{Observer, Simulation};
@@ -20,6 +20,40 @@ pub struct OutputObserver {
     curve: CurveWriter,
     progress: ProgressBar,
     last_row_step: usize,
+    /// `[output] snapshot_times` not reached yet, latest first.
+    pending_times: Vec<f64>,
+    /// The fields at the snapshot times reached so far.
+    fields: Vec<FieldSnapshot>,
+}
+
+/// The material points' positions and strains at one snapshot time (what the
+/// campaigns plot as the paper's Figs. 7 and 10).
+#[derive(Clone, Debug)]
+pub struct FieldSnapshot {
+    /// The snapshot time asked for in `[output] snapshot_times`, s.
+    pub requested_time: f64,
+    /// The time of the step written, s (the first step reaching it).
+    pub time: f64,
+    /// Positions x_p, m.
+    pub positions: Vec<[f64; 2]>,
+    /// Deviatoric Hencky strain εq per point (DESIGN D8).
+    pub eps_q: Vec<f64>,
+    /// Current volume V_p, m³ per m.
+    pub volumes: Vec<f64>,
+}
+
+impl FieldSnapshot {
+    /// The fields of `sim` now, for the requested time `requested_time`.
+    pub fn of(sim: &Simulation, requested_time: f64) -> Self {
+        let p = &sim.model.particles;
+        Self {
+            requested_time,
+            time: sim.model.time,
+            positions: p.position.clone(),
+            eps_q: p.def_grad.iter().map(deviatoric_hencky_strain).collect(),
+            volumes: p.volume.clone(),
+        }
+    }
 }
 
 impl OutputObserver {
@@ -46,12 +80,37 @@ impl OutputObserver {
         } else {
             ProgressBar::hidden()
         };
+        let mut pending_times = sim.model.scene.output.snapshot_times.clone();
+        pending_times.sort_by(|a, b| b.total_cmp(a));
         Ok(Self {
             dir: dir.to_path_buf(),
             curve,
             progress,
             last_row_step: usize::MAX,
+            pending_times,
+            fields: Vec::new(),
         })
+    }
+
+    /// The fields captured at `[output] snapshot_times`, in time order.
+    pub fn fields(&self) -> &[FieldSnapshot] {
+        &self.fields
+    }
+
+    /// Capture the fields for every snapshot time the run has now reached
+    /// (within a relative 1e-9 of the time); true if any.
+    fn capture_due_times(&mut self, sim: &Simulation) -> bool {
+        let time = sim.model.time;
+        let mut any = false;
+        while let Some(&t) = self.pending_times.last() {
+            if time < t - 1e-9 * t.abs().max(1.0) {
+                break;
+            }
+            self.pending_times.pop();
+            self.fields.push(FieldSnapshot::of(sim, t));
+            any = true;
+        }
+        any
     }
 
     fn snapshot_due(sim: &Simulation) -> bool {
@@ -121,7 +180,8 @@ impl Observer for OutputObserver {
     fn on_start(&mut self, sim: &Simulation) -> Result<(), RunError> {
         sim.profile.time(Stage::Output, || {
             self.write_row(sim)?;
-            if Self::snapshot_due(sim) {
+            let at_time = self.capture_due_times(sim);
+            if Self::snapshot_due(sim) || at_time {
                 self.write_snapshot(sim)?;
             }
             Ok(())
@@ -134,7 +194,8 @@ impl Observer for OutputObserver {
             if sim.model.step.is_multiple_of(every) || sim.finished() {
                 self.write_row(sim)?;
             }
-            if Self::snapshot_due(sim) {
+            let at_time = self.capture_due_times(sim);
+            if Self::snapshot_due(sim) || at_time {
                 self.write_snapshot(sim)?;
             }
             self.show_progress(sim, report);
@@ -151,6 +212,8 @@ pub struct RunOutcome {
     pub wall_seconds: f64,
     /// The error that stopped the run, if any (outputs up to it are kept).
     pub error: Option<RunError>,
+    /// The fields at the `[output] snapshot_times` the run reached.
+    pub fields: Vec<FieldSnapshot>,
 }
 
 /// Run a validated scene, writing `curve.csv`, snapshots and `run.json` into `out`.
@@ -175,6 +238,7 @@ pub fn run_scene(
         simulation: sim,
         wall_seconds,
         error,
+        fields: observer.fields,
     })
 }
 

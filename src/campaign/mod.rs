@@ -14,11 +14,20 @@
 //! `run.rs` finds the scenes and runs them; `report.rs` computes the metrics and
 //! writes the combined outputs.
 
+mod footing;
+mod history;
 mod report;
 mod run;
+mod spec;
 
+pub use footing::{corner_band_share, soil_inside_outline, FootingGeometry};
+pub use history::{compute_history_metrics, History, HistoryColumns, HistoryMetrics};
 pub use report::{compute_metrics, step_convergence, CurveColumns, RunMetrics, StepConvergence};
-pub use run::run_campaign;
+pub use run::{run_campaign, CampaignOptions};
+pub use spec::{Benchmark, CampaignSpec, IntegratorChoice, SPEC_FILE};
+
+use crate::run::FieldSnapshot;
+use crate::scene::AnalysisKind;
 
 /// Why a campaign could not run.
 #[derive(Debug, thiserror::Error)]
@@ -107,6 +116,57 @@ pub struct CampaignRun {
     /// 1 for the scene as written; K for its time-step refinement (K times the
     /// steps, Δt / K), run with `--step-refinement K`.
     pub step_factor: usize,
+    /// The scene file the run was made from (its stem).
+    pub scene: String,
+    /// The integrator the run used.
+    pub analysis: AnalysisKind,
+    /// Time histories of a time-history benchmark (the cut: u_A, q_B, run-out).
+    pub history: Option<History>,
+    /// Fields at the scene's `[output] snapshot_times` (paper Fig. 10).
+    pub fields: Vec<FieldSnapshot>,
+    /// Final volume of every material point, m³ per m.
+    pub volumes: Vec<f64>,
+    /// The rigid footing's outline (footing benchmark).
+    pub footing: Option<FootingGeometry>,
+    /// Steps taken, Newton iterations, step halvings (implicit cut-backs).
+    pub effort: Effort,
+}
+
+/// What a run cost in steps and iterations.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Effort {
+    /// Steps completed.
+    pub steps: usize,
+    /// Newton iterations (implicit runs).
+    pub newton_iterations: usize,
+    /// Step halvings after a failed Newton solve (implicit cut-backs).
+    pub halvings: usize,
+}
+
+impl CampaignRun {
+    /// Family of the run: regularisation and integrator (DESIGN §9: the
+    /// reference of a run is the finest mesh of its family).
+    pub fn same_family(&self, other: &CampaignRun) -> bool {
+        self.length_scale.is_some() == other.length_scale.is_some()
+            && self.analysis == other.analysis
+    }
+
+    /// `local` or `nonlocal`.
+    pub fn regularisation(&self) -> &'static str {
+        if self.length_scale.is_some() {
+            "nonlocal"
+        } else {
+            "local"
+        }
+    }
+
+    /// `implicit` or `explicit`.
+    pub fn integrator(&self) -> &'static str {
+        match self.analysis {
+            AnalysisKind::Explicit => "explicit",
+            _ => "implicit",
+        }
+    }
 }
 
 /// M5 energy balance of a run at its last step, kJ/m.

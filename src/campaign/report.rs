@@ -5,6 +5,8 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
+use super::footing::{corner_band_share, soil_inside_outline};
+use super::spec::Benchmark;
 use super::{CampaignError, CampaignRun, CurveProblem};
 use crate::metrics;
 use crate::plot::{self, Bounds, Panel, Series};
@@ -85,7 +87,7 @@ pub(super) fn read_curve(
 }
 
 /// The number in column `index` of a curve row.
-fn number_in(
+pub(super) fn number_in(
     record: &csv::StringRecord,
     index: usize,
     headers: &csv::StringRecord,
@@ -223,8 +225,9 @@ pub(super) fn write_step_convergence(
 /// Per-run metrics of DESIGN §9 against the family reference.
 #[derive(Clone, Debug, Default)]
 pub struct RunMetrics {
-    /// Initial slope dF/dδ, least-squares fit over δ ∈ [0.1, 0.5] mm (elastic,
-    /// after the start-up transient of dynamic runs), kN/m per m.
+    /// Initial slope dF/dδ, least-squares fit over the benchmark's elastic
+    /// window ([`Benchmark::slope_window`]; biaxial δ ∈ [0.1, 0.5] mm, after
+    /// the start-up transient of dynamic runs), kN/m per m.
     pub initial_slope: f64,
     /// Peak load and its δ.
     pub peak: (f64, f64),
@@ -243,27 +246,47 @@ pub struct RunMetrics {
     pub band_width_kappa_bar: Option<f64>,
     /// External work W = ∫F dδ, kJ/m.
     pub external_work: Option<f64>,
+    /// Footing: soil area inside the footing's outline above its base at
+    /// the last δ, m² per m ([`soil_inside_outline`]).
+    pub soil_inside_footing: Option<f64>,
+    /// Footing: share of Σ V εq in the strip under the left and the right
+    /// corner ([`corner_band_share`]).
+    pub corner_band: Option<[f64; 2]>,
 }
 
 /// Metrics of every run (reference: the finest completed mesh of its family).
-pub fn compute_metrics(runs: &[CampaignRun]) -> Vec<RunMetrics> {
+pub fn compute_metrics(runs: &[CampaignRun], benchmark: Benchmark) -> Vec<RunMetrics> {
     runs.iter()
         .map(|run| {
+            let delta_end = run.curve.last().map(|c| c.0).unwrap_or(0.0);
+            let (from, to) = benchmark.slope_window(delta_end);
             let mut m = RunMetrics {
-                initial_slope: fitted_slope(&run.curve, 1e-4, 5e-4),
+                initial_slope: fitted_slope(&run.curve, from, to),
                 ..Default::default()
             };
+            if let (Some(footing), false) = (&run.footing, run.positions.is_empty()) {
+                m.soil_inside_footing = Some(soil_inside_outline(
+                    footing,
+                    delta_end,
+                    &run.positions,
+                    &run.volumes,
+                ));
+                m.corner_band = Some(corner_band_share(
+                    footing,
+                    delta_end,
+                    &run.positions,
+                    &run.volumes,
+                    &run.eps_q,
+                ));
+            }
             if let Ok((d, f)) = metrics::peak(&run.curve) {
                 m.peak = (d, f);
             }
             m.final_load = run.curve.last().map(|c| c.1).unwrap_or(f64::NAN);
             let reference = runs
                 .iter()
-                .filter(|r| {
-                    r.length_scale.is_some() == run.length_scale.is_some() && r.error.is_none()
-                })
+                .filter(|r| r.same_family(run) && r.error.is_none())
                 .min_by(|a, b| a.cell_size.total_cmp(&b.cell_size));
-            let delta_end = run.curve.last().map(|c| c.0).unwrap_or(0.0);
             if let Some(reference) = reference {
                 let end = delta_end.min(reference.curve.last().map(|c| c.0).unwrap_or(0.0));
                 m.discrepancy =
@@ -294,6 +317,29 @@ pub fn compute_metrics(runs: &[CampaignRun]) -> Vec<RunMetrics> {
         .collect()
 }
 
+/// The footing's report section: soil inside the footing's outline and the
+/// corner-band shares per run.
+fn footing_section(runs: &[CampaignRun], m: &[RunMetrics]) -> String {
+    use super::footing::{CORNER_STRIP_DEPTH, CORNER_STRIP_HALF_WIDTH};
+    let mut md = format!(
+        "\n## Footing: soil over the base and the corner band\n\nSoil inside the outline = area of soil inside the footing's footprint above its base at the last δ (the paper's 3 m footing is not modelled, so nothing keeps heaving soil out of it). Corner band = share of Σ V εq (whole soil) in a vertical strip under each footing corner, {:.2} B wide, from {} B to {} B below the base (above the main Prandtl band): the paper's \"secondary vertical band below the footing corner\" raises it.\n\n| run | soil inside outline (m²/m) | corner band left | corner band right |\n|---|---|---|---|\n",
+        2.0 * CORNER_STRIP_HALF_WIDTH,
+        CORNER_STRIP_DEPTH.0,
+        CORNER_STRIP_DEPTH.1
+    );
+    for (r, mm) in runs.iter().zip(m) {
+        let _ = writeln!(
+            md,
+            "| {} | {} | {} | {} |",
+            r.name,
+            fmt_opt(mm.soil_inside_footing, 1.0, 4),
+            fmt_opt(mm.corner_band.map(|c| c[0]), 1.0, 4),
+            fmt_opt(mm.corner_band.map(|c| c[1]), 1.0, 4),
+        );
+    }
+    md
+}
+
 /// Least-squares slope of the curve points with δ in [from, to] (NaN if < 2 points).
 fn fitted_slope(curve: &[(f64, f64)], from: f64, to: f64) -> f64 {
     let pts: Vec<&(f64, f64)> = curve
@@ -317,12 +363,30 @@ fn fmt_sci(v: Option<f64>) -> String {
     v.map(|x| format!("{x:.3e}")).unwrap_or_else(|| "–".into())
 }
 
-fn fmt_opt(v: Option<f64>, scale: f64, digits: usize) -> String {
+pub(super) fn fmt_opt(v: Option<f64>, scale: f64, digits: usize) -> String {
     v.map(|x| format!("{:.*}", digits, x * scale))
         .unwrap_or_else(|| "–".into())
 }
 
-pub(super) fn write_outputs(out: &Path, runs: &[CampaignRun]) -> Result<(), CampaignError> {
+/// The report section with every run's stage profile (wall time by stage).
+pub(super) fn profiles_section(runs: &[CampaignRun]) -> String {
+    let mut md =
+        String::from("\n## Stage profiles\n\nWall time of every run by stage (exclusive).\n\n");
+    for r in runs {
+        let _ = writeln!(md, "### {}\n\n```\n{}\n```\n", r.name, r.profile.trim_end());
+    }
+    md
+}
+
+/// Write `curves.csv`, `metrics.csv`, `report.md` and the figures of a
+/// load-curve campaign (biaxial, footing) into `out`.
+pub(super) fn write_outputs(
+    out: &Path,
+    runs: &[CampaignRun],
+    benchmark: Benchmark,
+    window: Bounds,
+) -> Result<(), CampaignError> {
+    let (unit, scale) = benchmark.length_unit();
     let io = |p: &Path, e: &dyn std::fmt::Display| {
         CampaignError::Output(p.display().to_string(), e.to_string())
     };
@@ -346,10 +410,10 @@ pub(super) fn write_outputs(out: &Path, runs: &[CampaignRun]) -> Result<(), Camp
     }
     std::fs::write(&combined, text).map_err(|e| io(&combined, &e))?;
     // metrics
-    let m = compute_metrics(runs);
+    let m = compute_metrics(runs, benchmark);
     let metrics_path = out.join("metrics.csv");
-    let mut csv = String::from("run,family,cell_size,length_scale,status,wall_seconds,initial_slope,peak_delta,peak_load,final_load,M1_discrepancy,M2_peak_spread,M3_brittleness,M4_band_width,M4_band_width_kappa_bar,load_curve_work,M5_dissipation,external_work,internal_work,kinetic_energy,energy_loss\n");
-    let mut md = String::from("# Mesh-objectivity report\n\nReference of each family: its finest completed mesh (DESIGN §9). δ in mm, loads in kN/m, band width w (M4 on εq) and w_κ̄ (M4 on the nonlocal variable κ̄) in mm.\n\n| run | h (mm) | status | wall (s) | slope (kN/m/m) | peak F | δ_peak | F_end | β (M3) | M1 e_h | M2 | w (mm) | w/l_s | w_κ̄ (mm) | D (kJ/m, M5) |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    let mut csv = String::from("run,family,cell_size,length_scale,status,wall_seconds,initial_slope,peak_delta,peak_load,final_load,M1_discrepancy,M2_peak_spread,M3_brittleness,M4_band_width,M4_band_width_kappa_bar,load_curve_work,M5_dissipation,external_work,internal_work,kinetic_energy,energy_loss,soil_inside_footing,corner_band_left,corner_band_right\n");
+    let mut md = format!("# Mesh-objectivity report\n\nReference of each family: its finest completed mesh (DESIGN §9). h and δ in {unit}, loads in kN/m, band width w (M4 on εq) and w_κ̄ (M4 on the nonlocal variable κ̄) in {unit}.\n\n| run | h ({unit}) | status | wall (s) | slope (kN/m/m) | peak F | δ_peak | F_end | β (M3) | M1 e_h | M2 | w ({unit}) | w/l_s | w_κ̄ ({unit}) | D (kJ/m, M5) |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     for (r, mm) in runs.iter().zip(&m) {
         let family = if r.length_scale.is_some() {
             "nonlocal"
@@ -363,7 +427,7 @@ pub(super) fn write_outputs(out: &Path, runs: &[CampaignRun]) -> Result<(), Camp
         };
         let _ = writeln!(
             csv,
-            "{},{family},{:e},{},{status},{:.2},{:.1},{:e},{:e},{:e},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{family},{:e},{},{status},{:.2},{:.1},{:e},{:e},{:e},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
             r.name,
             r.cell_size,
             r.length_scale.map(|l| l.to_string()).unwrap_or_default(),
@@ -383,6 +447,9 @@ pub(super) fn write_outputs(out: &Path, runs: &[CampaignRun]) -> Result<(), Camp
             fmt_opt(r.energy.map(|e| e.internal), 1.0, 6),
             fmt_opt(r.energy.map(|e| e.kinetic), 1.0, 9),
             fmt_opt(r.energy.map(|e| e.relative_loss()), 1.0, 5),
+            fmt_opt(mm.soil_inside_footing, 1.0, 5),
+            fmt_opt(mm.corner_band.map(|c| c[0]), 1.0, 5),
+            fmt_opt(mm.corner_band.map(|c| c[1]), 1.0, 5),
         );
         let ratio = match (mm.band_width, r.length_scale) {
             (Some(w), Some(l)) => format!("{:.2}", w / l),
@@ -392,19 +459,22 @@ pub(super) fn write_outputs(out: &Path, runs: &[CampaignRun]) -> Result<(), Camp
             md,
             "| {} | {:.3} | {status} | {:.1} | {:.0} | {:.3} | {:.3} | {:.3} | {} | {} | {} | {} | {ratio} | {} | {} |",
             r.name,
-            r.cell_size * 1e3,
+            r.cell_size * scale,
             r.wall_seconds,
             mm.initial_slope,
             mm.peak.1,
-            mm.peak.0 * 1e3,
+            mm.peak.0 * scale,
             mm.final_load,
             fmt_opt(mm.brittleness, 1.0, 3),
             fmt_opt(mm.discrepancy, 1.0, 4),
             fmt_opt(mm.peak_spread, 1.0, 4),
-            fmt_opt(mm.band_width, 1e3, 2),
-            fmt_opt(mm.band_width_kappa_bar, 1e3, 2),
+            fmt_opt(mm.band_width, scale, 3),
+            fmt_opt(mm.band_width_kappa_bar, scale, 3),
             fmt_opt(r.dissipation, 1.0, 4),
         );
+    }
+    if m.iter().any(|mm| mm.corner_band.is_some()) {
+        md.push_str(&footing_section(runs, &m));
     }
     if runs.iter().any(|r| r.energy.is_some()) {
         md.push_str("\n## Energy balance (M5)\n\nAt the last step, kJ/m: W work of the pressures and the platen on the soil, W_int work of the stresses on the strain increments (elastic energy stored + dissipation D), K kinetic energy. The loss (W − W_int − K)/W is the energy the time integration removed (Newmark γ > ½ damping a dynamic snap; about 2e-5 in an elastic run, tests/energy_balance.rs).\n\n| run | W | W_int | D | K | loss |\n|---|---|---|---|---|---|\n");
@@ -445,6 +515,7 @@ pub(super) fn write_outputs(out: &Path, runs: &[CampaignRun]) -> Result<(), Camp
             r.error.as_deref().unwrap_or_default()
         );
     }
+    md.push_str(&profiles_section(runs));
     std::fs::write(&metrics_path, csv).map_err(|e| io(&metrics_path, &e))?;
     let report = out.join("report.md");
     std::fs::write(&report, md).map_err(|e| io(&report, &e))?;
@@ -462,16 +533,8 @@ pub(super) fn write_outputs(out: &Path, runs: &[CampaignRun]) -> Result<(), Camp
     let series: Vec<Series> = ordered
         .iter()
         .map(|r| Series {
-            name: format!(
-                "{} h={:.2} mm",
-                if r.length_scale.is_some() {
-                    "nonlocal"
-                } else {
-                    "local"
-                },
-                r.cell_size * 1e3
-            ),
-            points: r.curve.iter().map(|(d, f)| (d * 1e3, *f)).collect(),
+            name: format!("{} h={:.3} {unit}", r.regularisation(), r.cell_size * scale),
+            points: r.curve.iter().map(|(d, f)| (d * scale, *f)).collect(),
             dashed: r.length_scale.is_none(),
             color: sizes.iter().position(|&h| h == r.cell_size).unwrap_or(0),
         })
@@ -481,7 +544,7 @@ pub(super) fn write_outputs(out: &Path, runs: &[CampaignRun]) -> Result<(), Camp
         plot::plot_curves(
             &path,
             "Load vs displacement (dashed: local, solid: nonlocal)",
-            "δ (mm)",
+            &format!("δ ({unit})"),
             "F (kN/m)",
             &series,
         )
@@ -500,13 +563,10 @@ pub(super) fn write_outputs(out: &Path, runs: &[CampaignRun]) -> Result<(), Camp
         let panels: Vec<Panel> = members
             .iter()
             .map(|r| Panel {
-                title: format!("h = {:.2} mm", r.cell_size * 1e3),
+                title: format!("h = {:.3} {unit}", r.cell_size * scale),
                 positions: &r.positions,
                 values: &r.eps_q,
-                bounds: Bounds {
-                    x: (0.0, 0.04),
-                    y: (0.0, 0.05),
-                },
+                bounds: window,
                 marker: Some(0.6 * r.cell_size),
             })
             .collect();

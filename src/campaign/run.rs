@@ -5,11 +5,27 @@ use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::time::Instant;
 
+use super::footing::FootingGeometry;
+use super::history::{write_history_outputs, History, HistoryColumns};
 use super::report::{last_value, read_curve, write_outputs, write_step_convergence};
-use super::{CampaignError, CampaignRun, CurveColumns, EnergyBalance};
+use super::spec::{Benchmark, CampaignSpec, SPEC_FILE};
+use super::{CampaignError, CampaignRun, CurveColumns, Effort, EnergyBalance};
 use crate::output::deviatoric_hencky_strain;
 use crate::run::run_scene;
-use crate::scene::Scene;
+use crate::scene::{Formulation, Scene};
+
+/// How a campaign is run.
+#[derive(Clone, Debug, Default)]
+pub struct CampaignOptions {
+    /// Runs at a time.
+    pub jobs: usize,
+    /// `--set key=value` edits applied to every scene.
+    pub overrides: Vec<String>,
+    /// Also run every scene with K times the steps (time-step convergence).
+    pub step_refinement: Option<usize>,
+    /// The scenes as written or the paper's literal formulation.
+    pub formulation: Formulation,
+}
 
 fn scenes_in(dir: &Path) -> Result<Vec<PathBuf>, CampaignError> {
     let entries = std::fs::read_dir(dir)
@@ -17,6 +33,7 @@ fn scenes_in(dir: &Path) -> Result<Vec<PathBuf>, CampaignError> {
     let mut paths: Vec<PathBuf> = entries
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+        .filter(|p| p.file_name().is_some_and(|n| n != SPEC_FILE))
         .collect();
     paths.sort();
     if paths.is_empty() {
@@ -29,54 +46,68 @@ fn scenes_in(dir: &Path) -> Result<Vec<PathBuf>, CampaignError> {
 }
 
 /// Run every scene of `dir` (validated first, all of them, before anything
-/// runs), `jobs` at a time, into `out/<scene>/`, then write the combined
-/// outputs. With `step_refinement = Some(K)` every scene is also run with K
-/// times the steps at Δt / K (into `out/<scene>_dtK/`) and the time-step
-/// discrepancy of each curve is reported (`step_convergence.csv`, report
-/// section). Returns the runs in scene order, refinements after the scenes; a
-/// run's unreadable `curve.csv` is an error once every run has finished.
+/// runs) with every integrator of the directory's `campaign.toml`,
+/// `options.jobs` at a time, into `out/<scene>[_explicit]/`, then write the
+/// combined outputs of its benchmark. With `step_refinement = Some(K)` every
+/// scene is also run with K times the steps at Δt / K (into
+/// `out/<scene>_dtK/`) and the time-step discrepancy of each curve is reported
+/// (`step_convergence.csv`, report section). Returns the runs in scene order,
+/// refinements after the scenes; a run's unreadable `curve.csv` is an error
+/// once every run has finished.
 pub fn run_campaign(
     dir: &Path,
     out: &Path,
-    jobs: usize,
-    overrides: &[String],
-    step_refinement: Option<usize>,
+    options: &CampaignOptions,
 ) -> Result<Vec<CampaignRun>, CampaignError> {
+    let spec = CampaignSpec::load(dir)?;
     let paths = scenes_in(dir)?;
-    let scenes: Vec<(String, Scene)> = paths
-        .iter()
-        .map(|p| {
-            let name = p
-                .file_stem()
-                .map(|s| s.to_string_lossy().into_owned())
-                .unwrap_or_default();
-            Scene::load(p, overrides)
-                .map(|s| (name, s))
-                .map_err(|e| CampaignError::Scene(e.to_string()))
-        })
-        .collect::<Result<_, _>>()?;
-    let mut variants: Vec<(String, Scene, usize)> = Vec::new();
-    if let Some(k) = step_refinement {
-        for (name, scene) in &scenes {
-            variants.push((format!("{name}_dt{k}"), refine_steps(name, scene, k)?, k));
+    let mut scenes: Vec<(String, String, Scene)> = Vec::new();
+    for path in &paths {
+        let stem = path
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let scene = Scene::load(path, &options.overrides)
+            .and_then(|s| s.with_formulation(options.formulation))
+            .map_err(|e| CampaignError::Scene(e.to_string()))?;
+        for integrator in &spec.integrators {
+            let name = format!("{stem}{}", integrator.suffix());
+            scenes.push((name, stem.clone(), integrator.apply(&scene)?));
         }
     }
-    let all: Vec<(String, Scene, usize)> = scenes
+    let mut variants: Vec<Planned> = Vec::new();
+    if let Some(k) = options.step_refinement {
+        for (name, stem, scene) in &scenes {
+            variants.push(Planned {
+                name: format!("{name}_dt{k}"),
+                scene_file: stem.clone(),
+                scene: refine_steps(name, scene, k)?,
+                step_factor: k,
+            });
+        }
+    }
+    let all: Vec<Planned> = scenes
         .into_iter()
-        .map(|(name, scene)| (name, scene, 1))
+        .map(|(name, scene_file, scene)| Planned {
+            name,
+            scene_file,
+            scene,
+            step_factor: 1,
+        })
         .chain(variants)
         .collect();
     // popped from the back: queue the longest runs (finest meshes, refinements) first
     let queue = Mutex::new(all.into_iter().enumerate().collect::<Vec<_>>());
     let results = Mutex::new(Vec::new());
     std::thread::scope(|scope| {
-        for _ in 0..jobs.max(1) {
+        for _ in 0..options.jobs.max(1) {
             scope.spawn(|| loop {
                 let next = queue.lock().map(|mut q| q.pop()).unwrap_or(None);
-                let Some((index, (name, scene, factor))) = next else {
+                let Some((index, planned)) = next else {
                     break;
                 };
-                let run = run_one(&name, scene, &out.join(&name), factor);
+                let name = planned.name.clone();
+                let run = run_one(planned, &out.join(&name));
                 match &run {
                     Ok(run) => eprintln!(
                         "campaign: {name} finished in {:.1} s{}",
@@ -103,11 +134,29 @@ pub fn run_campaign(
         .filter(|r| r.step_factor == 1)
         .cloned()
         .collect();
-    write_outputs(out, &scenes_as_written)?;
-    if step_refinement.is_some() {
+    let window = match (spec.benchmark, paths.first()) {
+        (Benchmark::VerticalCut, _) => crate::plot::Bounds::new(0.0, 16.0, 0.0, 3.5),
+        (benchmark, Some(first)) => Scene::load(first, &options.overrides)
+            .map(|s| benchmark.field_window(&s))
+            .map_err(|e| CampaignError::Scene(e.to_string()))?,
+        (_, None) => crate::plot::Bounds::new(0.0, 1.0, 0.0, 1.0),
+    };
+    match spec.benchmark {
+        Benchmark::VerticalCut => write_history_outputs(out, &scenes_as_written, window)?,
+        benchmark => write_outputs(out, &scenes_as_written, benchmark, window)?,
+    }
+    if options.step_refinement.is_some() {
         write_step_convergence(out, &runs)?;
     }
     Ok(runs)
+}
+
+/// A run waiting in the campaign's queue.
+struct Planned {
+    name: String,
+    scene_file: String,
+    scene: Scene,
+    step_factor: usize,
 }
 
 /// The scene with K times the steps at Δt / K (loads are functions of time, so
@@ -133,18 +182,27 @@ fn refine_steps(name: &str, scene: &Scene, k: usize) -> Result<Scene, CampaignEr
 
 /// Run one scene into `out` and gather what the report needs; an unreadable
 /// curve is an error.
-fn run_one(
-    name: &str,
-    scene: Scene,
-    out: &Path,
-    step_factor: usize,
-) -> Result<CampaignRun, CampaignError> {
+fn run_one(planned: Planned, out: &Path) -> Result<CampaignRun, CampaignError> {
+    let Planned {
+        name,
+        scene_file,
+        scene,
+        step_factor,
+    } = planned;
     let cell_size = scene.grid.cell_size;
     let length_scale = scene.nonlocal.as_ref().map(|n| n.length_scale);
     let curve_columns = CurveColumns::of_scene(&scene);
+    let history_columns = HistoryColumns::of_scene(&scene);
     let start = Instant::now();
     let mut run = CampaignRun {
-        name: name.to_string(),
+        scene: scene_file,
+        analysis: scene.scene.analysis,
+        history: None,
+        fields: Vec::new(),
+        volumes: Vec::new(),
+        footing: FootingGeometry::of_scene(&scene),
+        effort: Effort::default(),
+        name,
         cell_size,
         length_scale,
         curve: Vec::new(),
@@ -168,6 +226,14 @@ fn run_one(
         Ok(outcome) => {
             let p = &outcome.simulation.model.particles;
             run.positions = p.position.clone();
+            run.volumes = p.volume.clone();
+            let usage = outcome.simulation.integrator.usage();
+            run.effort = Effort {
+                steps: outcome.simulation.model.step,
+                newton_iterations: usage.newton_iterations,
+                halvings: usage.halvings,
+            };
+            run.fields = outcome.fields;
             run.eps_q = p.def_grad.iter().map(deviatoric_hencky_strain).collect();
             if run.length_scale.is_some() {
                 run.kappa_bar = p
@@ -191,6 +257,9 @@ fn run_one(
     if curve_written {
         if let Some(columns) = &run.curve_columns {
             run.curve = read_curve(&curve, columns)?;
+        }
+        if let Some(columns) = &history_columns {
+            run.history = Some(History::read(&curve, columns)?);
         }
     }
     run.dissipation = last_value(&curve, "dissipation");

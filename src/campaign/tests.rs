@@ -1,8 +1,76 @@
 use std::path::{Path, PathBuf};
 
+use super::history::write_history_outputs;
 use super::report::{read_curve, write_outputs};
 use super::*;
+use crate::plot::Bounds;
 use crate::scene::Scene;
+
+/// A run with no results yet.
+fn blank_run(
+    name: &str,
+    cell_size: f64,
+    length_scale: Option<f64>,
+    analysis: AnalysisKind,
+) -> CampaignRun {
+    CampaignRun {
+        name: name.into(),
+        cell_size,
+        length_scale,
+        curve: Vec::new(),
+        curve_columns: None,
+        positions: Vec::new(),
+        eps_q: Vec::new(),
+        kappa_bar: Vec::new(),
+        error: None,
+        lost_points: (0, 0.0),
+        dissipation: None,
+        energy: None,
+        wall_seconds: 0.0,
+        profile: String::new(),
+        step_factor: 1,
+        scene: name.trim_end_matches("_explicit").into(),
+        analysis,
+        history: None,
+        fields: Vec::new(),
+        volumes: Vec::new(),
+        footing: None,
+        effort: Effort::default(),
+    }
+}
+
+/// A cut-like history: at rest until `onset_at`, then |u_A| grows as
+/// (t − t0)² · `rate`; q_B rises to 100 kPa at the onset and falls linearly.
+fn cut_run(
+    name: &str,
+    h: f64,
+    nonlocal: bool,
+    explicit: bool,
+    onset_at: f64,
+    rate: f64,
+) -> CampaignRun {
+    let analysis = if explicit {
+        AnalysisKind::Explicit
+    } else {
+        AnalysisKind::ImplicitDynamic
+    };
+    let mut run = blank_run(name, h, nonlocal.then_some(0.4), analysis);
+    let mut history = History::default();
+    for i in 0..=1000 {
+        let t = i as f64 * 1e-3;
+        let u = rate * (t - onset_at).max(0.0).powi(2);
+        let q = if t < onset_at {
+            100.0 * t / onset_at
+        } else {
+            100.0 * (1.0 - (t - onset_at))
+        };
+        history.displacement.push((t, u));
+        history.stress.push((t, q));
+        history.run_out.push((t, 3.0 + 0.5 * u));
+    }
+    run.history = Some(history);
+    run
+}
 
 fn validation_scene(name: &str, overrides: &[&str]) -> Scene {
     let path = Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -117,24 +185,102 @@ fn unreadable_curve_is_refused_naming_the_file() {
 #[test]
 fn report_names_a_run_without_load_curve() {
     let dir = tempfile::tempdir().unwrap();
-    let run = CampaignRun {
-        name: "patch".into(),
-        cell_size: 0.5,
-        length_scale: None,
-        curve: Vec::new(),
-        curve_columns: None,
-        positions: Vec::new(),
-        eps_q: Vec::new(),
-        kappa_bar: Vec::new(),
-        error: None,
-        lost_points: (0, 0.0),
-        dissipation: None,
-        energy: None,
-        wall_seconds: 0.0,
-        profile: String::new(),
-        step_factor: 1,
-    };
-    write_outputs(dir.path(), &[run]).unwrap();
+    let run = blank_run("patch", 0.5, None, AnalysisKind::QuasiStatic);
+    write_outputs(
+        dir.path(),
+        &[run],
+        Benchmark::LoadCurve,
+        Bounds::new(0.0, 1.0, 0.0, 1.0),
+    )
+    .unwrap();
     let report = std::fs::read_to_string(dir.path().join("report.md")).unwrap();
     assert!(report.contains("\n- patch: no load curve ("), "{report}");
+}
+
+/// The cut's metrics on synthetic histories: onset where |u_A| passes 5 cm,
+/// M1 against the finest mesh of the same family (regularisation and
+/// integrator), and the implicit/explicit pairs of one scene.
+#[test]
+fn history_metrics_follow_families_and_pair_the_integrators() {
+    // rate 10 m/s²: |u_A| = 0.05 m at 0.0707 s after the onset
+    let runs = vec![
+        cut_run("nonlocal_h100", 0.1, true, false, 0.06, 10.0),
+        cut_run("nonlocal_h62", 0.0625, true, false, 0.06, 11.0),
+        cut_run("nonlocal_h62_explicit", 0.0625, true, true, 0.065, 11.0),
+        cut_run("local_h62", 0.0625, false, false, 0.05, 20.0),
+    ];
+    let m = compute_history_metrics(&runs);
+    let expected_onset = 0.06 + (0.05f64 / 10.0).sqrt();
+    let onset = m[0].onset.unwrap();
+    assert!(
+        (onset - expected_onset).abs() < 1e-4,
+        "{onset} vs {expected_onset}"
+    );
+    // u ∝ rate: the whole-history M1 of rate 10 against rate 11 is 1/11
+    let e = m[0].discrepancy.unwrap();
+    assert!((e - 1.0 / 11.0).abs() < 1e-9, "{e}");
+    // each finest run is its family's own reference (the explicit one too)
+    assert_eq!(m[1].discrepancy, Some(0.0));
+    assert_eq!(m[2].discrepancy, Some(0.0));
+    assert_eq!(m[3].discrepancy, Some(0.0));
+    assert_eq!(m[1].stress_reversals, Some(0));
+    assert!((m[1].stress_roughness.unwrap() - 1.0).abs() < 1e-9);
+
+    let dir = tempfile::tempdir().unwrap();
+    write_history_outputs(dir.path(), &runs, Bounds::new(0.0, 16.0, 0.0, 3.5)).unwrap();
+    let pairs = std::fs::read_to_string(dir.path().join("integrators.csv")).unwrap();
+    let rows: Vec<&str> = pairs.lines().skip(1).collect();
+    assert_eq!(rows.len(), 1, "{pairs}");
+    assert!(rows[0].starts_with("nonlocal_h62,nonlocal,"), "{pairs}");
+    // explicit onset 5 ms later
+    let fields: Vec<&str> = rows[0].split(',').collect();
+    let difference: f64 = fields[5].parse().unwrap();
+    assert!((difference - 0.005).abs() < 1e-4, "{difference}");
+    for file in [
+        "histories.csv",
+        "metrics.csv",
+        "report.md",
+        "fig12_uA.png",
+        "fig11_qB.png",
+        "implicit_vs_explicit.png",
+    ] {
+        assert!(dir.path().join(file).exists(), "{file} missing");
+    }
+}
+
+/// `campaign.toml` names the benchmark and the integrators; an unknown key or
+/// an empty list of integrators is refused, a missing file is the default.
+#[test]
+fn campaign_spec_is_read_and_checked() {
+    let dir = tempfile::tempdir().unwrap();
+    assert_eq!(
+        CampaignSpec::load(dir.path()).unwrap(),
+        CampaignSpec::default()
+    );
+    write_file(
+        dir.path(),
+        SPEC_FILE,
+        "benchmark = \"vertical_cut\"\nintegrators = [\"as_written\", \"explicit\"]\n",
+    );
+    let spec = CampaignSpec::load(dir.path()).unwrap();
+    assert_eq!(spec.benchmark, Benchmark::VerticalCut);
+    assert_eq!(
+        spec.integrators,
+        vec![IntegratorChoice::AsWritten, IntegratorChoice::Explicit]
+    );
+    write_file(
+        dir.path(),
+        SPEC_FILE,
+        "benchmark = \"footing\"\nintegrator = [\"explicit\"]\n",
+    );
+    let message = CampaignSpec::load(dir.path()).unwrap_err().to_string();
+    assert!(message.contains("integrator"), "{message}");
+    write_file(dir.path(), SPEC_FILE, "integrators = []\n");
+    assert!(CampaignSpec::load(dir.path()).is_err());
+    for shipped in ["biaxial", "footing", "vertical_cut"] {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("validation")
+            .join(shipped);
+        CampaignSpec::load(&path).expect("shipped campaign.toml");
+    }
 }

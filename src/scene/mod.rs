@@ -15,10 +15,12 @@ use std::path::Path;
 mod overrides;
 mod schema;
 mod validation;
+mod variants;
 
 pub use overrides::apply_override;
 pub use schema::*;
 pub use validation::{polygon_contains, FieldError};
+pub use variants::Formulation;
 
 use validation::whole_cells;
 

@@ -606,6 +606,9 @@ pub struct OutputSpec {
     pub snapshots: Vec<usize>,
     /// Also write a snapshot every this many steps (0 = never).
     pub snapshot_every: usize,
+    /// Also write a snapshot at the end of the first step that reaches each of
+    /// these times, s (explicit runs choose their own steps).
+    pub snapshot_times: Vec<f64>,
 }
 
 impl Default for OutputSpec {
@@ -614,6 +617,7 @@ impl Default for OutputSpec {
             curve_every: 1,
             snapshots: Vec::new(),
             snapshot_every: 0,
+            snapshot_times: Vec::new(),
         }
     }
 }
@@ -651,6 +655,9 @@ pub enum MonitorKind {
     DissipatedEnergy,
     /// Current gravity, m/s².
     Gravity,
+    /// Run-out front x_front = max_p x_p, m: the largest horizontal extent of
+    /// the material (DESIGN §8.3).
+    RunOut,
 }
 
 /// A component selector for vector monitors.

@@ -119,6 +119,7 @@ impl Scene {
             self.validate_bc(&mut e);
         }
         self.validate_monitors(&mut e, grid_ok);
+        self.validate_output(&mut e);
         if let Some(nl) = &self.nonlocal {
             check(
                 &mut e,
@@ -597,6 +598,17 @@ impl Scene {
                 format!("{f}.velocity"),
                 r.velocity.iter().all(|v| v.is_finite()),
                 "must be finite",
+            );
+        }
+    }
+
+    fn validate_output(&self, e: &mut Vec<FieldError>) {
+        for (i, t) in self.output.snapshot_times.iter().enumerate() {
+            check(
+                e,
+                format!("output.snapshot_times[{i}]"),
+                t.is_finite() && *t >= 0.0,
+                format!("must be a time >= 0 s (got {t})"),
             );
         }
     }

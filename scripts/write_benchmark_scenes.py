@@ -1,0 +1,261 @@
+#!/usr/bin/env python3
+"""Write the footing and vertical-cut scene families (validation/footing,
+validation/vertical_cut) from one template each, so that the scenes of a
+family differ only in the cell size and the regularisation.
+
+    python3 scripts/write_benchmark_scenes.py
+"""
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+
+FOOTING = """\
+# Rigid rough strip footing (paper §3.2, Figs. 6-8; DESIGN §8.2), {family} model{ls_note}.
+# Soil 14 m x 8 m, weightless, zero initial stress; footing B = 1.5 m centred
+# at x = 7 m driven down 2.5e-3 m per step to 0.3 m (120 steps); normal
+# fixity on the sides and the base; free surface; Table 1 with the Table 2
+# changes (E = 50,000 kPa, nu = 0.45, c_ini = 100 kPa, b_post = 5); cell size
+# h = {h} m. Full model (the paper reports a band under one corner only).
+# Written by scripts/write_benchmark_scenes.py.
+[scene]
+name = "footing_{name}"
+# Implicit dynamic with slow loading, as the biaxial scenes (DESIGN decision
+# 26): the footing moves at 0.125 m/s, 1/2500 of the P-wave speed (308 m/s),
+# and the whole run lasts 92 transit times of the 8 m soil depth, so inertia
+# is negligible before the peak. Displacement-controlled quasi-static Newton
+# stalls after the peak (measured at h = 0.25 m, local: no convergence at
+# delta = 0.07 m even with 1/16 steps).
+analysis = "implicit_dynamic"
+steps = 120
+dt = 0.02
+
+[solver]
+newmark_gamma = 0.6
+max_iterations = 60
+
+[grid]
+size = [14.0, 9.0]  # 1 m of air above the surface for heave
+cell_size = {h}
+shape_functions = "gimp"
+point_layout = "uniform"
+# points squeezed out at the footing corners and thrown off the free surface
+# are removed and listed in run.json (DESIGN decision 28)
+lost_points = "remove"
+{nonlocal_table}
+[materials.soil]
+model = "hmc"
+E = 50000.0
+nu = 0.45
+density = 2.0  # inertia of the slow dynamic run only (the soil is weightless)
+phi_ini = 20.0
+phi_peak = 20.0
+phi_res = 15.0
+c_ini = 100.0
+c_post = 0.0
+pt_ini = 0.0
+pt_post = 0.0
+b_post = 5.0
+b_res = 2.0
+omega = 1.0
+
+[[body]]
+name = "soil"
+material = "soil"
+box = [[0.0, 0.0], [14.0, 8.0]]
+
+[bc]
+fixed = [{{ line = "x=0", dofs = ["x"] }}, {{ line = "x=14", dofs = ["x"] }}, {{ line = "y=0", dofs = ["y"] }}]
+# perfectly rough footing tied at the soil surface (DESIGN decision 25)
+rigid = [{{ name = "footing", footprint = [6.25, 7.75], velocity = [0.0, -0.125], contact = "surface" }}]
+
+[output]
+snapshots = [0, 120]
+
+[[monitor]]
+name = "load"
+kind = "rigid_force"
+rigid = "footing"
+component = "y"
+scale = -1.0
+
+[[monitor]]
+name = "footing_uy"
+kind = "rigid_displacement"
+rigid = "footing"
+component = "y"
+
+[[monitor]]
+name = "kappa_max"
+kind = "max_plastic_strain"
+
+[[monitor]]
+name = "dissipation"
+kind = "dissipated_energy"
+
+[[monitor]]
+name = "external_work"
+kind = "external_work"
+
+[[monitor]]
+name = "internal_work"
+kind = "internal_work"
+
+[[monitor]]
+name = "kinetic_energy"
+kind = "kinetic_energy"
+"""
+
+FOOTING_NONLOCAL = """
+[nonlocal]
+length_scale = 0.8
+# over-nonlocal factor chosen on the biaxial benchmark (DESIGN decision 24)
+over_nonlocal = 1.1
+"""
+
+CUT = """\
+# Vertical cut under increasing gravity (paper §3.3, Figs. 9-12; DESIGN §8.3), {family} model{ls_note}.
+# Soil block 3 m x 3 m (free face x = 3, crest y = 3); rollers on x = 0, rough
+# base (u_x = u_y = 0 along the whole grid width); zero initial stress, at
+# rest; gravity raised by 0.1 g every 1 ms to 60 g at t = 0.6 s, then held,
+# to t = 1.0 s; Table 1 with the Table 3 changes (E = 10,000 kPa, nu = 0.35,
+# c_ini = 100 kPa, b_post = 5), density 2.0 t/m3 (DESIGN decision 18); cell
+# size h = 1/{n} m. The campaign (`mpm-geo campaign validation/vertical_cut`)
+# runs this file as written (implicit Newmark) and again with explicit MUSL.
+# Written by scripts/write_benchmark_scenes.py.
+[scene]
+name = "vertical_cut_{name}"
+analysis = "implicit_dynamic"
+steps = 1000
+dt = 1.0e-3
+
+[solver]
+# Newmark gamma = 0.6 as in the biaxial scenes (DESIGN decision 26). The
+# explicit twin runs undamped (damping = 0) at CFL 0.5.
+newmark_gamma = 0.6
+max_iterations = 60
+
+[grid]
+# 20 m wide: the softened block runs out to x ~ 15 m by t = 1 s (measured at
+# h = 0.1 m); x = 20 is a wall that the material does not reach
+size = [20.0, 3.5]
+cell_size = {h}
+shape_functions = "gimp"
+point_layout = "uniform"
+# fragments thrown off the free surface that leave the grid are removed and
+# listed in run.json (DESIGN decision 28)
+lost_points = "remove"
+{nonlocal_table}
+[loads]
+# g(t) = 9.81 m/s2 x min(60, 0.1 ceil(t / 1 ms))
+gravity_ramp = {{ increment = 0.981, interval = 1.0e-3, max = 588.6 }}
+
+[materials.soil]
+model = "hmc"
+E = 10000.0
+nu = 0.35
+density = 2.0
+phi_ini = 20.0
+phi_peak = 20.0
+phi_res = 15.0
+c_ini = 100.0
+c_post = 0.0
+pt_ini = 0.0
+pt_post = 0.0
+b_post = 5.0
+b_res = 2.0
+omega = 1.0
+
+[[body]]
+name = "soil"
+material = "soil"
+box = [[0.0, 0.0], [3.0, 3.0]]
+
+[bc]
+fixed = [
+  {{ line = "x=0", dofs = ["x"] }},
+  {{ line = "y=0", dofs = ["x", "y"] }},
+  {{ line = "x=20", dofs = ["x"] }},
+]
+
+[output]
+snapshots = [0]
+snapshot_times = [0.6, 0.7, 1.0]
+
+# A: the point initially nearest the crest corner (3, 3) (DESIGN decision 20)
+[[monitor]]
+name = "uA"
+kind = "point_displacement"
+point = [3.0, 3.0]
+component = "norm"
+
+[[monitor]]
+name = "uA_x"
+kind = "point_displacement"
+point = [3.0, 3.0]
+component = "x"
+
+[[monitor]]
+name = "uA_y"
+kind = "point_displacement"
+point = [3.0, 3.0]
+component = "y"
+
+# B: the point initially nearest (3 - 0.22, 0.34), on the toe band (DESIGN decision 19)
+[[monitor]]
+name = "qB"
+kind = "point_stress"
+point = [2.78, 0.34]
+quantity = "q"
+
+[[monitor]]
+name = "run_out"
+kind = "run_out"
+
+[[monitor]]
+name = "gravity"
+kind = "gravity"
+
+[[monitor]]
+name = "kappa_max"
+kind = "max_plastic_strain"
+
+[[monitor]]
+name = "dissipation"
+kind = "dissipated_energy"
+
+[[monitor]]
+name = "kinetic_energy"
+kind = "kinetic_energy"
+"""
+
+CUT_NONLOCAL = """
+[nonlocal]
+length_scale = 0.4
+# over-nonlocal factor chosen on the biaxial benchmark (DESIGN decision 24)
+over_nonlocal = 1.1
+"""
+
+
+def main():
+    footing = ROOT / "validation" / "footing"
+    footing.mkdir(parents=True, exist_ok=True)
+    for h, tag in [(0.25, "h250"), (0.125, "h125"), (0.1, "h100")]:
+        for family, nonlocal_table, note in [("local", "", ""),
+                                       ("nonlocal", FOOTING_NONLOCAL, ", l_s = 0.8 m")]:
+            name = f"{family}_{tag}"
+            text = FOOTING.format(family=family, ls_note=note, h=h, name=name, nonlocal_table=nonlocal_table)
+            (footing / f"{name}.toml").write_text(text)
+    cut = ROOT / "validation" / "vertical_cut"
+    cut.mkdir(parents=True, exist_ok=True)
+    for n in [10, 12, 14, 16]:
+        h = repr(1.0 / n) if n != 10 else "0.1"
+        tag = f"h{round(1000 / n)}"
+        for family, nonlocal_table, note in [("local", "", ""),
+                                       ("nonlocal", CUT_NONLOCAL, ", l_s = 0.4 m")]:
+            name = f"{family}_{tag}"
+            text = CUT.format(family=family, ls_note=note, h=h, n=n, name=name, nonlocal_table=nonlocal_table)
+            (cut / f"{name}.toml").write_text(text)
+
+
+if __name__ == "__main__":
+    main()

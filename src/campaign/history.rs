@@ -1,0 +1,594 @@
+//! Time-history campaigns (the vertical cut, paper Figs. 10–12, DESIGN §8.3
+//! and §9 M1, M6): u_A(t), q_B(t) and the run-out read from each run's
+//! `curve.csv`, their metrics per run, the implicit/explicit comparison, and
+//! the combined CSVs, report and figures.
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use super::report::{fmt_opt, number_in, profiles_section};
+use super::{CampaignError, CampaignRun, CurveProblem};
+use crate::metrics;
+use crate::plot::{self, Bounds, Panel, Series};
+use crate::scene::{MonitorKind, Scene, StressQuantity, VectorComponent};
+
+/// |u_A| that marks the collapse onset, m (issue 12: first time |u_A| > 5 cm).
+pub const ONSET_DISPLACEMENT: f64 = 0.05;
+
+/// Time at which implicit and explicit |u_A| are compared, s (issue 12 check 4).
+pub const COMPARISON_TIME: f64 = 0.3;
+
+/// Reversals of q_B are counted with a hysteresis of this fraction of its peak.
+pub const REVERSAL_THRESHOLD: f64 = 0.02;
+
+/// The `curve.csv` columns of a time-history run, named by the scene's monitors.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct HistoryColumns {
+    /// |u| of the monitored point A (`point_displacement`, `component = "norm"`).
+    pub displacement: String,
+    /// q at the monitored point B (`point_stress`, `quantity = "q"`).
+    pub stress: Option<String>,
+    /// Run-out front (`run_out`).
+    pub run_out: Option<String>,
+}
+
+impl HistoryColumns {
+    /// The columns of `scene`; `None` without a `point_displacement` norm monitor.
+    pub fn of_scene(scene: &Scene) -> Option<Self> {
+        let find = |pred: &dyn Fn(&crate::scene::MonitorSpec) -> bool| {
+            scene
+                .monitor
+                .iter()
+                .find(|m| pred(m))
+                .map(|m| m.name.clone())
+        };
+        Some(Self {
+            displacement: find(&|m| {
+                m.kind == MonitorKind::PointDisplacement
+                    && m.component == Some(VectorComponent::Norm)
+            })?,
+            stress: find(&|m| {
+                m.kind == MonitorKind::PointStress && m.quantity == Some(StressQuantity::Q)
+            }),
+            run_out: find(&|m| m.kind == MonitorKind::RunOut),
+        })
+    }
+}
+
+/// The time histories of one run (one entry per `curve.csv` row).
+#[derive(Clone, Debug, Default)]
+pub struct History {
+    /// (t, |u_A|), m.
+    pub displacement: Vec<(f64, f64)>,
+    /// (t, q_B), kPa (empty without the monitor).
+    pub stress: Vec<(f64, f64)>,
+    /// (t, x_front), m (empty without the monitor).
+    pub run_out: Vec<(f64, f64)>,
+}
+
+impl History {
+    /// Read the histories of a run's `curve.csv`.
+    pub fn read(path: &Path, columns: &HistoryColumns) -> Result<Self, CampaignError> {
+        let refuse = |problem| CampaignError::Curve {
+            path: path.display().to_string(),
+            problem,
+        };
+        let mut reader = csv::Reader::from_path(path)
+            .map_err(|e| refuse(CurveProblem::Missing(e.to_string())))?;
+        let headers = match reader.headers() {
+            Ok(h) if !h.is_empty() => h.clone(),
+            _ => return Err(refuse(CurveProblem::NoHeader)),
+        };
+        let column = |name: &str| {
+            headers
+                .iter()
+                .position(|h| h == name)
+                .ok_or_else(|| refuse(CurveProblem::MissingColumn(name.to_string())))
+        };
+        let time = column("time")?;
+        let displacement = column(&columns.displacement)?;
+        let stress = columns.stress.as_deref().map(column).transpose()?;
+        let run_out = columns.run_out.as_deref().map(column).transpose()?;
+        let mut history = History::default();
+        for record in reader.records() {
+            let record = record.map_err(|e| refuse(CurveProblem::BadRow(e.to_string())))?;
+            let value = |i: usize| number_in(&record, i, &headers).map_err(refuse);
+            let t = value(time)?;
+            history.displacement.push((t, value(displacement)?));
+            if let Some(i) = stress {
+                history.stress.push((t, value(i)?));
+            }
+            if let Some(i) = run_out {
+                history.run_out.push((t, value(i)?));
+            }
+        }
+        Ok(history)
+    }
+
+    /// Time of the last row, s.
+    pub fn end_time(&self) -> f64 {
+        self.displacement.last().map_or(0.0, |p| p.0)
+    }
+}
+
+/// The metrics of one time-history run (DESIGN §9 M1 and M6, issue 12).
+#[derive(Clone, Debug, Default)]
+pub struct HistoryMetrics {
+    /// First time |u_A| > [`ONSET_DISPLACEMENT`], s.
+    pub onset: Option<f64>,
+    /// |u_A| at [`COMPARISON_TIME`], m.
+    pub displacement_at_comparison: Option<f64>,
+    /// |u_A| at the end, m.
+    pub final_displacement: f64,
+    /// Run-out front at the end, m.
+    pub final_run_out: Option<f64>,
+    /// Peak q_B (kPa) and its time (s).
+    pub stress_peak: Option<(f64, f64)>,
+    /// Total variation of q_B after its peak over its net drop (1: monotone fall).
+    pub stress_roughness: Option<f64>,
+    /// Reversals of q_B after the onset, with a hysteresis of
+    /// [`REVERSAL_THRESHOLD`] q_peak (M6 noise index).
+    pub stress_reversals: Option<usize>,
+    /// M1 \[D42\] of u_A(t) on [0, t_end] against the family reference.
+    pub discrepancy: Option<f64>,
+}
+
+/// Metrics of every run; the reference of a run is the finest completed
+/// mesh of its family (regularisation and integrator).
+pub fn compute_history_metrics(runs: &[CampaignRun]) -> Vec<HistoryMetrics> {
+    runs.iter()
+        .map(|run| {
+            let Some(h) = &run.history else {
+                return HistoryMetrics::default();
+            };
+            let u = &h.displacement;
+            let mut m = HistoryMetrics {
+                onset: metrics::first_exceedance(u, ONSET_DISPLACEMENT),
+                displacement_at_comparison: metrics::value_at(u, COMPARISON_TIME).ok(),
+                final_displacement: u.last().map_or(f64::NAN, |p| p.1),
+                final_run_out: h.run_out.last().map(|p| p.1),
+                ..Default::default()
+            };
+            if let Ok((t, q)) = metrics::peak(&h.stress) {
+                m.stress_peak = Some((q, t));
+                m.stress_roughness = metrics::fall_roughness(&h.stress).ok();
+                m.stress_reversals = m
+                    .onset
+                    .map(|t0| metrics::reversals(&h.stress, t0, REVERSAL_THRESHOLD * q));
+            }
+            let reference = runs
+                .iter()
+                .filter(|r| r.same_family(run) && r.error.is_none() && r.history.is_some())
+                .min_by(|a, b| a.cell_size.total_cmp(&b.cell_size));
+            if let Some(Some(reference)) = reference.map(|r| r.history.as_ref()) {
+                let end = h.end_time().min(reference.end_time());
+                m.discrepancy =
+                    metrics::curve_discrepancy(u, &reference.displacement, 0.0, end).ok();
+            }
+            m
+        })
+        .collect()
+}
+
+/// The implicit run of a scene beside its explicit twin.
+struct IntegratorPair<'a> {
+    implicit: (&'a CampaignRun, &'a HistoryMetrics),
+    explicit: (&'a CampaignRun, &'a HistoryMetrics),
+}
+
+impl IntegratorPair<'_> {
+    /// M1 \[D42\] of the explicit u_A(t) against the implicit one on [0, t_end].
+    fn discrepancy(&self) -> Option<f64> {
+        let (a, b) = (
+            self.implicit.0.history.as_ref()?,
+            self.explicit.0.history.as_ref()?,
+        );
+        let end = a.end_time().min(b.end_time());
+        metrics::curve_discrepancy(&b.displacement, &a.displacement, 0.0, end).ok()
+    }
+}
+
+fn integrator_pairs<'a>(
+    runs: &'a [CampaignRun],
+    m: &'a [HistoryMetrics],
+) -> Vec<IntegratorPair<'a>> {
+    let explicit = |r: &CampaignRun| r.integrator() == "explicit";
+    runs.iter()
+        .zip(m)
+        .filter(|(r, _)| !explicit(r))
+        .filter_map(|implicit| {
+            let twin = runs
+                .iter()
+                .zip(m)
+                .find(|(r, _)| explicit(r) && r.scene == implicit.0.scene)?;
+            Some(IntegratorPair {
+                implicit,
+                explicit: twin,
+            })
+        })
+        .collect()
+}
+
+/// Write `histories.csv`, `metrics.csv`, `integrators.csv`, `report.md` and
+/// the figures of a time-history campaign into `out`.
+pub(super) fn write_history_outputs(
+    out: &Path,
+    runs: &[CampaignRun],
+    window: Bounds,
+) -> Result<(), CampaignError> {
+    let io = |p: &Path, e: &dyn std::fmt::Display| {
+        CampaignError::Output(p.display().to_string(), e.to_string())
+    };
+    std::fs::create_dir_all(out).map_err(|e| io(out, &e))?;
+    let m = compute_history_metrics(runs);
+    let write = |name: &str, text: String| {
+        let path = out.join(name);
+        std::fs::write(&path, text).map_err(|e| io(&path, &e))
+    };
+    write("histories.csv", histories_csv(runs))?;
+    write("metrics.csv", metrics_csv(runs, &m))?;
+    let pairs = integrator_pairs(runs, &m);
+    write("integrators.csv", integrators_csv(&pairs))?;
+    write("report.md", report_md(runs, &m, &pairs))?;
+    plot_histories(out, runs).map_err(|e| io(out, &e))?;
+    plot_snapshots(out, runs, window).map_err(|e| io(out, &e))?;
+    Ok(())
+}
+
+fn histories_csv(runs: &[CampaignRun]) -> String {
+    let mut text = String::from("run,scene,family,integrator,cell_size,time,uA,qB,run_out\n");
+    for r in runs {
+        let Some(h) = &r.history else { continue };
+        for (i, (t, u)) in h.displacement.iter().enumerate() {
+            let q = h.stress.get(i).map(|p| p.1.to_string()).unwrap_or_default();
+            let x = h
+                .run_out
+                .get(i)
+                .map(|p| p.1.to_string())
+                .unwrap_or_default();
+            let _ = writeln!(
+                text,
+                "{},{},{},{},{:e},{t:e},{u:e},{q},{x}",
+                r.name,
+                r.scene,
+                r.regularisation(),
+                r.integrator(),
+                r.cell_size
+            );
+        }
+    }
+    text
+}
+
+fn status(r: &CampaignRun) -> &'static str {
+    if r.error.is_some() {
+        "stopped"
+    } else {
+        "completed"
+    }
+}
+
+fn metrics_csv(runs: &[CampaignRun], m: &[HistoryMetrics]) -> String {
+    let mut csv = String::from("run,scene,family,integrator,cell_size,length_scale,status,wall_seconds,steps,newton_iterations,halvings,lost_points,onset_time,uA_at_0.3,uA_final,run_out_final,qB_peak,qB_peak_time,qB_fall_roughness,qB_reversals,M1_discrepancy\n");
+    for (r, mm) in runs.iter().zip(m) {
+        let _ = writeln!(
+            csv,
+            "{},{},{},{},{:e},{},{},{:.2},{},{},{},{},{},{},{:e},{},{},{},{},{},{}",
+            r.name,
+            r.scene,
+            r.regularisation(),
+            r.integrator(),
+            r.cell_size,
+            r.length_scale.map(|l| l.to_string()).unwrap_or_default(),
+            status(r),
+            r.wall_seconds,
+            r.effort.steps,
+            r.effort.newton_iterations,
+            r.effort.halvings,
+            r.lost_points.0,
+            fmt_opt(mm.onset, 1.0, 5),
+            fmt_opt(mm.displacement_at_comparison, 1.0, 5),
+            mm.final_displacement,
+            fmt_opt(mm.final_run_out, 1.0, 4),
+            fmt_opt(mm.stress_peak.map(|p| p.0), 1.0, 3),
+            fmt_opt(mm.stress_peak.map(|p| p.1), 1.0, 4),
+            fmt_opt(mm.stress_roughness, 1.0, 4),
+            mm.stress_reversals
+                .map(|n| n.to_string())
+                .unwrap_or_default(),
+            fmt_opt(mm.discrepancy, 1.0, 5),
+        );
+    }
+    csv
+}
+
+fn integrators_csv(pairs: &[IntegratorPair]) -> String {
+    let mut csv = String::from("scene,family,cell_size,onset_implicit,onset_explicit,onset_difference,uA_0.3_implicit,uA_0.3_explicit,uA_0.3_relative_difference,M1_explicit_vs_implicit,uA_final_implicit,uA_final_explicit,run_out_implicit,run_out_explicit,wall_implicit,wall_explicit,steps_implicit,steps_explicit,newton_iterations,halvings\n");
+    for p in pairs {
+        let ((ri, mi), (re, me)) = (p.implicit, p.explicit);
+        let onset_diff = mi.onset.zip(me.onset).map(|(a, b)| b - a);
+        let u_diff = mi
+            .displacement_at_comparison
+            .zip(me.displacement_at_comparison)
+            .map(|(a, b)| (b - a) / a);
+        let _ = writeln!(
+            csv,
+            "{},{},{:e},{},{},{},{},{},{},{},{:e},{:e},{},{},{:.2},{:.2},{},{},{},{}",
+            ri.scene,
+            ri.regularisation(),
+            ri.cell_size,
+            fmt_opt(mi.onset, 1.0, 5),
+            fmt_opt(me.onset, 1.0, 5),
+            fmt_opt(onset_diff, 1.0, 5),
+            fmt_opt(mi.displacement_at_comparison, 1.0, 5),
+            fmt_opt(me.displacement_at_comparison, 1.0, 5),
+            fmt_opt(u_diff, 1.0, 5),
+            fmt_opt(p.discrepancy(), 1.0, 5),
+            mi.final_displacement,
+            me.final_displacement,
+            fmt_opt(mi.final_run_out, 1.0, 4),
+            fmt_opt(me.final_run_out, 1.0, 4),
+            ri.wall_seconds,
+            re.wall_seconds,
+            ri.effort.steps,
+            re.effort.steps,
+            ri.effort.newton_iterations,
+            ri.effort.halvings,
+        );
+    }
+    csv
+}
+
+/// Spread of a family's values: (max − min) / mean.
+fn spread(values: &[f64]) -> Option<f64> {
+    if values.len() < 2 || values.iter().any(|v| !v.is_finite()) {
+        return None;
+    }
+    let max = values.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let min = values.iter().copied().fold(f64::INFINITY, f64::min);
+    let mean = values.iter().sum::<f64>() / values.len() as f64;
+    Some((max - min) / mean)
+}
+
+fn report_md(runs: &[CampaignRun], m: &[HistoryMetrics], pairs: &[IntegratorPair]) -> String {
+    let mut md = format!(
+        "# Vertical-cut campaign report\n\nPer run (DESIGN §9 M1, M6): collapse onset = first time |u_A| > {ONSET_DISPLACEMENT} m; u_A at t = {COMPARISON_TIME} s and at the end; run-out front x_front = max_p x_p at the end; q_B peak; fall roughness = total variation of q_B after its peak / its net drop (1 = monotone fall); reversals of q_B after the onset with a hysteresis of {:.0} % of its peak (M6 noise index); M1 = relative L2 discrepancy of u_A(t) on [0, t_end] against the finest mesh of the same family (regularisation and integrator).\n\n| run | h (m) | status | wall (s) | steps | Newton | halvings | onset (s) | u_A(0.3) (m) | u_A end (m) | x_front end (m) | q_B peak (kPa) | roughness | reversals | M1 |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+        100.0 * REVERSAL_THRESHOLD
+    );
+    for (r, mm) in runs.iter().zip(m) {
+        let _ =
+            writeln!(
+            md,
+            "| {} | {:.4} | {} | {:.1} | {} | {} | {} | {} | {} | {:.3} | {} | {} | {} | {} | {} |",
+            r.name,
+            r.cell_size,
+            status(r),
+            r.wall_seconds,
+            r.effort.steps,
+            r.effort.newton_iterations,
+            r.effort.halvings,
+            fmt_opt(mm.onset, 1.0, 4),
+            fmt_opt(mm.displacement_at_comparison, 1.0, 3),
+            mm.final_displacement,
+            fmt_opt(mm.final_run_out, 1.0, 2),
+            fmt_opt(mm.stress_peak.map(|p| p.0), 1.0, 1),
+            fmt_opt(mm.stress_roughness, 1.0, 2),
+            mm.stress_reversals.map(|n| n.to_string()).unwrap_or("–".into()),
+            fmt_opt(mm.discrepancy, 1.0, 4),
+        );
+    }
+    md.push_str("\n## Spread across meshes\n\nPer family: (max − min)/mean over its meshes of the final |u_A| and the final run-out, and S = max M1 over the meshes other than the coarsest (the three finer meshes against the finest).\n\n| family | integrator | meshes | final u_A spread | run-out spread | S (finer meshes) |\n|---|---|---|---|---|---|\n");
+    let mut families: Vec<(&str, &str)> = runs
+        .iter()
+        .map(|r| (r.regularisation(), r.integrator()))
+        .collect();
+    families.dedup();
+    families.sort();
+    families.dedup();
+    for (reg, int) in families {
+        let members: Vec<(&CampaignRun, &HistoryMetrics)> = runs
+            .iter()
+            .zip(m)
+            .filter(|(r, _)| r.regularisation() == reg && r.integrator() == int)
+            .collect();
+        let coarsest = members
+            .iter()
+            .map(|(r, _)| r.cell_size)
+            .fold(f64::NEG_INFINITY, f64::max);
+        let finals: Vec<f64> = members
+            .iter()
+            .map(|(_, mm)| mm.final_displacement)
+            .collect();
+        let runouts: Vec<f64> = members
+            .iter()
+            .filter_map(|(_, mm)| mm.final_run_out)
+            .collect();
+        let s = members
+            .iter()
+            .filter(|(r, _)| r.cell_size < coarsest)
+            .filter_map(|(_, mm)| mm.discrepancy)
+            .fold(None, |acc: Option<f64>, e| {
+                Some(acc.map_or(e, |a| a.max(e)))
+            });
+        let _ = writeln!(
+            md,
+            "| {reg} | {int} | {} | {} | {} | {} |",
+            members.len(),
+            fmt_opt(spread(&finals), 1.0, 3),
+            fmt_opt(spread(&runouts), 1.0, 3),
+            fmt_opt(s, 1.0, 4),
+        );
+    }
+    if !pairs.is_empty() {
+        let _ = write!(md, "\n## Implicit against explicit\n\nThe same scene file run with implicit Newmark (as written) and explicit MUSL (its stable step). Onset difference = explicit − implicit; u_A(0.3) difference relative to the implicit value; M1 = explicit u_A(t) against implicit on [0, t_end].\n\n| scene | onset impl. (s) | onset expl. (s) | Δ onset (s) | u_A(0.3) impl. | u_A(0.3) expl. | rel. diff. | M1 | wall impl. (s) | wall expl. (s) | steps impl. / expl. | halvings |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+        for p in pairs {
+            let ((ri, mi), (re, me)) = (p.implicit, p.explicit);
+            let _ = writeln!(
+                md,
+                "| {} | {} | {} | {} | {} | {} | {} | {} | {:.1} | {:.1} | {} / {} | {} |",
+                ri.scene,
+                fmt_opt(mi.onset, 1.0, 4),
+                fmt_opt(me.onset, 1.0, 4),
+                fmt_opt(mi.onset.zip(me.onset).map(|(a, b)| b - a), 1.0, 4),
+                fmt_opt(mi.displacement_at_comparison, 1.0, 3),
+                fmt_opt(me.displacement_at_comparison, 1.0, 3),
+                fmt_opt(
+                    mi.displacement_at_comparison
+                        .zip(me.displacement_at_comparison)
+                        .map(|(a, b)| (b - a) / a),
+                    1.0,
+                    3
+                ),
+                fmt_opt(p.discrepancy(), 1.0, 4),
+                ri.wall_seconds,
+                re.wall_seconds,
+                ri.effort.steps,
+                re.effort.steps,
+                ri.effort.halvings,
+            );
+        }
+    }
+    for r in runs.iter().filter(|r| r.lost_points.0 > 0) {
+        let _ = writeln!(
+            md,
+            "\n- {}: {} material point(s) left the grid and were removed ({:.2e} of the mass; run.json lists them)",
+            r.name, r.lost_points.0, r.lost_points.1
+        );
+    }
+    for r in runs.iter().filter(|r| r.error.is_some()) {
+        let _ = writeln!(
+            md,
+            "\n- {} stopped: {}",
+            r.name,
+            r.error.as_deref().unwrap_or_default()
+        );
+    }
+    md.push_str(&profiles_section(runs));
+    md
+}
+
+/// One colour per cell size, coarse to fine.
+fn colour_of(runs: &[CampaignRun], h: f64) -> usize {
+    let mut sizes: Vec<f64> = runs.iter().map(|r| r.cell_size).collect();
+    sizes.sort_by(|a, b| b.total_cmp(a));
+    sizes.dedup();
+    sizes.iter().position(|&s| s == h).unwrap_or(0)
+}
+
+fn plot_histories(out: &Path, runs: &[CampaignRun]) -> plot::Result<()> {
+    let series = |pick: &dyn Fn(&History) -> &Vec<(f64, f64)>,
+                  filter: &dyn Fn(&CampaignRun) -> bool,
+                  dashed: &dyn Fn(&CampaignRun) -> bool| {
+        runs.iter()
+            .filter(|r| filter(r))
+            .filter_map(|r| {
+                let points = pick(r.history.as_ref()?);
+                (points.len() > 1).then(|| Series {
+                    name: format!(
+                        "{} {} h={:.3} m",
+                        r.regularisation(),
+                        r.integrator(),
+                        r.cell_size
+                    ),
+                    points: points.clone(),
+                    dashed: dashed(r),
+                    color: colour_of(runs, r.cell_size),
+                })
+            })
+            .collect::<Vec<_>>()
+    };
+    let implicit = |r: &CampaignRun| r.integrator() == "implicit";
+    let local = |r: &CampaignRun| r.length_scale.is_none();
+    let figures: [(&str, &str, &str, Vec<Series>); 4] = [
+        (
+            "fig11_qB.png",
+            "Fig. 11: q at B (implicit; dashed: local, solid: nonlocal)",
+            "q_B (kPa)",
+            series(&|h| &h.stress, &implicit, &local),
+        ),
+        (
+            "fig12_uA.png",
+            "Fig. 12: |u_A| (implicit; dashed: local, solid: nonlocal)",
+            "|u_A| (m)",
+            series(&|h| &h.displacement, &implicit, &local),
+        ),
+        (
+            "run_out.png",
+            "Run-out front x_front (implicit; dashed: local, solid: nonlocal)",
+            "x_front (m)",
+            series(&|h| &h.run_out, &implicit, &local),
+        ),
+        (
+            "implicit_vs_explicit.png",
+            "|u_A|: implicit (solid) against explicit (dashed)",
+            "|u_A| (m)",
+            series(&|h| &h.displacement, &|_| true, &|r| !implicit(r)),
+        ),
+    ];
+    for (file, title, y_label, s) in figures {
+        if !s.is_empty() {
+            plot::plot_curves(out.join(file), title, "t (s)", y_label, &s)?;
+        }
+    }
+    Ok(())
+}
+
+/// Paper Fig. 10: normalised εq and point positions at each snapshot time, one
+/// figure per time, family and integrator, meshes coarse to fine.
+fn plot_snapshots(out: &Path, runs: &[CampaignRun], window: Bounds) -> plot::Result<()> {
+    let mut times: Vec<f64> = runs
+        .iter()
+        .flat_map(|r| r.fields.iter().map(|f| f.requested_time))
+        .collect();
+    times.sort_by(f64::total_cmp);
+    times.dedup();
+    for &time in &times {
+        for family in ["local", "nonlocal"] {
+            for integrator in ["implicit", "explicit"] {
+                let mut members: Vec<&CampaignRun> = runs
+                    .iter()
+                    .filter(|r| r.regularisation() == family && r.integrator() == integrator)
+                    .collect();
+                members.sort_by(|a, b| b.cell_size.total_cmp(&a.cell_size));
+                let normalised: Vec<(&CampaignRun, &crate::run::FieldSnapshot, Vec<f64>)> = members
+                    .iter()
+                    .filter_map(|r| {
+                        let f = r.fields.iter().find(|f| f.requested_time == time)?;
+                        let max = metrics::clip_outliers(&f.eps_q, 0.99)
+                            .iter()
+                            .copied()
+                            .fold(0.0, f64::max);
+                        let values = f
+                            .eps_q
+                            .iter()
+                            .map(|e| if max > 0.0 { (e / max).min(1.0) } else { 0.0 })
+                            .collect();
+                        Some((*r, f, values))
+                    })
+                    .collect();
+                if normalised.is_empty() {
+                    continue;
+                }
+                let panels: Vec<Panel> = normalised
+                    .iter()
+                    .map(|(r, f, values)| Panel {
+                        title: format!("h = {:.3} m, t = {:.3} s", r.cell_size, f.time),
+                        positions: &f.positions,
+                        values,
+                        bounds: window,
+                        marker: Some(0.35 * r.cell_size),
+                    })
+                    .collect();
+                let path = out.join(format!("fig10_{family}_{integrator}_t{time:.2}.png"));
+                plot::plot_field_panels(
+                    &path,
+                    &format!("Normalised εq at t = {time} s ({family}, {integrator})"),
+                    &panels,
+                    Some((0.0, 1.0)),
+                    "εq / max εq",
+                )?;
+            }
+        }
+    }
+    Ok(())
+}
