@@ -64,7 +64,7 @@ pub fn fall_roughness(history: &[(f64, f64)]) -> Result<f64> {
         return Err(MetricsError::Empty("history"));
     };
     let drop = first.1 - last.1;
-    if !(drop > 0.0) {
+    if drop.is_nan() || drop <= 0.0 {
         return Err(MetricsError::Degenerate(
             "the history does not end below its first value",
         ));
