@@ -86,6 +86,9 @@ pub fn run_campaign(
             });
         }
     }
+    let window = scenes
+        .first()
+        .map(|(_, _, scene)| spec.benchmark.field_window(scene));
     let all: Vec<Planned> = scenes
         .into_iter()
         .map(|(name, scene_file, scene)| Planned {
@@ -134,13 +137,7 @@ pub fn run_campaign(
         .filter(|r| r.step_factor == 1)
         .cloned()
         .collect();
-    let window = match (spec.benchmark, paths.first()) {
-        (Benchmark::VerticalCut, _) => crate::plot::Bounds::new(0.0, 16.0, 0.0, 3.5),
-        (benchmark, Some(first)) => Scene::load(first, &options.overrides)
-            .map(|s| benchmark.field_window(&s))
-            .map_err(|e| CampaignError::Scene(e.to_string()))?,
-        (_, None) => crate::plot::Bounds::new(0.0, 1.0, 0.0, 1.0),
-    };
+    let window = window.unwrap_or(crate::plot::Bounds::new(0.0, 1.0, 0.0, 1.0));
     match spec.benchmark {
         Benchmark::VerticalCut => write_history_outputs(out, &scenes_as_written, window)?,
         benchmark => write_outputs(out, &scenes_as_written, benchmark, window)?,
