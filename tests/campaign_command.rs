@@ -15,7 +15,7 @@ fn campaign_writes_curves_metrics_report_and_plots() {
     let dir = tempfile::tempdir().unwrap();
     let scenes = dir.path().join("scenes");
     std::fs::create_dir_all(&scenes).unwrap();
-    for name in ["local_h300.toml", "nonlocal_h300.toml"] {
+    for name in ["local_h300.toml", "nonlocal_h300.toml", "campaign.toml"] {
         std::fs::copy(
             common::validation(&format!("biaxial/{name}")),
             scenes.join(name),

@@ -99,8 +99,12 @@ pub fn run_campaign(
         })
         .chain(variants)
         .collect();
-    // popped from the back: queue the longest runs (finest meshes, refinements) first
-    let queue = Mutex::new(all.into_iter().enumerate().collect::<Vec<_>>());
+    // popped from the back: the longest runs (finest meshes, refinements) start
+    // first, estimated as step factor / h²
+    let mut queue: Vec<(usize, Planned)> = all.into_iter().enumerate().collect();
+    let cost = |p: &Planned| p.step_factor as f64 / p.scene.grid.cell_size.powi(2);
+    queue.sort_by(|a, b| cost(&a.1).total_cmp(&cost(&b.1)));
+    let queue = Mutex::new(queue);
     let results = Mutex::new(Vec::new());
     std::thread::scope(|scope| {
         for _ in 0..options.jobs.max(1) {

@@ -24,8 +24,8 @@ pub const SPEC_FILE: &str = "campaign.toml";
 #[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
 #[serde(rename_all = "snake_case")]
 pub enum Benchmark {
-    /// Any load–displacement campaign (δ in m, initial slope over the first
-    /// tenth of the curve, fields over the whole grid).
+    /// Any load–displacement campaign (δ in m, initial slope over 5–20 % of
+    /// the last δ, fields over the whole grid).
     #[default]
     LoadCurve,
     /// Biaxial compression (paper Figs. 3–5, DESIGN §8.1): δ in mm.
@@ -127,7 +127,7 @@ impl Benchmark {
             Self::Biaxial => (1e-4, 5e-4),
             // elastic to delta ~ 0.016 m (DESIGN §8.2 reference curves)
             Self::Footing => (2.5e-3, 1.0e-2),
-            _ => (0.0, 0.1 * delta_end),
+            _ => (0.05 * delta_end, 0.2 * delta_end),
         }
     }
 
