@@ -19,7 +19,7 @@
 use thiserror::Error;
 
 mod time_history;
-pub use time_history::{fall_roughness, first_exceedance, reversals, value_at};
+pub use time_history::{fall_roughness, first_exceedance, reversals};
 
 /// Number of sample points of the M1 discrepancy \[D42\].
 pub const M1_SAMPLES: usize = 101;

@@ -27,7 +27,7 @@ pub struct OutputObserver {
 }
 
 /// The material points' positions and strains at one snapshot time (what the
-/// campaigns plot as the paper's Figs. 7 and 10).
+/// campaigns plot as the paper's Fig. 10).
 #[derive(Clone, Debug)]
 pub struct FieldSnapshot {
     /// The snapshot time asked for in `[output] snapshot_times`, s.
@@ -90,11 +90,6 @@ impl OutputObserver {
             pending_times,
             fields: Vec::new(),
         })
-    }
-
-    /// The fields captured at `[output] snapshot_times`, in time order.
-    pub fn fields(&self) -> &[FieldSnapshot] {
-        &self.fields
     }
 
     /// Capture the fields for every snapshot time the run has now reached

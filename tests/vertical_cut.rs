@@ -12,7 +12,7 @@
 
 mod common;
 
-use mpm_geo::metrics::{first_exceedance, value_at};
+use mpm_geo::metrics::{first_exceedance, interpolate};
 use mpm_geo::scene::Scene;
 use mpm_geo::simulation::Simulation;
 
@@ -61,8 +61,8 @@ fn coarse_nonlocal_cut_collapses_alike_with_both_integrators() {
     );
     let (explicit, _) = displacement_of_a(scene.explicit_twin().unwrap());
     let (t_implicit, t_explicit) = (onset(&implicit), onset(&explicit));
-    let u_implicit = value_at(&implicit, 0.3).unwrap();
-    let u_explicit = value_at(&explicit, 0.3).unwrap();
+    let u_implicit = interpolate(&implicit, 0.3).unwrap();
+    let u_explicit = interpolate(&explicit, 0.3).unwrap();
     println!(
         "onset implicit {t_implicit:.4} s, explicit {t_explicit:.4} s; |u_A(0.3 s)| implicit {u_implicit:.4} m, explicit {u_explicit:.4} m ({:+.1} %)",
         100.0 * (u_explicit / u_implicit - 1.0)

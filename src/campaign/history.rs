@@ -6,7 +6,7 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use super::report::{fmt_opt, number_in, profiles_section};
+use super::report::{fmt_opt, lost_points_notes, number_in, profiles_section, stopped_notes};
 use super::{CampaignError, CampaignRun, CurveProblem};
 use crate::metrics;
 use crate::plot::{self, Bounds, Panel, Series};
@@ -156,7 +156,7 @@ pub fn compute_history_metrics(runs: &[CampaignRun]) -> Vec<HistoryMetrics> {
             let u = &h.displacement;
             let mut m = HistoryMetrics {
                 onset: metrics::first_exceedance(u, ONSET_DISPLACEMENT),
-                displacement_at_comparison: metrics::value_at(u, COMPARISON_TIME).ok(),
+                displacement_at_comparison: metrics::interpolate(u, COMPARISON_TIME).ok(),
                 final_displacement: u.last().map_or(f64::NAN, |p| p.1),
                 final_run_out: h.run_out.last().map(|p| p.1),
                 ..Default::default()
@@ -197,6 +197,20 @@ struct IntegratorPair<'a> {
 }
 
 impl IntegratorPair<'_> {
+    /// Onset time, explicit − implicit, s.
+    fn onset_difference(&self) -> Option<f64> {
+        let (i, e) = (self.implicit.1, self.explicit.1);
+        i.onset.zip(e.onset).map(|(a, b)| b - a)
+    }
+
+    /// |u_A| at [`COMPARISON_TIME`], explicit relative to implicit, − 1.
+    fn displacement_difference(&self) -> Option<f64> {
+        let (i, e) = (self.implicit.1, self.explicit.1);
+        i.displacement_at_comparison
+            .zip(e.displacement_at_comparison)
+            .map(|(a, b)| (b - a) / a)
+    }
+
     /// M1 \[D42\] of the explicit u_A(t) against the implicit one on [0, t_end].
     fn discrepancy(&self) -> Option<f64> {
         let (a, b) = (
@@ -326,11 +340,6 @@ fn integrators_csv(pairs: &[IntegratorPair]) -> String {
     let mut csv = String::from("scene,family,cell_size,onset_implicit,onset_explicit,onset_difference,uA_0.3_implicit,uA_0.3_explicit,uA_0.3_relative_difference,M1_explicit_vs_implicit,uA_final_implicit,uA_final_explicit,run_out_implicit,run_out_explicit,wall_implicit,wall_explicit,steps_implicit,steps_explicit,newton_iterations,halvings\n");
     for p in pairs {
         let ((ri, mi), (re, me)) = (p.implicit, p.explicit);
-        let onset_diff = mi.onset.zip(me.onset).map(|(a, b)| b - a);
-        let u_diff = mi
-            .displacement_at_comparison
-            .zip(me.displacement_at_comparison)
-            .map(|(a, b)| (b - a) / a);
         let _ = writeln!(
             csv,
             "{},{},{:e},{},{},{},{},{},{},{},{:e},{:e},{},{},{:.2},{:.2},{},{},{},{}",
@@ -339,10 +348,10 @@ fn integrators_csv(pairs: &[IntegratorPair]) -> String {
             ri.cell_size,
             fmt_opt(mi.onset, 1.0, 5),
             fmt_opt(me.onset, 1.0, 5),
-            fmt_opt(onset_diff, 1.0, 5),
+            fmt_opt(p.onset_difference(), 1.0, 5),
             fmt_opt(mi.displacement_at_comparison, 1.0, 5),
             fmt_opt(me.displacement_at_comparison, 1.0, 5),
-            fmt_opt(u_diff, 1.0, 5),
+            fmt_opt(p.displacement_difference(), 1.0, 5),
             fmt_opt(p.discrepancy(), 1.0, 5),
             mi.final_displacement,
             me.final_displacement,
@@ -402,7 +411,6 @@ fn report_md(runs: &[CampaignRun], m: &[HistoryMetrics], pairs: &[IntegratorPair
         .iter()
         .map(|r| (r.regularisation(), r.integrator()))
         .collect();
-    families.dedup();
     families.sort();
     families.dedup();
     for (reg, int) in families {
@@ -449,16 +457,10 @@ fn report_md(runs: &[CampaignRun], m: &[HistoryMetrics], pairs: &[IntegratorPair
                 ri.scene,
                 fmt_opt(mi.onset, 1.0, 4),
                 fmt_opt(me.onset, 1.0, 4),
-                fmt_opt(mi.onset.zip(me.onset).map(|(a, b)| b - a), 1.0, 4),
+                fmt_opt(p.onset_difference(), 1.0, 4),
                 fmt_opt(mi.displacement_at_comparison, 1.0, 3),
                 fmt_opt(me.displacement_at_comparison, 1.0, 3),
-                fmt_opt(
-                    mi.displacement_at_comparison
-                        .zip(me.displacement_at_comparison)
-                        .map(|(a, b)| (b - a) / a),
-                    1.0,
-                    3
-                ),
+                fmt_opt(p.displacement_difference(), 1.0, 3),
                 fmt_opt(p.discrepancy(), 1.0, 4),
                 ri.wall_seconds,
                 re.wall_seconds,
@@ -468,21 +470,8 @@ fn report_md(runs: &[CampaignRun], m: &[HistoryMetrics], pairs: &[IntegratorPair
             );
         }
     }
-    for r in runs.iter().filter(|r| r.lost_points.0 > 0) {
-        let _ = writeln!(
-            md,
-            "\n- {}: {} material point(s) left the grid and were removed ({:.2e} of the mass; run.json lists them)",
-            r.name, r.lost_points.0, r.lost_points.1
-        );
-    }
-    for r in runs.iter().filter(|r| r.error.is_some()) {
-        let _ = writeln!(
-            md,
-            "\n- {} stopped: {}",
-            r.name,
-            r.error.as_deref().unwrap_or_default()
-        );
-    }
+    md.push_str(&lost_points_notes(runs));
+    md.push_str(&stopped_notes(runs));
     md.push_str(&profiles_section(runs));
     md
 }

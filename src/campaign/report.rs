@@ -368,6 +368,33 @@ pub(super) fn fmt_opt(v: Option<f64>, scale: f64, digits: usize) -> String {
         .unwrap_or_else(|| "–".into())
 }
 
+/// Report lines for the runs that lost points off the grid.
+pub(super) fn lost_points_notes(runs: &[CampaignRun]) -> String {
+    let mut md = String::new();
+    for r in runs.iter().filter(|r| r.lost_points.0 > 0) {
+        let _ = writeln!(
+            md,
+            "\n- {}: {} material point(s) left the grid and were removed ({:.2e} of the mass; run.json lists them)",
+            r.name, r.lost_points.0, r.lost_points.1
+        );
+    }
+    md
+}
+
+/// Report lines for the runs that stopped early, with their errors.
+pub(super) fn stopped_notes(runs: &[CampaignRun]) -> String {
+    let mut md = String::new();
+    for r in runs.iter().filter(|r| r.error.is_some()) {
+        let _ = writeln!(
+            md,
+            "\n- {} stopped: {}",
+            r.name,
+            r.error.as_deref().unwrap_or_default()
+        );
+    }
+    md
+}
+
 /// The report section with every run's stage profile (wall time by stage).
 pub(super) fn profiles_section(runs: &[CampaignRun]) -> String {
     let mut md =
@@ -493,13 +520,7 @@ pub(super) fn write_outputs(
             }
         }
     }
-    for r in runs.iter().filter(|r| r.lost_points.0 > 0) {
-        let _ = writeln!(
-            md,
-            "\n- {}: {} material point(s) left the grid and were removed ({:.2e} of the mass; run.json lists them)",
-            r.name, r.lost_points.0, r.lost_points.1
-        );
-    }
+    md.push_str(&lost_points_notes(runs));
     for r in runs.iter().filter(|r| r.curve_columns.is_none()) {
         let _ = writeln!(
             md,
@@ -507,14 +528,7 @@ pub(super) fn write_outputs(
             r.name
         );
     }
-    for r in runs.iter().filter(|r| r.error.is_some()) {
-        let _ = writeln!(
-            md,
-            "\n- {} stopped: {}",
-            r.name,
-            r.error.as_deref().unwrap_or_default()
-        );
-    }
+    md.push_str(&stopped_notes(runs));
     md.push_str(&profiles_section(runs));
     std::fs::write(&metrics_path, csv).map_err(|e| io(&metrics_path, &e))?;
     let report = out.join("report.md");

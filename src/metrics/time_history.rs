@@ -2,7 +2,7 @@
 //! onset, reversals of a stress history after its peak and the smoothness of
 //! its fall. Histories are `(t, value)` pairs with non-decreasing t.
 
-use super::{interpolate, MetricsError, Result};
+use super::{MetricsError, Result};
 
 /// First time at which `|value|` exceeds `threshold` (linear interpolation
 /// between the samples around the crossing); `None` if it never does.
@@ -71,11 +71,6 @@ pub fn fall_roughness(history: &[(f64, f64)]) -> Result<f64> {
     }
     let variation: f64 = history.windows(2).map(|w| (w[1].1 - w[0].1).abs()).sum();
     Ok(variation / drop)
-}
-
-/// Value of a history at time `t` (linear interpolation, [`interpolate`]).
-pub fn value_at(history: &[(f64, f64)], t: f64) -> Result<f64> {
-    interpolate(history, t)
 }
 
 #[cfg(test)]
