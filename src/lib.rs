@@ -19,7 +19,7 @@
 //! - the run: [`simulation`] (time loop, monitors), [`monitor`], [`output`],
 //!   [`run`] and [`profile`] (what a run writes and measures), [`scene`]
 //!   (TOML input and its validation), [`campaign`] and [`metrics`] (mesh
-//!   studies), [`error`].
+//!   studies), [`study`] (error against run time), [`error`].
 
 // Index loops over nodes, components and Voigt entries mirror the equations
 // (B_a, D_ij, N_a) more readably than iterator chains.
@@ -48,4 +48,5 @@ pub mod shape;
 pub mod simulation;
 pub mod smoothing;
 pub mod stiffness;
+pub mod study;
 pub mod transfer;

@@ -58,6 +58,19 @@ enum Command {
         #[arg(long, value_enum, default_value_t = FormulationArg::Ours)]
         formulation: FormulationArg,
     },
+    /// Error against run time: run a study spec's sweep (each run a whole
+    /// process, timed `repeats` times) and write study.csv,
+    /// work_precision.png and report.md.
+    Study {
+        /// Study spec (TOML), e.g. validation/studies/elastic_bar.toml.
+        spec: PathBuf,
+        /// Output directory (default: out/study-<spec file stem>).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Repeats per run instead of the spec's `study.repeats`.
+        #[arg(long)]
+        repeats: Option<usize>,
+    },
     /// Homogeneous test on one material point (biaxial, triaxial, simple shear) → CSV.
     Point(mpm_geo::point_driver::PointArgs),
     /// Validate a scene without running it (exit 0 when valid).
@@ -120,6 +133,34 @@ fn main() -> ExitCode {
                     } else {
                         ExitCode::from(1)
                     }
+                }
+                Err(e) => fail(2, &e.to_string()),
+            }
+        }
+        Command::Study { spec, out, repeats } => {
+            let stem = spec
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_else(|| "study".into());
+            let out = out.unwrap_or_else(|| PathBuf::from("out").join(format!("study-{stem}")));
+            let executable = match std::env::current_exe() {
+                Ok(exe) => exe,
+                Err(e) => return fail(2, &format!("cannot find the mpm-geo executable: {e}")),
+            };
+            let options = mpm_geo::study::StudyOptions {
+                executable,
+                repeats,
+                verbose: true,
+            };
+            match mpm_geo::study::run_study(&spec, &out, &options) {
+                Ok(rows) => {
+                    let stopped = rows.iter().filter(|r| !r.measured.completed()).count();
+                    eprintln!(
+                        "study: {} runs ({stopped} did not complete); report in {}",
+                        rows.len(),
+                        out.join("report.md").display()
+                    );
+                    ExitCode::SUCCESS
                 }
                 Err(e) => fail(2, &e.to_string()),
             }

@@ -279,6 +279,118 @@ pub fn plot_curves_sized(
     Ok(())
 }
 
+/// Tick label of a logarithmic axis: plain decimals from 1e-3 to 1e4, else
+/// scientific.
+fn log_tick(v: f64) -> String {
+    if (1e-3..1e4).contains(&v.abs()) {
+        let text = format!("{v:.3}");
+        text.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        format!("{v:.0e}")
+    }
+}
+
+/// Work-precision figure of a study: error against wall time, both axes
+/// logarithmic, one line with markers per method, the Pareto front (`front`,
+/// sorted by time) as a black step line with open circles. Points that are
+/// not finite and positive are dropped.
+pub fn plot_work_precision(
+    path: impl AsRef<Path>,
+    title: &str,
+    series: &[Series],
+    front: &[(f64, f64)],
+) -> Result<()> {
+    let path = path.as_ref();
+    let keep = |p: &&(f64, f64)| p.0.is_finite() && p.1.is_finite() && p.0 > 0.0 && p.1 > 0.0;
+    let clean: Vec<Vec<(f64, f64)>> = series
+        .iter()
+        .map(|s| s.points.iter().filter(keep).copied().collect())
+        .collect();
+    let all: Vec<(f64, f64)> = clean.iter().flatten().copied().collect();
+    if all.is_empty() {
+        return Err(PlotError::Empty("no run with a finite positive error"));
+    }
+    let bounds = |f: fn(&(f64, f64)) -> f64| {
+        let (lo, hi) = all
+            .iter()
+            .map(f)
+            .fold((f64::INFINITY, 0.0f64), |(lo, hi), v| {
+                (lo.min(v), hi.max(v))
+            });
+        (lo / 1.5, hi * 1.5)
+    };
+    let ((x0, x1), (y0, y1)) = (bounds(|p| p.0), bounds(|p| p.1));
+    prepare_path(path)?;
+    let root = BitMapBackend::new(path, CURVE_SIZE).into_drawing_area();
+    root.fill(&WHITE).map_err(de)?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(title, ("sans-serif", 24))
+        .margin(16)
+        .x_label_area_size(56)
+        .y_label_area_size(90)
+        .build_cartesian_2d((x0..x1).log_scale(), (y0..y1).log_scale())
+        .map_err(de)?;
+    chart
+        .configure_mesh()
+        .x_desc("wall time (s), median of the repeats")
+        .y_desc("error (relative)")
+        .label_style(("sans-serif", 16))
+        .axis_desc_style(("sans-serif", 19))
+        .x_labels(6)
+        .y_labels(8)
+        .x_label_formatter(&|v| log_tick(*v))
+        .y_label_formatter(&|v| log_tick(*v))
+        .light_line_style(RGBColor(235, 235, 235))
+        .bold_line_style(RGBColor(205, 205, 205))
+        .draw()
+        .map_err(de)?;
+    for (s, pts) in series.iter().zip(&clean) {
+        let color = series_color(s.color);
+        let style = color.stroke_width(2);
+        chart
+            .draw_series(LineSeries::new(pts.clone(), style))
+            .map_err(de)?
+            .label(s.name.clone())
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 30, y)], style));
+        chart
+            .draw_series(pts.iter().map(|&p| Circle::new(p, 4, color.filled())))
+            .map_err(de)?;
+    }
+    let front: Vec<(f64, f64)> = front.iter().filter(keep).copied().collect();
+    if !front.is_empty() {
+        let mut steps = Vec::new();
+        for (i, &p) in front.iter().enumerate() {
+            if i > 0 {
+                steps.push((p.0, front[i - 1].1));
+            }
+            steps.push(p);
+        }
+        let black = BLACK.stroke_width(1);
+        chart
+            .draw_series(DashedLineSeries::new(steps, 6, 4, black))
+            .map_err(de)?
+            .label("Pareto front")
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 30, y)], black));
+        chart
+            .draw_series(
+                front
+                    .iter()
+                    .map(|&p| Circle::new(p, 8, BLACK.stroke_width(2))),
+            )
+            .map_err(de)?;
+    }
+    chart
+        .configure_series_labels()
+        .label_font(("sans-serif", 15))
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .position(SeriesLabelPosition::UpperRight)
+        .draw()
+        .map_err(de)?;
+    root.present().map_err(de)?;
+    Ok(())
+}
+
 // ---------------------------------------------------------------------------
 // Fields (Figs. 4–5)
 // ---------------------------------------------------------------------------

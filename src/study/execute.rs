@@ -1,0 +1,213 @@
+//! Running a study's runs: each as a whole `mpm-geo run` process on its
+//! resolved `scene.toml`, one at a time (so timings do not compete), timed
+//! `repeats` times.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Instant;
+
+use super::spec::PlannedRun;
+use super::StudyError;
+use crate::profile::Stage;
+
+/// Monitor histories `(t, value)` by monitor name.
+pub type Histories = Vec<(String, Vec<(f64, f64)>)>;
+
+/// What one run measured (from its process, `run.json` and `curve.csv`).
+#[derive(Clone, Debug)]
+pub struct Measured {
+    /// Wall time of the whole process per repeat, s.
+    pub wall_seconds: Vec<f64>,
+    /// Exclusive seconds per stage ([`Stage::ALL`] order) of the median repeat.
+    pub stage_seconds: Vec<f64>,
+    /// `completed`, or `stopped: <why>` / `refused: <why>`.
+    pub status: String,
+    /// Steps completed.
+    pub steps: usize,
+    /// Newton iterations (implicit).
+    pub newton_iterations: usize,
+    /// Factorisations (Cholesky + LU).
+    pub factorisations: usize,
+    /// Step halvings (implicit).
+    pub halvings: usize,
+    /// Monitor histories `(t, value)` by monitor name (from `curve.csv`).
+    pub histories: Histories,
+}
+
+impl Measured {
+    /// Median wall time over the repeats, s.
+    pub fn median_wall(&self) -> f64 {
+        median(&self.wall_seconds)
+    }
+
+    /// The history of `monitor`.
+    pub fn history(&self, monitor: &str) -> Option<&[(f64, f64)]> {
+        self.histories
+            .iter()
+            .find(|(name, _)| name == monitor)
+            .map(|(_, h)| h.as_slice())
+    }
+
+    /// Whether the run completed.
+    pub fn completed(&self) -> bool {
+        self.status == "completed"
+    }
+}
+
+/// Median of a non-empty list (mean of the middle two for an even count).
+pub fn median(values: &[f64]) -> f64 {
+    let mut v = values.to_vec();
+    v.sort_by(f64::total_cmp);
+    match v.len() {
+        0 => f64::NAN,
+        n if n % 2 == 1 => v[n / 2],
+        n => 0.5 * (v[n / 2 - 1] + v[n / 2]),
+    }
+}
+
+/// Run `planned` `repeats` times with the `mpm-geo` executable `exe` into
+/// `dir` (its `scene.toml` is the scene run, so a run is reproduced by
+/// `mpm-geo run dir/scene.toml`).
+pub fn execute(
+    exe: &Path,
+    planned: &PlannedRun,
+    dir: &Path,
+    repeats: usize,
+) -> Result<Measured, StudyError> {
+    let io = |path: &Path, e: &dyn std::fmt::Display| StudyError::Io {
+        path: path.display().to_string(),
+        message: e.to_string(),
+    };
+    std::fs::create_dir_all(dir).map_err(|e| io(dir, &e))?;
+    let scene_path = dir.join("scene.toml");
+    let text = toml::to_string(&planned.scene).map_err(|e| io(&scene_path, &e))?;
+    std::fs::write(&scene_path, text).map_err(|e| io(&scene_path, &e))?;
+    let out = dir.join("output");
+    let mut runs: Vec<(f64, Vec<f64>)> = Vec::new();
+    let mut last_status = String::new();
+    for _ in 0..repeats.max(1) {
+        let start = Instant::now();
+        let output = Command::new(exe)
+            .arg("run")
+            .arg(&scene_path)
+            .arg("--out")
+            .arg(&out)
+            .arg("--quiet")
+            .output()
+            .map_err(|e| io(exe, &e))?;
+        let wall = start.elapsed().as_secs_f64();
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        last_status = match output.status.code() {
+            Some(0) => "completed".to_string(),
+            Some(1) => format!("stopped: {}", last_error_line(&stderr)),
+            _ => format!("refused: {}", last_error_line(&stderr)),
+        };
+        let stages = read_stage_seconds(&out.join("run.json")).unwrap_or_default();
+        runs.push((wall, stages));
+        if last_status.starts_with("refused") {
+            break;
+        }
+    }
+    let walls: Vec<f64> = runs.iter().map(|r| r.0).collect();
+    let median_wall = median(&walls);
+    let stage_seconds = runs
+        .iter()
+        .min_by(|a, b| {
+            (a.0 - median_wall)
+                .abs()
+                .total_cmp(&(b.0 - median_wall).abs())
+        })
+        .map(|r| r.1.clone())
+        .unwrap_or_default();
+    let usage = read_usage(&out.join("run.json")).unwrap_or_default();
+    let histories = read_curve(&out.join("curve.csv")).unwrap_or_default();
+    Ok(Measured {
+        wall_seconds: walls,
+        stage_seconds,
+        status: last_status,
+        steps: usage.0,
+        newton_iterations: usage.1,
+        factorisations: usage.2,
+        halvings: usage.3,
+        histories,
+    })
+}
+
+/// The `error:` line of a run's stderr (else its last non-empty line).
+fn last_error_line(stderr: &str) -> String {
+    stderr
+        .lines()
+        .find_map(|l| l.strip_prefix("error: "))
+        .or_else(|| stderr.lines().rev().find(|l| !l.trim().is_empty()))
+        .unwrap_or("no message")
+        .replace(',', ";")
+}
+
+fn read_json(path: &Path) -> Option<serde_json::Value> {
+    serde_json::from_str(&std::fs::read_to_string(path).ok()?).ok()
+}
+
+/// Seconds per stage from `run.json`'s profile, in [`Stage::ALL`] order.
+fn read_stage_seconds(path: &Path) -> Option<Vec<f64>> {
+    let json = read_json(path)?;
+    let rows = json.get("profile")?.as_array()?;
+    Some(
+        Stage::ALL
+            .iter()
+            .map(|stage| {
+                rows.iter()
+                    .find(|r| r.get("stage").and_then(|s| s.as_str()) == Some(stage.name()))
+                    .and_then(|r| r.get("seconds")?.as_f64())
+                    .unwrap_or(0.0)
+            })
+            .collect(),
+    )
+}
+
+/// (steps, Newton iterations, factorisations, halvings) from `run.json`.
+fn read_usage(path: &Path) -> Option<(usize, usize, usize, usize)> {
+    let json = read_json(path)?;
+    let usage = json.get("solver")?.get("usage")?;
+    let count = |key: &str| usage.get(key).and_then(|v| v.as_u64()).unwrap_or(0) as usize;
+    let steps = json.get("steps_completed")?.as_u64()? as usize;
+    Some((
+        steps,
+        count("newton_iterations"),
+        count("cholesky") + count("lu"),
+        count("halvings"),
+    ))
+}
+
+/// Every monitor column of `curve.csv` as `(t, value)` pairs.
+pub fn read_curve(path: &Path) -> Option<Histories> {
+    let mut reader = csv::Reader::from_path(path).ok()?;
+    let header: Vec<String> = reader.headers().ok()?.iter().map(String::from).collect();
+    let time = header.iter().position(|h| h == "time")?;
+    let mut columns: Histories = header
+        .iter()
+        .enumerate()
+        .filter(|(i, h)| *i != time && h.as_str() != "step")
+        .map(|(_, h)| (h.clone(), Vec::new()))
+        .collect();
+    let indices: Vec<usize> = header
+        .iter()
+        .enumerate()
+        .filter(|(i, h)| *i != time && h.as_str() != "step")
+        .map(|(i, _)| i)
+        .collect();
+    for record in reader.records() {
+        let record = record.ok()?;
+        let t: f64 = record.get(time)?.parse().ok()?;
+        for (column, &i) in columns.iter_mut().zip(&indices) {
+            if let Some(v) = record.get(i).and_then(|v| v.parse::<f64>().ok()) {
+                column.1.push((t, v));
+            }
+        }
+    }
+    Some(columns)
+}
+
+/// The directory of a run inside the study's output directory.
+pub fn run_dir(out: &Path, planned: &PlannedRun) -> PathBuf {
+    out.join("runs").join(&planned.name)
+}

@@ -1,0 +1,376 @@
+//! The study's outputs: `study.csv`, the work-precision figure and
+//! `report.md` (Pareto-optimal runs, crossover points, observed orders).
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use super::execute::Measured;
+use super::measure::log_log_slope;
+use super::spec::{PlannedRun, StudySpec};
+use super::StudyError;
+use crate::plot::{plot_work_precision, Series};
+use crate::profile::Stage;
+
+/// One compared run with its errors.
+#[derive(Clone, Debug)]
+pub struct StudyRow {
+    /// The planned run.
+    pub planned: PlannedRun,
+    /// What it measured.
+    pub measured: Measured,
+    /// Error per quantity (spec order); `None` where it cannot be measured.
+    pub errors: Vec<Option<f64>>,
+}
+
+impl StudyRow {
+    /// The run's error: the largest over the quantities (`None` if any is
+    /// missing or the run did not complete).
+    pub fn error(&self) -> Option<f64> {
+        if !self.measured.completed() {
+            return None;
+        }
+        self.errors
+            .iter()
+            .try_fold(0.0f64, |m, e| e.map(|e| m.max(e)))
+    }
+}
+
+/// Indices of the Pareto-optimal rows: no other row is both faster and more
+/// accurate (ties broken towards the earlier row).
+pub fn pareto_front(rows: &[StudyRow]) -> Vec<usize> {
+    let points: Vec<Option<(f64, f64)>> = rows
+        .iter()
+        .map(|r| r.error().map(|e| (r.measured.median_wall(), e)))
+        .collect();
+    let mut front: Vec<usize> = (0..rows.len())
+        .filter(|&i| {
+            let Some((ti, ei)) = points[i] else {
+                return false;
+            };
+            !points.iter().enumerate().any(|(j, p)| {
+                p.is_some_and(|(tj, ej)| {
+                    j != i && tj <= ti && ej <= ei && (tj < ti || ej < ei || j < i)
+                })
+            })
+        })
+        .collect();
+    front.sort_by(|&a, &b| {
+        let (ta, tb) = (
+            points[a].map_or(0.0, |p| p.0),
+            points[b].map_or(0.0, |p| p.0),
+        );
+        ta.total_cmp(&tb)
+    });
+    front
+}
+
+/// A crossover: at errors below `error` method `faster_below` reaches the
+/// same error in less time than `faster_above` (log–log interpolation).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Crossover {
+    /// The error at the crossing.
+    pub error: f64,
+    /// The wall time at the crossing, s.
+    pub wall_seconds: f64,
+    /// The method faster for smaller errors.
+    pub faster_below: String,
+    /// The method faster for larger errors.
+    pub faster_above: String,
+}
+
+/// The (log error, log time) polyline of one method, sorted by error.
+fn method_curve(rows: &[&StudyRow]) -> Vec<(f64, f64)> {
+    let mut pts: Vec<(f64, f64)> = rows
+        .iter()
+        .filter_map(|r| {
+            let e = r.error()?;
+            (e > 0.0).then(|| (e.ln(), r.measured.median_wall().max(1e-9).ln()))
+        })
+        .collect();
+    pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+    pts.dedup_by(|a, b| a.0 == b.0);
+    pts
+}
+
+fn interp(curve: &[(f64, f64)], x: f64) -> Option<f64> {
+    let k = curve.partition_point(|p| p.0 <= x);
+    if k == 0 || k == curve.len() {
+        return (curve.last()?.0 == x)
+            .then(|| curve.last().map(|p| p.1))
+            .flatten();
+    }
+    let (a, b) = (curve[k - 1], curve[k]);
+    Some(a.1 + (b.1 - a.1) * (x - a.0) / (b.0 - a.0))
+}
+
+/// Where two methods' time-to-error curves cross, for every pair of methods
+/// whose error ranges overlap.
+pub fn crossovers(rows: &[StudyRow]) -> Vec<Crossover> {
+    let methods = method_names(rows);
+    let curves: Vec<Vec<(f64, f64)>> = methods
+        .iter()
+        .map(|m| {
+            method_curve(
+                &rows
+                    .iter()
+                    .filter(|r| &r.planned.method == m)
+                    .collect::<Vec<_>>(),
+            )
+        })
+        .collect();
+    let mut out = Vec::new();
+    for a in 0..methods.len() {
+        for b in a + 1..methods.len() {
+            let (ca, cb) = (&curves[a], &curves[b]);
+            let mut xs: Vec<f64> = ca.iter().chain(cb.iter()).map(|p| p.0).collect();
+            xs.sort_by(f64::total_cmp);
+            xs.dedup();
+            let diffs: Vec<(f64, f64)> = xs
+                .iter()
+                .filter_map(|&x| Some((x, interp(ca, x)? - interp(cb, x)?)))
+                .collect();
+            for w in diffs.windows(2) {
+                let ((x0, d0), (x1, d1)) = (w[0], w[1]);
+                if d0 == 0.0 || d0.signum() == d1.signum() || d1 == 0.0 {
+                    continue;
+                }
+                let x = x0 + (x1 - x0) * d0 / (d0 - d1);
+                let Some(t) = interp(ca, x) else { continue };
+                // below the crossing (smaller x) the sign of d0 says who is faster
+                let (below, above) = if d0 < 0.0 { (a, b) } else { (b, a) };
+                out.push(Crossover {
+                    error: x.exp(),
+                    wall_seconds: t.exp(),
+                    faster_below: methods[below].clone(),
+                    faster_above: methods[above].clone(),
+                });
+            }
+        }
+    }
+    out
+}
+
+/// Method labels in first-appearance order.
+fn method_names(rows: &[StudyRow]) -> Vec<String> {
+    let mut names: Vec<String> = Vec::new();
+    for r in rows {
+        if !names.contains(&r.planned.method) {
+            names.push(r.planned.method.clone());
+        }
+    }
+    names
+}
+
+/// Observed order per method: slope of log error against log refined value.
+pub fn observed_orders(rows: &[StudyRow]) -> Vec<(String, Option<f64>)> {
+    method_names(rows)
+        .into_iter()
+        .map(|m| {
+            let pts: Vec<(f64, f64)> = rows
+                .iter()
+                .filter(|r| r.planned.method == m)
+                .filter_map(|r| Some((r.planned.refine.as_ref()?.1, r.error()?)))
+                .collect();
+            (m, log_log_slope(&pts))
+        })
+        .collect()
+}
+
+fn fmt_opt(v: Option<f64>) -> String {
+    v.map_or_else(|| "nan".to_string(), |v| format!("{v:e}"))
+}
+
+/// `study.csv`: one row per run with every axis value, wall time (median,
+/// min, max over the repeats), per-stage seconds, steps, Newton iterations,
+/// factorisations, halvings, the error per quantity and the run's error.
+pub fn write_csv(path: &Path, spec: &StudySpec, rows: &[StudyRow]) -> Result<(), StudyError> {
+    let io = |e: &dyn std::fmt::Display| StudyError::Io {
+        path: path.display().to_string(),
+        message: e.to_string(),
+    };
+    let mut w = csv::Writer::from_path(path).map_err(|e| io(&e))?;
+    let mut header: Vec<String> = ["run", "method", "series", "integrator"]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+    header.extend(spec.axis.iter().map(|a| a.name.clone()));
+    header.extend(
+        [
+            "refine",
+            "value",
+            "repeats",
+            "wall_seconds",
+            "wall_min",
+            "wall_max",
+            "steps",
+            "newton_iterations",
+            "factorisations",
+            "halvings",
+        ]
+        .iter()
+        .map(|s| s.to_string()),
+    );
+    header.extend(Stage::ALL.iter().map(|s| format!("{}_seconds", s.name())));
+    header.extend(spec.quantity.iter().map(|q| q.column()));
+    header.extend(["error".to_string(), "status".to_string()]);
+    w.write_record(&header).map_err(|e| io(&e))?;
+    for row in rows {
+        let (p, m) = (&row.planned, &row.measured);
+        let mut record = vec![
+            p.name.clone(),
+            p.method.clone(),
+            spec.series
+                .get(p.series)
+                .map_or("reference".into(), |s| s.label.clone()),
+            format!("{:?}", p.integrator).to_lowercase(),
+        ];
+        for axis in &spec.axis {
+            record.push(
+                p.axes
+                    .iter()
+                    .find(|(name, _)| name == &axis.name)
+                    .map_or(String::new(), |(_, v)| v.clone()),
+            );
+        }
+        let (key, value) = p.refine.clone().unwrap_or_default();
+        let walls = &m.wall_seconds;
+        record.extend([
+            key,
+            format!("{value:e}"),
+            walls.len().to_string(),
+            format!("{:e}", m.median_wall()),
+            format!("{:e}", walls.iter().copied().fold(f64::INFINITY, f64::min)),
+            format!("{:e}", walls.iter().copied().fold(0.0, f64::max)),
+            m.steps.to_string(),
+            m.newton_iterations.to_string(),
+            m.factorisations.to_string(),
+            m.halvings.to_string(),
+        ]);
+        record.extend(
+            (0..Stage::ALL.len())
+                .map(|i| format!("{:e}", m.stage_seconds.get(i).copied().unwrap_or(0.0))),
+        );
+        record.extend(row.errors.iter().map(|e| fmt_opt(*e)));
+        record.push(fmt_opt(row.error()));
+        record.push(m.status.clone());
+        w.write_record(&record).map_err(|e| io(&e))?;
+    }
+    w.flush().map_err(|e| io(&e))
+}
+
+/// The work-precision figure: error against median wall time, log–log, one
+/// line per method, the Pareto front marked.
+pub fn write_figure(path: &Path, spec: &StudySpec, rows: &[StudyRow]) -> Result<(), StudyError> {
+    let series: Vec<Series> = method_names(rows)
+        .iter()
+        .enumerate()
+        .map(|(i, m)| {
+            let mut points: Vec<(f64, f64)> = rows
+                .iter()
+                .filter(|r| &r.planned.method == m)
+                .filter_map(|r| Some((r.measured.median_wall(), r.error()?)))
+                .collect();
+            points.sort_by(|a, b| a.0.total_cmp(&b.0));
+            Series {
+                name: m.clone(),
+                points,
+                dashed: false,
+                color: i,
+            }
+        })
+        .collect();
+    if series.iter().all(|s| s.points.is_empty()) {
+        // no run has an error to plot (every one stopped): the CSV and the
+        // report say why
+        return Ok(());
+    }
+    let front: Vec<(f64, f64)> = pareto_front(rows)
+        .into_iter()
+        .filter_map(|i| Some((rows[i].measured.median_wall(), rows[i].error()?)))
+        .collect();
+    plot_work_precision(
+        path,
+        &format!("{}: error against wall time", spec.study.name),
+        &series,
+        &front,
+    )
+    .map_err(|e| StudyError::Io {
+        path: path.display().to_string(),
+        message: e.to_string(),
+    })
+}
+
+/// `report.md`: the runs, the Pareto-optimal ones, the crossovers and the
+/// observed orders.
+pub fn write_report(
+    path: &Path,
+    spec: &StudySpec,
+    reference: &str,
+    rows: &[StudyRow],
+) -> Result<(), StudyError> {
+    let mut md = format!("# Study `{}`\n\n", spec.study.name);
+    let _ = writeln!(
+        md,
+        "Base scene `{}`; each run timed {} time(s) as a whole `mpm-geo run` process, one at a time (median wall time). Reference: {reference}. Error: the largest over the quantities ({}).\n",
+        spec.study.scene.display(),
+        spec.study.repeats,
+        spec.quantity
+            .iter()
+            .map(|q| format!("`{}`", q.column()))
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    md += "| run | method | refined | wall (s) | steps | Newton its | factorisations | error | status |\n|---|---|---|---|---|---|---|---|---|\n";
+    for r in rows {
+        let (key, value) = r.planned.refine.clone().unwrap_or_default();
+        let _ = writeln!(
+            md,
+            "| {} | {} | {key} = {value:.3e} | {:.3} | {} | {} | {} | {} | {} |",
+            r.planned.name,
+            r.planned.method,
+            r.measured.median_wall(),
+            r.measured.steps,
+            r.measured.newton_iterations,
+            r.measured.factorisations,
+            r.error().map_or("—".into(), |e| format!("{e:.3e}")),
+            r.measured.status
+        );
+    }
+    md += "\n## Pareto-optimal runs (no run both faster and more accurate)\n\n";
+    for i in pareto_front(rows) {
+        let r = &rows[i];
+        let _ = writeln!(
+            md,
+            "- `{}` ({}): {:.3} s, error {:.3e}",
+            r.planned.name,
+            r.planned.method,
+            r.measured.median_wall(),
+            r.error().unwrap_or(f64::NAN)
+        );
+    }
+    md += "\n## Crossovers (time to reach an error, interpolated log–log)\n\n";
+    let crossings = crossovers(rows);
+    if crossings.is_empty() {
+        md += "None within the measured ranges: where the error ranges overlap, one method is faster throughout.\n";
+    }
+    for c in crossings {
+        let _ = writeln!(
+            md,
+            "- at error {:.3e} ({:.3} s): below it {} is faster, above it {}",
+            c.error, c.wall_seconds, c.faster_below, c.faster_above
+        );
+    }
+    md += "\n## Observed order (slope of log error against log refined value)\n\n";
+    for (m, slope) in observed_orders(rows) {
+        let _ = writeln!(
+            md,
+            "- {m}: {}",
+            slope.map_or("—".into(), |s| format!("{s:.2}"))
+        );
+    }
+    md += "\nFigure: `work_precision.png`. Every run's scene is `runs/<run>/scene.toml`.\n";
+    std::fs::write(path, md).map_err(|e| StudyError::Io {
+        path: path.display().to_string(),
+        message: e.to_string(),
+    })
+}
