@@ -69,7 +69,10 @@ fn scene_files(dir: &Path, out: &mut Vec<PathBuf>) {
     entries.sort();
     for path in entries {
         if path.is_dir() {
-            scene_files(&path, out);
+            // study specs are not scenes (tests/study_bar.rs runs them)
+            if path.file_name().is_some_and(|n| n != "studies") {
+                scene_files(&path, out);
+            }
         } else if path.extension().is_some_and(|e| e == "toml")
             && path.file_name().is_some_and(|n| n != "campaign.toml")
         {
