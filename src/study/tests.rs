@@ -170,3 +170,22 @@ fn pareto_front_and_crossover() {
     assert!((c.wall_seconds - 8f64.sqrt()).abs() < 1e-9, "{c:?}");
     assert!((c.error - 0.1 / 8f64.sqrt()).abs() < 1e-12, "{c:?}");
 }
+
+/// Every shipped study spec in `validation/studies/` reads and plans (every
+/// run's scene is valid), so the specs cannot drift from the scene types.
+#[test]
+fn shipped_specs_plan() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("validation/studies");
+    let mut planned = 0;
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_some_and(|e| e == "toml") {
+            let plan = StudySpec::load(&path)
+                .and_then(|s| s.plan())
+                .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+            assert!(!plan.runs.is_empty(), "{}", path.display());
+            planned += 1;
+        }
+    }
+    assert!(planned >= 4, "{planned} specs");
+}
