@@ -211,6 +211,7 @@ fn main() -> ExitCode {
                 Err(e) => fail(2, &e.to_string()),
                 Ok(outcome) => {
                     eprintln!("{}", outcome.simulation.profile.table(outcome.wall_seconds));
+                    eprintln!("{}", outcome.simulation.profile.work_line());
                     let usage = outcome.simulation.integrator.usage();
                     let sim = &outcome.simulation.model;
                     eprintln!(

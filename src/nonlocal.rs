@@ -475,6 +475,12 @@ impl NonlocalAverager {
         })
     }
 
+    /// Whether the denominators (\[D34\], the `O(N · n_nb)` pass) have been
+    /// computed: by the first call that needed them.
+    pub fn has_weights(&self) -> bool {
+        self.weights.get().is_some()
+    }
+
     /// Number of MPs of the operator.
     pub fn len(&self) -> usize {
         self.order.len()

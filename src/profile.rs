@@ -1,5 +1,6 @@
-//! Per-stage wall-time profile (call count and seconds per stage), reported
-//! at the end of a run and written to `run.json`.
+//! Per-stage wall-time profile (call count and seconds per stage) and work
+//! counters (how often each costly structure was built or operation done),
+//! reported at the end of a run and written to `run.json`.
 //!
 //! Stages are timed *exclusively*: while a stage runs inside another (the
 //! stress update inside Newton, the nonlocal average inside the stresses
@@ -101,10 +102,107 @@ impl Stage {
 /// Name of the row that holds the wall time no stage covers.
 pub const OTHER: &str = "other";
 
-/// Accumulated call counts and exclusive seconds per stage.
+/// Costly structures and operations of a run, each counted where it is built
+/// or done (not inferred from the scene), so that a run shows what it
+/// skipped: a quasi-static scene builds no mass matrix, a local one no
+/// neighbour lists, an elastic one does no return mapping.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Work {
+    /// Implicit dynamic: lumped nodal mass m_i built for the inertia term,
+    /// one per (sub-)step (P2G; DESIGN D15–D16). Quasi-static runs build none.
+    MassMatrix,
+    /// Implicit dynamic: M/(βΔt²) diagonals added to a tangent assembly
+    /// (DESIGN D17), one per assembly.
+    MassDiagonals,
+    /// Explicit: nodal mass m_i of the momentum update, one per step
+    /// (DESIGN §4 step 1; the stability check before the run is not counted).
+    ExplicitNodalMass,
+    /// Material-point stress updates, every material (DESIGN §5).
+    StressUpdates,
+    /// Stress updates of a material that can yield (`is_elastic()` false):
+    /// each evaluates its yield function.
+    YieldChecks,
+    /// Stress updates that returned to the yield surface (`yielded`).
+    ReturnMappings,
+    /// Nonlocal neighbour structures (cell-linked lists of
+    /// `NonlocalAverager::new`), one per nonlocal (sub-)step (DESIGN D34).
+    NeighbourLists,
+    /// Nonlocal weight denominators Σ_s w V_s computed (the O(N n_nb) pass of
+    /// D34); a step whose increments are all zero needs none.
+    NonlocalWeights,
+    /// Weight-cache blocks built (`NonlocalAverager::cache_sources` calls that
+    /// cached new sources; `iteration` update only, D36).
+    WeightCaches,
+    /// Applications of the averaging operator (`NonlocalAverager::average`,
+    /// D35–D36).
+    NonlocalAverages,
+    /// Double-mapping passes over the stresses (DESIGN D37–D39).
+    SmoothingPasses,
+    /// Internal-force restorations after double mapping (GGᵀ assembled and
+    /// factorised; `[smoothing] restore_forces`).
+    ForceRestorations,
+    /// Implicit tangent assemblies (DESIGN D17, D19).
+    Assemblies,
+    /// Numeric Cholesky factorisations of the implicit tangent (attempts:
+    /// one that finds K not positive definite and falls back to LU counts).
+    FactorisationsCholesky,
+    /// Numeric LU factorisations of the implicit tangent.
+    FactorisationsLu,
+    /// Symbolic factorisations of the implicit tangent (a new sparsity
+    /// pattern, or the first of each kind).
+    SymbolicFactorisations,
+}
+
+impl Work {
+    /// All counters in report order.
+    pub const ALL: [Work; 16] = [
+        Work::MassMatrix,
+        Work::MassDiagonals,
+        Work::ExplicitNodalMass,
+        Work::StressUpdates,
+        Work::YieldChecks,
+        Work::ReturnMappings,
+        Work::NeighbourLists,
+        Work::NonlocalWeights,
+        Work::WeightCaches,
+        Work::NonlocalAverages,
+        Work::SmoothingPasses,
+        Work::ForceRestorations,
+        Work::Assemblies,
+        Work::FactorisationsCholesky,
+        Work::FactorisationsLu,
+        Work::SymbolicFactorisations,
+    ];
+
+    /// Report name (the key in `run.json`'s `"work"` object).
+    pub fn name(self) -> &'static str {
+        match self {
+            Work::MassMatrix => "mass_matrix",
+            Work::MassDiagonals => "mass_diagonals",
+            Work::ExplicitNodalMass => "explicit_nodal_mass",
+            Work::StressUpdates => "stress_updates",
+            Work::YieldChecks => "yield_checks",
+            Work::ReturnMappings => "return_mappings",
+            Work::NeighbourLists => "neighbour_lists",
+            Work::NonlocalWeights => "nonlocal_weights",
+            Work::WeightCaches => "weight_caches",
+            Work::NonlocalAverages => "nonlocal_averages",
+            Work::SmoothingPasses => "smoothing_passes",
+            Work::ForceRestorations => "force_restorations",
+            Work::Assemblies => "assemblies",
+            Work::FactorisationsCholesky => "factorisations_cholesky",
+            Work::FactorisationsLu => "factorisations_lu",
+            Work::SymbolicFactorisations => "symbolic_factorisations",
+        }
+    }
+}
+
+/// Accumulated call counts and exclusive seconds per stage, and the work
+/// counters.
 #[derive(Debug, Default)]
 pub struct Profile {
     entries: [Cell<(u64, f64)>; Stage::ALL.len()],
+    work: [Cell<u64>; Work::ALL.len()],
     /// The stage running now and when its current stretch of own time began.
     running: Cell<Option<(Stage, Instant)>>,
 }
@@ -144,6 +242,36 @@ impl Profile {
         let cell = &self.entries[stage as usize];
         let (n, s) = cell.get();
         cell.set((n + calls, s + elapsed.as_secs_f64()));
+    }
+
+    /// Add `n` to the counter `work` (call where the work is done; after a
+    /// parallel loop, from its results).
+    pub fn count(&self, work: Work, n: u64) {
+        let cell = &self.work[work as usize];
+        cell.set(cell.get() + n);
+    }
+
+    /// The counter `work` so far.
+    pub fn work_count(&self, work: Work) -> u64 {
+        self.work[work as usize].get()
+    }
+
+    /// Every counter, zeros included, in report order: (name, count).
+    pub fn work(&self) -> Vec<(&'static str, u64)> {
+        Work::ALL
+            .iter()
+            .map(|&w| (w.name(), self.work_count(w)))
+            .collect()
+    }
+
+    /// The counters on one line, `work: name n, name n, …`.
+    pub fn work_line(&self) -> String {
+        let counts: Vec<String> = self
+            .work()
+            .iter()
+            .map(|(name, n)| format!("{name} {n}"))
+            .collect();
+        format!("work: {}", counts.join(", "))
     }
 
     /// Seconds charged to `stage` so far.
@@ -239,5 +367,39 @@ mod tests {
         assert_eq!(solve_row.calls, 2);
         let sum: f64 = totals.iter().map(|t| t.seconds).sum();
         assert!((sum - wall).abs() < 1e-12);
+    }
+
+    /// Work counters add up per counter, never touch another one, and every
+    /// counter is reported (zeros too) under a distinct name.
+    #[test]
+    fn work_counters_accumulate() {
+        let profile = Profile::default();
+        profile.count(Work::Assemblies, 2);
+        profile.count(Work::Assemblies, 3);
+        profile.count(Work::ReturnMappings, 0);
+        profile.count(Work::NonlocalAverages, 1);
+        assert_eq!(profile.work_count(Work::Assemblies), 5);
+        assert_eq!(profile.work_count(Work::NonlocalAverages), 1);
+        let work = profile.work();
+        assert_eq!(work.len(), Work::ALL.len());
+        for (i, w) in Work::ALL.iter().enumerate() {
+            assert_eq!(*w as usize, i, "{w:?} out of place in Work::ALL");
+        }
+        for (w, (name, n)) in Work::ALL.iter().zip(&work) {
+            assert_eq!(*name, w.name());
+            let expected = match w {
+                Work::Assemblies => 5,
+                Work::NonlocalAverages => 1,
+                _ => 0,
+            };
+            assert_eq!(*n, expected, "{name}");
+        }
+        let mut names: Vec<&str> = work.iter().map(|(name, _)| *name).collect();
+        names.sort_unstable();
+        names.dedup();
+        assert_eq!(names.len(), Work::ALL.len());
+        let line = profile.work_line();
+        assert!(line.starts_with("work: mass_matrix 0, "), "{line}");
+        assert!(line.contains("assemblies 5"), "{line}");
     }
 }

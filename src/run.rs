@@ -237,7 +237,9 @@ pub fn run_scene(
     })
 }
 
-/// `run.json`: resolved scene, crate version, solver choices, per-stage profile, status.
+/// `run.json`: resolved scene, crate version, solver choices and the tangent
+/// solver's factorisation counts, per-stage profile, work counters
+/// ([`crate::profile::Work`], every counter, zeros too), status.
 pub fn write_run_json(
     path: &Path,
     sim: &Simulation,
@@ -250,6 +252,13 @@ pub fn write_run_json(
         .iter()
         .zip(&model.materials)
         .map(|(name, m)| json!({"name": name, "model": m.name(), "symmetric_tangent": m.has_symmetric_tangent()}))
+        .collect();
+    let factorisation = sim.integrator.factorisation_stats();
+    let work: serde_json::Map<String, serde_json::Value> = sim
+        .profile
+        .work()
+        .into_iter()
+        .map(|(name, n)| (name.to_string(), n.into()))
         .collect();
     let value = json!({
         "mpm_geo_version": env!("CARGO_PKG_VERSION"),
@@ -268,8 +277,22 @@ pub fn write_run_json(
             "analysis": model.analysis(),
             "linear_solver_policy": model.scene.solver.linear_solver,
             "usage": sim.integrator.usage(),
+            "factorisation": {
+                "symbolic": factorisation.symbolic,
+                "numeric": factorisation.numeric,
+                "numeric_cholesky": factorisation.numeric_cholesky,
+                "numeric_lu": factorisation.numeric_lu,
+                "symbolic_reuses": factorisation.numeric.saturating_sub(factorisation.symbolic),
+                "cholesky_fallbacks": factorisation.cholesky_fallbacks,
+                "solves": factorisation.solves,
+                "symbolic_seconds": factorisation.symbolic_seconds,
+                "numeric_seconds": factorisation.numeric_seconds,
+                "solve_seconds": factorisation.solve_seconds,
+                "probe_seconds": factorisation.probe_seconds,
+            },
         },
         "profile": sim.profile.totals(wall_seconds),
+        "work": work,
         "scene": model.scene,
     });
     write_json(path, &value)

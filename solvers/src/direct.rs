@@ -71,6 +71,11 @@ pub struct SolverStats {
     pub symbolic: usize,
     /// Numeric factorisations attempted (a failed Cholesky followed by LU counts 2).
     pub numeric: usize,
+    /// Numeric Cholesky factorisations attempted (those that found K not
+    /// positive definite included).
+    pub numeric_cholesky: usize,
+    /// Numeric LU factorisations attempted.
+    pub numeric_lu: usize,
     /// Calls of [`DirectSolver::solve_in_place`] (the LU probe is not counted).
     pub solves: usize,
     /// Times Cholesky failed (K not positive definite) and LU was used instead.
@@ -260,6 +265,7 @@ impl DirectSolver {
         };
         let t = Instant::now();
         self.stats.numeric += 1;
+        self.stats.numeric_cholesky += 1;
         self.llt_values.fill(0.0);
         let res = sym.factorize_numeric_llt::<f64>(
             &mut self.llt_values,
@@ -310,6 +316,7 @@ impl DirectSolver {
         };
         let t = Instant::now();
         self.stats.numeric += 1;
+        self.stats.numeric_lu += 1;
         let res = sym.factorize_numeric_lu::<f64>(
             &mut self.lu_numeric,
             k.as_faer(),

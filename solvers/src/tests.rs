@@ -319,6 +319,9 @@ fn auto_falls_back_to_lu_on_indefinite_symmetric() {
     assert!(r <= 1e-12, "residual after fallback {r:e}");
     assert_eq!(s.stats().cholesky_fallbacks, 1);
     assert_eq!(s.stats().last_factor, Some(FactorKind::Lu));
+    // the failed Cholesky attempt and the LU are both numeric factorisations
+    assert_eq!((s.stats().numeric_cholesky, s.stats().numeric_lu), (1, 1));
+    assert_eq!(s.stats().numeric, 2);
 }
 
 #[test]
@@ -360,6 +363,16 @@ fn refactorisation_reuses_symbolic() {
         s.factorize(&k4, true).unwrap();
         assert_eq!(s.stats().symbolic, 2, "{policy:?}");
         assert_eq!(s.stats().numeric, 4, "{policy:?}");
+        let by_kind = match policy {
+            SolverPolicy::Lu => (0, 4),
+            _ => (4, 0),
+        };
+        let stats = s.stats();
+        assert_eq!(
+            (stats.numeric_cholesky, stats.numeric_lu),
+            by_kind,
+            "{policy:?}"
+        );
     }
 }
 

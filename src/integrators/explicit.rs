@@ -10,7 +10,7 @@ use super::{evaluate_stresses, NonlocalStep, SolverUsage, StepReport, StepSetup,
 use crate::bc::DofConstraint;
 use crate::error::StepError;
 use crate::model::Model;
-use crate::profile::{Profile, Stage};
+use crate::profile::{Profile, Stage, Work};
 use crate::scene::{FieldError, SceneError};
 use crate::transfer;
 
@@ -74,7 +74,7 @@ impl ExplicitIntegrator {
         let t = model.time;
         let setup = profile.time(Stage::Setup, || StepSetup::new(model))?;
         let mut nonlocal = NonlocalStep::start(model, true, profile)?;
-        let nodal = profile.time(Stage::P2G, || map_to_grid(model, &setup, t));
+        let nodal = profile.time(Stage::P2G, || map_to_grid(model, &setup, t, profile));
         let (dt, grid) = profile.time(Stage::TimeStep, || {
             let dt = self.time_step(model, &setup, &nodal)?;
             Ok::<_, StepError>((dt, update_momentum(model, nodal, dt)))
@@ -85,7 +85,7 @@ impl ExplicitIntegrator {
         });
         let du = profile.time(Stage::Remap, || remap(model, &setup, &grid, dt));
         let trial = profile.time(Stage::StressUpdate, || {
-            stress_update(model, &setup, &du, nonlocal.as_ref())
+            stress_update(model, &setup, &du, nonlocal.as_ref(), profile)
         })?;
         let converged = profile.time(Stage::Stresses, || {
             converged_stresses(model, &setup, &trial, nonlocal.as_mut(), profile)
@@ -169,11 +169,13 @@ fn nodal_mass(model: &Model, setup: &StepSetup) -> Vec<f64> {
     )
 }
 
-/// P2G: m_i, p_i = Σ N_ip m_p v_p, f_i = f_ext + f_pen − f_int at t.
-fn map_to_grid(model: &Model, setup: &StepSetup, t: f64) -> NodalMomentum {
+/// P2G: m_i, p_i = Σ N_ip m_p v_p, f_i = f_ext + f_pen − f_int at t (the
+/// nodal mass counted in `profile`).
+fn map_to_grid(model: &Model, setup: &StepSetup, t: f64, profile: &Profile) -> NodalMomentum {
     let (grid, p) = (&model.grid, &model.particles);
     let (bins, shapes) = (&setup.bins, &setup.shapes);
     let mass = nodal_mass(model, setup);
+    profile.count(Work::ExplicitNodalMass, 1);
     let momentum = transfer::nodal_mass_weighted(grid, bins, shapes, &p.mass, &p.velocity);
     let internal = transfer::internal_force(grid, bins, shapes, &p.volume, &p.stress);
     let mut external = external_force(model, setup, t);
@@ -286,12 +288,13 @@ fn remap(model: &Model, setup: &StepSetup, grid: &UpdatedGrid, dt: f64) -> Vec<[
 }
 
 /// Δε from the re-mapped increment and the stress update (DESIGN §4 step 5),
-/// strengths at κ̄(n).
+/// strengths at κ̄(n); the updates are counted in `profile`.
 fn stress_update(
     model: &Model,
     setup: &StepSetup,
     du: &[[f64; 2]],
     nonlocal: Option<&NonlocalStep>,
+    profile: &Profile,
 ) -> Result<TrialStresses, StepError> {
     let mut trial = TrialStresses::default();
     evaluate_stresses(
@@ -303,6 +306,7 @@ fn stress_update(
         None,
         &mut trial,
     )
+    .counted(profile)
     .map_err(|(particle, source)| StepError::Constitutive { particle, source })?;
     Ok(trial)
 }

@@ -4,7 +4,7 @@
 //! and factorised by the sparse direct solver; a step whose Newton loop
 //! fails is halved, up to `solver.max_halvings` times.
 
-use mpm_solvers::SparseMatrix;
+use mpm_solvers::{SolverStats, SparseMatrix};
 
 use super::commit::{commit, NodalResults};
 use super::g2p::{g2p, GridMotion, VelocityUpdate};
@@ -17,7 +17,7 @@ use crate::bc::DofConstraint;
 use crate::dofs::{gather_free, DofMap};
 use crate::error::StepError;
 use crate::model::Model;
-use crate::profile::{Profile, Stage};
+use crate::profile::{Profile, Stage, Work};
 use crate::scene::AnalysisKind;
 use crate::transfer;
 
@@ -55,6 +55,11 @@ impl ImplicitIntegrator {
     /// The time step, s.
     pub fn dt(&self) -> f64 {
         self.dt
+    }
+
+    /// Counters and timings of the tangent's sparse direct solver.
+    pub fn solver_stats(&self) -> &SolverStats {
+        self.tangent.solver_stats()
     }
 
     /// One implicit step of Δt, halved on Newton failure (DESIGN §3).
@@ -110,7 +115,9 @@ impl ImplicitIntegrator {
         report: &mut StepReport,
     ) -> Result<usize, NewtonError> {
         let (setup, dofs) = profile.time(Stage::Setup, || step_setup(model))?;
-        let nodal = profile.time(Stage::P2G, || self.map_to_grid(model, &setup, t + dt));
+        let nodal = profile.time(Stage::P2G, || {
+            self.map_to_grid(model, &setup, t + dt, profile)
+        });
         let mut nonlocal = NonlocalStep::start(model, false, profile).map_err(StepError::from)?;
         let system = self.system(model, &setup, dofs, nodal, t, dt);
         let solution = profile.time(Stage::Newton, || {
@@ -167,13 +174,21 @@ impl ImplicitIntegrator {
     }
 
     /// P2G: nodal mass, v_n and a_n (dynamic only; Dirichlet dofs neither
-    /// move nor accelerate) and the external force at `t1` (DESIGN D10).
-    fn map_to_grid(&self, model: &Model, setup: &StepSetup, t1: f64) -> NodalKinematics {
+    /// move nor accelerate; the mass counted in `profile`) and the external
+    /// force at `t1` (DESIGN D10).
+    fn map_to_grid(
+        &self,
+        model: &Model,
+        setup: &StepSetup,
+        t1: f64,
+        profile: &Profile,
+    ) -> NodalKinematics {
         let (grid, p) = (&model.grid, &model.particles);
         let (bins, shapes) = (&setup.bins, &setup.shapes);
         let (mut mass, mut velocity, mut acceleration) = (Vec::new(), Vec::new(), Vec::new());
         if self.newmark.is_some() {
             mass = transfer::nodal_mass(grid, bins, shapes, &p.mass);
+            profile.count(Work::MassMatrix, 1);
             let momentum = transfer::nodal_mass_weighted(grid, bins, shapes, &p.mass, &p.velocity);
             let ma = transfer::nodal_mass_weighted(grid, bins, shapes, &p.mass, &p.acceleration);
             velocity = divide_by_mass(&momentum, &mass);
@@ -214,7 +229,7 @@ impl ImplicitIntegrator {
                 expected: dofs.n_free,
             });
         }
-        let nodal = self.map_to_grid(model, &setup, t + dt);
+        let nodal = self.map_to_grid(model, &setup, t + dt, &profile);
         let system = self.system(model, &setup, dofs, nodal, t, dt);
         let du = system.initial_increment(free_increment);
         let mut trial = TrialStresses::default();

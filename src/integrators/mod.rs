@@ -34,6 +34,8 @@ pub(crate) use regularisation::NonlocalStep;
 pub use setup::StepSetup;
 pub(crate) use stress::{evaluate_stresses, TrialStresses};
 
+use mpm_solvers::SolverStats;
+
 use crate::error::{StepError, TimeStepLimit};
 use crate::model::{Model, PointRemap};
 use crate::profile::Profile;
@@ -113,6 +115,15 @@ impl Integrator {
         match self {
             Integrator::Implicit(implicit) => &implicit.usage,
             Integrator::Explicit(explicit) => &explicit.usage,
+        }
+    }
+
+    /// Counters and timings of the implicit tangent's sparse direct solver
+    /// (all zero for an explicit run, which factorises nothing).
+    pub fn factorisation_stats(&self) -> SolverStats {
+        match self {
+            Integrator::Implicit(implicit) => implicit.solver_stats().clone(),
+            Integrator::Explicit(_) => SolverStats::default(),
         }
     }
 

@@ -197,6 +197,7 @@ impl StepSystem<'_> {
                     spin_compliances,
                     trial,
                 )
+                .counted(profile)
             })
             .map_err(|(p, e)| NewtonError::Constitutive(p, e))?;
         Ok(self.residual(trial, du, profile))
@@ -488,7 +489,11 @@ pub fn solve(
         let free_residual = gather_free(&system.dofs, &res.residual);
         let kappa_settled = || match nonlocal.as_deref_mut() {
             Some(nl) => Ok(profile.time(Stage::Nonlocal, || {
-                nl.iterate(&model.particles, |p| trial.state[p].plastic_strain_eq)
+                nl.iterate(
+                    &model.particles,
+                    |p| trial.state[p].plastic_strain_eq,
+                    profile,
+                )
             })?),
             None => Ok(true),
         };

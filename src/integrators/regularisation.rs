@@ -7,7 +7,7 @@ use crate::constitutive::StrengthVariable;
 use crate::model::Model;
 use crate::nonlocal::{NonlocalAverager, NonlocalError, NonlocalParameters};
 use crate::particles::Particles;
-use crate::profile::{Profile, Stage};
+use crate::profile::{Profile, Stage, Work};
 use crate::scene::{NonlocalSpec, NonlocalUpdate};
 
 /// The strength variable of every point for one iteration's stress updates.
@@ -50,9 +50,9 @@ pub struct NonlocalStep {
 impl NonlocalStep {
     /// The step's nonlocal bookkeeping for a nonlocal scene (`None` for a
     /// local one, which does no averaging): weights (D34) from the
-    /// start-of-step configuration, timed as the nonlocal stage. κ̄ is updated
-    /// per the scene's `nonlocal.update` (D36), or once per step when
-    /// `step_update` (explicit runs, DESIGN §4).
+    /// start-of-step configuration, timed as the nonlocal stage and counted
+    /// as a neighbour list. κ̄ is updated per the scene's `nonlocal.update`
+    /// (D36), or once per step when `step_update` (explicit runs, DESIGN §4).
     pub fn start(
         model: &Model,
         step_update: bool,
@@ -61,11 +61,11 @@ impl NonlocalStep {
         let Some(spec) = &model.scene.nonlocal else {
             return Ok(None);
         };
-        profile
-            .time(Stage::Nonlocal, || {
-                Self::new(spec, &model.particles, step_update)
-            })
-            .map(Some)
+        let step = profile.time(Stage::Nonlocal, || {
+            Self::new(spec, &model.particles, step_update)
+        })?;
+        profile.count(Work::NeighbourLists, 1);
+        Ok(Some(step))
     }
 
     /// Weights (D34) for the start-of-step configuration; MPs of different
@@ -123,11 +123,13 @@ impl NonlocalStep {
     /// In `iteration` mode (D36: one average per Newton iteration, weights fixed within the
     /// step) the weights of the plastic sources are cached at their first appearance in the
     /// step and reused by later iterations; a call with the same increments as the previous
-    /// one (the commit after convergence) reuses its result.
+    /// one (the commit after convergence) reuses its result. Weight caches built, averages
+    /// and the first computation of the denominators are counted in `profile`.
     fn averaged(
         &mut self,
         particles: &Particles,
         trial_kappa: impl Fn(usize) -> f64,
+        profile: &Profile,
     ) -> Result<&[f64], NonlocalError> {
         for (p, inc) in self.scratch_increment.iter_mut().enumerate() {
             *inc = trial_kappa(p) - particles.state[p].plastic_strain_eq;
@@ -141,11 +143,18 @@ impl NonlocalStep {
         if same {
             return Ok(&self.scratch_average);
         }
+        let had_weights = self.averager.has_weights();
         if self.update == NonlocalUpdate::Iteration {
-            self.averager.cache_sources(&self.scratch_increment)?;
+            let cached = self.averager.cache_sources(&self.scratch_increment)?;
+            profile.count(Work::WeightCaches, u64::from(cached > 0));
         }
         self.averager
             .average(&self.scratch_increment, &mut self.scratch_average)?;
+        profile.count(Work::NonlocalAverages, 1);
+        profile.count(
+            Work::NonlocalWeights,
+            u64::from(!had_weights && self.averager.has_weights()),
+        );
         self.memo_increment.copy_from_slice(&self.scratch_increment);
         self.memo_valid = true;
         Ok(&self.scratch_average)
@@ -154,17 +163,18 @@ impl NonlocalStep {
     /// After an iteration's stress update: lag the neighbour part of κ̄ by one
     /// iteration (D36) and report whether it has converged (max change ≤
     /// ε_κ · max(max Δκ̄, 1e−8)). In `step` mode the strength stays frozen at
-    /// κ̄(n) and this is always true.
+    /// κ̄(n) and this is always true (no average).
     pub fn iterate(
         &mut self,
         particles: &Particles,
         trial_kappa: impl Fn(usize) -> f64,
+        profile: &Profile,
     ) -> Result<bool, NonlocalError> {
         if self.update == NonlocalUpdate::Step {
             return Ok(true);
         }
         let m = self.over_nonlocal;
-        self.averaged(particles, trial_kappa)?;
+        self.averaged(particles, trial_kappa, profile)?;
         let mut change = 0.0f64;
         let mut largest = 0.0f64;
         for ((neighbours, start), avg) in self
@@ -187,9 +197,10 @@ impl NonlocalStep {
         &mut self,
         particles: &Particles,
         trial_kappa: impl Fn(usize) -> f64,
+        profile: &Profile,
     ) -> Result<Vec<f64>, NonlocalError> {
         let m = self.over_nonlocal;
-        self.averaged(particles, trial_kappa)?;
+        self.averaged(particles, trial_kappa, profile)?;
         Ok(self
             .start
             .iter()
@@ -237,18 +248,19 @@ mod tests {
     #[test]
     fn over_nonlocal_commit_blends_average_and_own_increment() {
         let particles = grid_of_points();
+        let profile = Profile::default();
         let uniform = |_: usize| 0.1 + 0.03;
         let peaked = |p: usize| 0.1 + if p == 12 { 0.05 } else { 0.01 * (p % 3) as f64 };
         let plain = NonlocalStep::new(&spec(1.0), &particles, false)
             .unwrap()
-            .committed(&particles, peaked)
+            .committed(&particles, peaked, &profile)
             .unwrap();
         for m in [1.0, 1.1, 2.0] {
             let mut step = NonlocalStep::new(&spec(m), &particles, false).unwrap();
-            for k in step.committed(&particles, uniform).unwrap() {
+            for k in step.committed(&particles, uniform, &profile).unwrap() {
                 assert!((k - 0.23).abs() < 1e-12, "m = {m}: {k}");
             }
-            let committed = step.committed(&particles, peaked).unwrap();
+            let committed = step.committed(&particles, peaked, &profile).unwrap();
             for p in 0..particles.len() {
                 let own = peaked(p) - 0.1;
                 let expected = 0.2 + m * (plain[p] - 0.2) + (1.0 - m) * own;
@@ -265,14 +277,15 @@ mod tests {
     #[test]
     fn strength_variable_carries_lagged_neighbours_and_own_weight() {
         let particles = grid_of_points();
+        let profile = Profile::default();
         let increments = |p: usize| 0.1 + 0.002 * p as f64;
         let plain = NonlocalStep::new(&spec(1.0), &particles, false)
             .unwrap()
-            .committed(&particles, increments)
+            .committed(&particles, increments, &profile)
             .unwrap();
         let m = 1.1;
         let mut step = NonlocalStep::new(&spec(m), &particles, false).unwrap();
-        step.iterate(&particles, increments).unwrap();
+        step.iterate(&particles, increments, &profile).unwrap();
         for (p, plain_p) in plain.iter().enumerate() {
             match step.strength().at(p) {
                 StrengthVariable::Nonlocal {
@@ -286,10 +299,39 @@ mod tests {
             }
         }
         let mut frozen = NonlocalStep::new(&spec(m), &particles, true).unwrap();
-        assert!(frozen.iterate(&particles, increments).unwrap());
+        assert!(frozen.iterate(&particles, increments, &profile).unwrap());
         assert!(matches!(
             frozen.strength().at(7),
             StrengthVariable::Nonlocal { neighbours, .. } if neighbours == 0.2
         ));
+    }
+
+    /// The averaging work is counted where it is done: the commit that
+    /// repeats the last iteration's increments reuses its average (one
+    /// average counted, not two), the denominators are computed once, and
+    /// `step` mode (explicit runs) averages only at the commit.
+    #[test]
+    fn averages_are_counted_once_per_application() {
+        let particles = grid_of_points();
+        let increments = |p: usize| 0.1 + 0.002 * p as f64;
+        let profile = Profile::default();
+        let mut step = NonlocalStep::new(&spec(1.0), &particles, false).unwrap();
+        step.iterate(&particles, increments, &profile).unwrap();
+        step.committed(&particles, increments, &profile).unwrap();
+        assert_eq!(profile.work_count(Work::NonlocalAverages), 1);
+        assert_eq!(profile.work_count(Work::NonlocalWeights), 1);
+        // 25 new sources (≥ 16): one cache block
+        assert_eq!(profile.work_count(Work::WeightCaches), 1);
+        let frozen_profile = Profile::default();
+        let mut frozen = NonlocalStep::new(&spec(1.0), &particles, true).unwrap();
+        frozen
+            .iterate(&particles, increments, &frozen_profile)
+            .unwrap();
+        assert_eq!(frozen_profile.work_count(Work::NonlocalAverages), 0);
+        frozen
+            .committed(&particles, increments, &frozen_profile)
+            .unwrap();
+        assert_eq!(frozen_profile.work_count(Work::NonlocalAverages), 1);
+        assert_eq!(frozen_profile.work_count(Work::WeightCaches), 0);
     }
 }

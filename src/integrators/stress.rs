@@ -12,6 +12,7 @@ use crate::constitutive::{
 };
 use crate::grid::ShapeAt;
 use crate::particles::Particles;
+use crate::profile::{Profile, Work};
 use crate::transfer;
 
 /// Trial stresses, states and tangents of all material points for a given
@@ -35,8 +36,10 @@ pub struct TrialStresses {
 
 /// Evaluate the stress update at every material point for the nodal
 /// increment `du`. `strength` (nonlocal runs) gives the variable each point's
-/// strength is evaluated at (D36); local runs pass `None`. On failure returns the lowest-index
-/// failing point (deterministic whatever the thread count).
+/// strength is evaluated at (D36); local runs pass `None`. Returns what the
+/// updates did: [`UpdateTally::counted`] records it in the profile and gives
+/// the lowest-index failing point, if any (deterministic whatever the thread
+/// count).
 pub fn evaluate_stresses(
     particles: &Particles,
     materials: &[Arc<dyn ConstitutiveModel>],
@@ -45,14 +48,14 @@ pub fn evaluate_stresses(
     strength: Option<NonlocalStrength<'_>>,
     compliances: Option<&[Mat4]>,
     trial: &mut TrialStresses,
-) -> Result<(), (usize, ConstitutiveError)> {
+) -> UpdateTally {
     let n = particles.len();
     trial.stress.resize(n, [0.0; 4]);
     trial.state.resize(n, PointState::default());
     trial.gradient.resize(n, [0.0; 4]);
     trial.tangent.resize(n, [[0.0; 4]; 4]);
     trial.rotated.resize(n, [0.0; 4]);
-    let failures: Vec<(usize, ConstitutiveError)> = trial
+    let tally = trial
         .stress
         .par_iter_mut()
         .zip(trial.state.par_iter_mut())
@@ -64,25 +67,31 @@ pub fn evaluate_stresses(
         )
         .zip(trial.rotated.par_iter_mut())
         .enumerate()
-        .filter_map(|(p, (((stress, state), (grad, tangent)), rotated_out))| {
-            let l = transfer::gradient(&shapes[p], du);
-            *grad = l;
-            let (strain_increment, spin) = transfer::strain_and_spin(&l);
-            let rotated = transfer::rotate_stress(&particles.stress[p], spin);
-            *rotated_out = rotated;
-            let material = &materials[particles.material[p] as usize];
-            let strength = strength.map_or(StrengthVariable::Local, |s| s.at(p));
-            match material.update(&rotated, &strain_increment, &particles.state[p], strength) {
-                Ok(update) => {
-                    *stress = update.stress;
-                    *state = update.state;
-                    *tangent = update.tangent;
-                    None
+        .fold(
+            UpdateTally::default,
+            |mut tally, (p, (((stress, state), (grad, tangent)), rotated_out))| {
+                let l = transfer::gradient(&shapes[p], du);
+                *grad = l;
+                let (strain_increment, spin) = transfer::strain_and_spin(&l);
+                let rotated = transfer::rotate_stress(&particles.stress[p], spin);
+                *rotated_out = rotated;
+                let material = &materials[particles.material[p] as usize];
+                let strength = strength.map_or(StrengthVariable::Local, |s| s.at(p));
+                tally.updates += 1;
+                tally.yield_checks += u64::from(!material.is_elastic());
+                match material.update(&rotated, &strain_increment, &particles.state[p], strength) {
+                    Ok(update) => {
+                        tally.return_mappings += u64::from(update.yielded);
+                        *stress = update.stress;
+                        *state = update.state;
+                        *tangent = update.tangent;
+                    }
+                    Err(e) => tally.fail(p, e),
                 }
-                Err(e) => Some((p, e)),
-            }
-        })
-        .collect();
+                tally
+            },
+        )
+        .reduce(UpdateTally::default, UpdateTally::merge);
     if let Some(compliances) = compliances {
         trial.spin_sensitivity.resize(n, [0.0; 4]);
         trial
@@ -98,8 +107,53 @@ pub fn evaluate_stresses(
     } else {
         trial.spin_sensitivity.clear();
     }
-    match failures.into_iter().min_by_key(|(p, _)| *p) {
-        Some(first) => Err(first),
-        None => Ok(()),
+    tally
+}
+
+/// What the parallel stress-update loop of [`evaluate_stresses`] did, summed
+/// over the points, and its first failure.
+#[derive(Default)]
+#[must_use = "the stress update may have failed: call `counted`"]
+pub struct UpdateTally {
+    /// Stress updates (every material).
+    updates: u64,
+    /// Updates of a material that can yield.
+    yield_checks: u64,
+    /// Updates that returned to the yield surface.
+    return_mappings: u64,
+    /// The lowest-index point whose update failed.
+    failure: Option<(usize, ConstitutiveError)>,
+}
+
+impl UpdateTally {
+    /// Count the updates, yield checks and return mappings in `profile`
+    /// (those of a failed evaluation too: the work was done), then the
+    /// lowest-index failing point, if any.
+    pub fn counted(self, profile: &Profile) -> Result<(), (usize, ConstitutiveError)> {
+        profile.count(Work::StressUpdates, self.updates);
+        profile.count(Work::YieldChecks, self.yield_checks);
+        profile.count(Work::ReturnMappings, self.return_mappings);
+        match self.failure {
+            Some(first) => Err(first),
+            None => Ok(()),
+        }
+    }
+
+    /// Record a failure at point `p`, keeping the lowest index.
+    fn fail(&mut self, p: usize, error: ConstitutiveError) {
+        if self.failure.as_ref().is_none_or(|(q, _)| p < *q) {
+            self.failure = Some((p, error));
+        }
+    }
+
+    /// The tally of two disjoint sets of points.
+    fn merge(mut self, other: Self) -> Self {
+        self.updates += other.updates;
+        self.yield_checks += other.yield_checks;
+        self.return_mappings += other.return_mappings;
+        if let Some((p, error)) = other.failure {
+            self.fail(p, error);
+        }
+        self
     }
 }

@@ -9,7 +9,7 @@ use crate::dofs::DofMap;
 use crate::error::StepError;
 use crate::metrics::{dissipation_increment, ComplianceSource};
 use crate::model::Model;
-use crate::profile::{Profile, Stage};
+use crate::profile::{Profile, Stage, Work};
 use crate::scene::DoubleMapping;
 use crate::smoothing::{double_map, Equilibrium, MappingFrame};
 use crate::transfer::strain_and_spin;
@@ -27,7 +27,8 @@ pub struct ConvergedStresses {
 }
 
 /// The converged step's stresses and states to commit (times its nonlocal
-/// and double-mapping parts under their own stages).
+/// and double-mapping parts under their own stages, and counts the
+/// double-mapping passes).
 pub fn converged_stresses(
     model: &Model,
     setup: &StepSetup,
@@ -39,7 +40,11 @@ pub fn converged_stresses(
     let mut state = trial.state.clone();
     let kappa_bar = match nonlocal {
         Some(nl) => Some(profile.time(Stage::Nonlocal, || {
-            nl.committed(&model.particles, |p| trial.state[p].plastic_strain_eq)
+            nl.committed(
+                &model.particles,
+                |p| trial.state[p].plastic_strain_eq,
+                profile,
+            )
         })?),
         None => None,
     };
@@ -51,7 +56,7 @@ pub fn converged_stresses(
     let mut stress = trial.stress.clone();
     let mode = model.double_mapping();
     if mode != DoubleMapping::Off {
-        profile.time(Stage::DoubleMapping, || {
+        let restored = profile.time(Stage::DoubleMapping, || {
             smooth(
                 model,
                 setup,
@@ -62,6 +67,8 @@ pub fn converged_stresses(
                 &mut stress,
             )
         })?;
+        profile.count(Work::SmoothingPasses, 1);
+        profile.count(Work::ForceRestorations, u64::from(restored));
     }
     Ok(ConvergedStresses {
         stress,
@@ -72,7 +79,8 @@ pub fn converged_stresses(
 }
 
 /// Double mapping of the step's stresses (DESIGN D37–D39), with the
-/// force-restoring correction when the scene asks for it.
+/// force-restoring correction when the scene asks for it; returns whether
+/// the forces were restored.
 fn smooth(
     model: &Model,
     setup: &StepSetup,
@@ -81,7 +89,7 @@ fn smooth(
     state: &[PointState],
     kappa_bar: Option<&[f64]>,
     stress: &mut [Voigt],
-) -> Result<(), StepError> {
+) -> Result<bool, StepError> {
     let frame = MappingFrame {
         grid: &model.grid,
         bins: &setup.bins,
@@ -97,6 +105,7 @@ fn smooth(
         volume: &model.particles.volume,
         dofs,
     });
+    let restored = equilibrium.is_some();
     double_map(
         mode,
         &frame,
@@ -108,7 +117,8 @@ fn smooth(
         state,
         kappa_bar,
     )
-    .map_err(StepError::DoubleMapping)
+    .map_err(StepError::DoubleMapping)?;
+    Ok(restored)
 }
 
 /// Energies of the converged step (M5), kJ per metre run, from the

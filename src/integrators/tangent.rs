@@ -3,7 +3,7 @@
 //! cell blocks, and the sparse direct factorisation and solve (faer
 //! Cholesky or LU).
 
-use mpm_solvers::{Assembler, DirectSolver, FactorKind, SolverPolicy, SparseMatrix};
+use mpm_solvers::{Assembler, DirectSolver, FactorKind, SolverPolicy, SolverStats, SparseMatrix};
 
 use super::newton::StepSystem;
 use super::{SolverUsage, TrialStresses};
@@ -11,7 +11,7 @@ use crate::constitutive::LinearElastic;
 use crate::error::StepError;
 use crate::grid::Grid;
 use crate::model::Model;
-use crate::profile::{Profile, Stage};
+use crate::profile::{Profile, Stage, Work};
 use crate::scene::{LinearSolverChoice, Scene};
 use crate::stiffness;
 use crate::transfer::NONE;
@@ -44,12 +44,19 @@ impl Tangent {
         }
     }
 
+    /// Counters and timings of the sparse direct solver (symbolic and numeric
+    /// factorisations, Cholesky fallbacks, seconds).
+    pub fn solver_stats(&self) -> &SolverStats {
+        self.solver.stats()
+    }
+
     /// A new step: its pattern is checked at the first assembly.
     pub fn begin_step(&mut self) {
         self.pattern_current = false;
     }
 
-    /// Assemble K_T (+ M/(βΔt²) when dynamic) at `trial` (DESIGN D17, D19, D41).
+    /// Assemble K_T (+ M/(βΔt²) when dynamic) at `trial` (DESIGN D17, D19,
+    /// D41), counted in `profile` (the mass diagonal separately).
     pub fn assemble(
         &mut self,
         system: &StepSystem,
@@ -65,12 +72,17 @@ impl Tangent {
             };
             let blocks = cell_blocks(system, trial);
             let diagonal = system.mass_diagonal();
-            Ok(assembler.assemble_with_diagonal(&blocks, diagonal.as_deref())?)
+            let matrix = assembler.assemble_with_diagonal(&blocks, diagonal.as_deref())?;
+            profile.count(Work::Assemblies, 1);
+            profile.count(Work::MassDiagonals, u64::from(diagonal.is_some()));
+            Ok(matrix)
         })
     }
 
     /// Assemble and factorise the tangent, then solve K δu = R for the
-    /// correction (Cholesky when every material's tangent is symmetric).
+    /// correction (Cholesky when every material's tangent is symmetric). The
+    /// factorisations the solver did (a failed attempt too) are counted in
+    /// `profile`.
     pub fn solve(
         &mut self,
         system: &StepSystem,
@@ -81,9 +93,12 @@ impl Tangent {
     ) -> Result<Vec<f64>, StepError> {
         let matrix = self.assemble(system, trial, profile)?;
         let symmetric = self.symmetric;
+        let before = self.solver.stats().clone();
         let kind = profile.time(Stage::Factorisation, || {
             self.solver.factorize(&matrix, symmetric)
-        })?;
+        });
+        count_factorisations(&before, self.solver.stats(), profile);
+        let kind = kind?;
         match kind {
             FactorKind::Cholesky => usage.cholesky += 1,
             FactorKind::Lu => usage.lu += 1,
@@ -111,6 +126,24 @@ impl Tangent {
         self.pattern_current = true;
         Ok(())
     }
+}
+
+/// Count the symbolic and numeric factorisations the solver did between its
+/// counters `before` and `after`.
+fn count_factorisations(before: &SolverStats, after: &SolverStats, profile: &Profile) {
+    let done = |now: usize, then: usize| now.saturating_sub(then) as u64;
+    profile.count(
+        Work::SymbolicFactorisations,
+        done(after.symbolic, before.symbolic),
+    );
+    profile.count(
+        Work::FactorisationsCholesky,
+        done(after.numeric_cholesky, before.numeric_cholesky),
+    );
+    profile.count(
+        Work::FactorisationsLu,
+        done(after.numeric_lu, before.numeric_lu),
+    );
 }
 
 /// The system's element blocks: every active cell's patch stiffness (with
