@@ -86,6 +86,10 @@ pub fn execute(
     let mut runs: Vec<(f64, Vec<f64>)> = Vec::new();
     let mut last_status = String::new();
     for _ in 0..repeats.max(1) {
+        // a refused or stopped run must not be read from an earlier run's files
+        if out.exists() {
+            std::fs::remove_dir_all(&out).map_err(|e| io(&out, &e))?;
+        }
         let start = Instant::now();
         let output = Command::new(exe)
             .arg("run")
