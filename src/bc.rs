@@ -110,6 +110,44 @@ pub fn surface_shape(
     Some(grid.shape_in_cell(cell.0, cell.1, x))
 }
 
+/// The edges a pressure loads, each as (start, end) running counter-clockwise
+/// round the body (so that the outward normal is the tangent turned
+/// clockwise): a side of a `box`, or a range of a polygon's edges.
+fn loaded_edges(
+    body: &crate::scene::BodySpec,
+    spec: &crate::scene::PressureSpec,
+) -> Vec<([f64; 2], [f64; 2])> {
+    if let (Some(side), Some([lo, hi])) = (spec.side, body.rectangle) {
+        let edge = match side {
+            Side::Bottom => (lo, [hi[0], lo[1]]),
+            Side::Right => ([hi[0], lo[1]], hi),
+            Side::Top => (hi, [lo[0], hi[1]]),
+            Side::Left => ([lo[0], hi[1]], lo),
+        };
+        return vec![edge];
+    }
+    let (Some([first, last]), Some(polygon)) = (spec.edges, &body.polygon) else {
+        return Vec::new();
+    };
+    let n = polygon.len();
+    let twice_area: f64 = (0..n)
+        .map(|k| {
+            let (a, b) = (polygon[k], polygon[(k + 1) % n]);
+            a[0] * b[1] - b[0] * a[1]
+        })
+        .sum();
+    (first..=last.min(n - 1))
+        .map(|k| {
+            let (a, b) = (polygon[k], polygon[(k + 1) % n]);
+            if twice_area >= 0.0 {
+                (a, b)
+            } else {
+                (b, a)
+            }
+        })
+        .collect()
+}
+
 /// Massless boundary points carrying a follower pressure (DESIGN §8.0).
 #[derive(Clone, Debug, Default)]
 pub struct TractionPoints {
@@ -129,36 +167,33 @@ impl TractionPoints {
     pub fn from_scene(scene: &Scene) -> Self {
         let mut tp = TractionPoints::default();
         let h = scene.grid.cell_size;
-        let gauss = 0.5 / 3f64.sqrt();
         for spec in &scene.bc.pressure {
             let Some(b) = scene.body_index(spec.body.as_deref()) else {
                 continue;
             };
-            let Some([lo, hi]) = scene.body[b].rectangle else {
-                continue;
-            };
-            // start and end of the side, counter-clockwise
-            let (start, end) = match spec.side {
-                Side::Bottom => (lo, [hi[0], lo[1]]),
-                Side::Right => ([hi[0], lo[1]], hi),
-                Side::Top => (hi, [lo[0], hi[1]]),
-                Side::Left => ([lo[0], hi[1]], lo),
-            };
-            let length = ((end[0] - start[0]).powi(2) + (end[1] - start[1]).powi(2)).sqrt();
-            let segments = ((length / h) - 1e-9).ceil().max(1.0) as usize;
-            let dir = [(end[0] - start[0]) / length, (end[1] - start[1]) / length];
-            let seg = length / segments as f64;
-            for s in 0..segments {
-                for g in [0.5 - gauss, 0.5 + gauss] {
-                    let d = (s as f64 + g) * seg;
-                    tp.position
-                        .push([start[0] + d * dir[0], start[1] + d * dir[1]]);
-                    tp.tangent.push([0.5 * seg * dir[0], 0.5 * seg * dir[1]]);
-                    tp.pressure.push(spec.p);
-                }
+            for (start, end) in loaded_edges(&scene.body[b], spec) {
+                tp.add_edge(start, end, h, spec.p);
             }
         }
         tp
+    }
+
+    /// Two Gauss points per segment of the edge `start` → `end` (counter-clockwise).
+    fn add_edge(&mut self, start: [f64; 2], end: [f64; 2], h: f64, pressure: f64) {
+        let gauss = 0.5 / 3f64.sqrt();
+        let length = ((end[0] - start[0]).powi(2) + (end[1] - start[1]).powi(2)).sqrt();
+        let segments = ((length / h) - 1e-9).ceil().max(1.0) as usize;
+        let dir = [(end[0] - start[0]) / length, (end[1] - start[1]) / length];
+        let seg = length / segments as f64;
+        for s in 0..segments {
+            for g in [0.5 - gauss, 0.5 + gauss] {
+                let d = (s as f64 + g) * seg;
+                self.position
+                    .push([start[0] + d * dir[0], start[1] + d * dir[1]]);
+                self.tangent.push([0.5 * seg * dir[0], 0.5 * seg * dir[1]]);
+                self.pressure.push(pressure);
+            }
+        }
     }
 
     /// Number of traction points.

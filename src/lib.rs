@@ -50,3 +50,4 @@ pub mod smoothing;
 pub mod stiffness;
 pub mod study;
 pub mod transfer;
+pub mod volumetric;

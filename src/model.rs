@@ -185,6 +185,31 @@ impl Model {
         self.materials.iter().all(|m| m.has_symmetric_tangent())
     }
 
+    /// The stresses whose internal force (DESIGN D11) the grid receives:
+    /// `stress` itself, or with B-bar each point's mean stress replaced by its
+    /// cell's volume average ([`crate::volumetric`] B4).
+    pub fn force_stresses<'a>(
+        &self,
+        bins: &crate::transfer::ParticleBins,
+        stress: &'a [crate::constitutive::Voigt],
+    ) -> std::borrow::Cow<'a, [crate::constitutive::Voigt]> {
+        if self.b_bar() {
+            std::borrow::Cow::Owned(crate::volumetric::force_stresses(
+                bins,
+                &self.particles.volume,
+                stress,
+            ))
+        } else {
+            std::borrow::Cow::Borrowed(stress)
+        }
+    }
+
+    /// True when the scene takes each point's dilatation as its cell's
+    /// average (`[grid] volumetric = "b_bar"`, [`crate::volumetric`]).
+    pub fn b_bar(&self) -> bool {
+        self.scene.grid.volumetric == crate::scene::VolumetricTreatment::BBar
+    }
+
     /// Largest Young's modulus of the materials, kPa.
     pub fn max_youngs_modulus(&self) -> f64 {
         self.scene

@@ -197,10 +197,11 @@ pub fn restore_internal_forces(
         &volume_squared,
         &identities,
         None,
+        None,
     );
     let blocks = stiffness::system_blocks(frame.grid, frame.bins, blocks, None);
     let element_dofs = dofs.element_dofs(frame.grid, frame.bins);
-    let coupling = stiffness::patch_coupling(frame.grid);
+    let coupling = stiffness::patch_coupling(frame.grid, false);
     let assembler = Assembler::with_couplings(n, &element_dofs, coupling)?;
     let mut gram = assembler.assemble(&blocks)?;
     let max_diagonal = (0..n).map(|i| gram.get(i, i)).fold(0.0, f64::max);

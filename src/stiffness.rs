@@ -9,6 +9,7 @@ use rayon::prelude::*;
 use crate::constitutive::{Mat4, Voigt};
 use crate::grid::{Grid, ShapeAt, MAX_SUPPORT};
 use crate::transfer::ParticleBins;
+use crate::volumetric::{self, CellMeanGradients};
 
 /// Stiffness contribution V_p B_pᵀ D B_p of one particle to its cell's patch
 /// block (row-major, `dofs` = 2 × patch nodes, dof `2·place + direction`),
@@ -57,12 +58,13 @@ pub fn patch_dofs(grid: &Grid) -> usize {
 /// `Assembler::with_couplings`): in a GIMP cell patch (4 × 4 nodes) a point
 /// reaches at most 3 consecutive nodes per direction, so nodes three apart
 /// never share a point and their block entries are zero; dropping them halves
-/// the pattern. Every other element is fully coupled.
-pub fn patch_coupling(grid: &Grid) -> impl Fn(usize, usize, usize) -> bool {
+/// the pattern. Every other element is fully coupled, and so is every patch
+/// with B-bar (`b_bar`: B̄ spans the whole patch, [`crate::volumetric`]).
+pub fn patch_coupling(grid: &Grid, b_bar: bool) -> impl Fn(usize, usize, usize) -> bool {
     let side = grid.patch_side();
     let dofs = patch_dofs(grid);
     move |element_dofs, a, b| {
-        if element_dofs != dofs || side < 4 {
+        if element_dofs != dofs || side < 4 || b_bar {
             return true;
         }
         let (pa, pb) = (a / 2, b / 2);
@@ -71,7 +73,9 @@ pub fn patch_coupling(grid: &Grid) -> impl Fn(usize, usize, usize) -> bool {
 }
 
 /// Per-active-cell patch stiffness blocks Σ_{p ∈ cell} V_p B_pᵀ D_p B_p, in the
-/// order of `bins.active_cells` (deterministic: particles summed in index order).
+/// order of `bins.active_cells` (deterministic: particles summed in index
+/// order); with `b_bar` (the cells' b̄), Σ_p V_p B̄_pᵀ D_p B̄_p
+/// ([`crate::volumetric`] B3).
 pub fn cell_stiffness_blocks(
     grid: &Grid,
     bins: &ParticleBins,
@@ -79,17 +83,33 @@ pub fn cell_stiffness_blocks(
     volume: &[f64],
     tangent: &[Mat4],
     spin_sensitivity: Option<&[Voigt]>,
+    b_bar: Option<&CellMeanGradients>,
 ) -> Vec<Vec<f64>> {
     let dofs = patch_dofs(grid);
     bins.active_cells
         .par_iter()
-        .map(|&c| {
+        .enumerate()
+        .map(|(slot, &c)| {
             let mut block = vec![0.0; dofs * dofs];
+            let mut b_bar_p = Vec::new();
             for &p in bins.particles_in(c as usize) {
                 let p = p as usize;
+                let spin = spin_sensitivity.map(|s| &s[p]);
+                if let Some(means) = b_bar {
+                    volumetric::b_bar_matrix(&shapes[p], means.of_slot(slot), &mut b_bar_p);
+                    volumetric::add_particle_stiffness_b_bar(
+                        &mut block,
+                        &shapes[p],
+                        &b_bar_p,
+                        volume[p],
+                        &tangent[p],
+                        spin,
+                    );
+                    continue;
+                }
                 add_particle_stiffness(&mut block, dofs, &shapes[p], volume[p], &tangent[p]);
-                if let Some(s) = spin_sensitivity {
-                    add_spin_stiffness(&mut block, dofs, &shapes[p], volume[p], &s[p]);
+                if let Some(s) = spin {
+                    add_spin_stiffness(&mut block, dofs, &shapes[p], volume[p], s);
                 }
             }
             block
@@ -214,8 +234,15 @@ mod tests {
             assert!(fx.abs() < 1e-12 && fy.abs() < 1e-12, "{kind:?}");
             let d = crate::constitutive::LinearElastic::new(1000.0, 0.3).stiffness();
             let dofs = patch_dofs(&grid);
-            let blocks =
-                cell_stiffness_blocks(&grid, &bins, &shapes, &mass, &vec![d; pos.len()], None);
+            let blocks = cell_stiffness_blocks(
+                &grid,
+                &bins,
+                &shapes,
+                &mass,
+                &vec![d; pos.len()],
+                None,
+                None,
+            );
             for b in &blocks {
                 let scale = b.iter().fold(1.0f64, |m, v| m.max(v.abs()));
                 for i in 0..dofs {
@@ -254,7 +281,7 @@ mod tests {
                 .collect();
             let f = internal_force(&grid, &bins, &shapes, &vol, &stress);
             let blocks =
-                cell_stiffness_blocks(&grid, &bins, &shapes, &vol, &vec![d; pos.len()], None);
+                cell_stiffness_blocks(&grid, &bins, &shapes, &vol, &vec![d; pos.len()], None, None);
             let dofs = patch_dofs(&grid);
             let mut ku = vec![[0.0; 2]; grid.node_count()];
             for (block, &c) in blocks.iter().zip(&bins.active_cells) {

@@ -56,6 +56,29 @@ fn dynamic_tangent_with_mass_term_matches_finite_differences() {
     );
 }
 
+/// B-bar ([`mpm_geo::volumetric`] B3): the tangent Σ_p V_p B̄_pᵀ D B̄_p with
+/// the penalty, against the residual of the averaged-mean-stress force (B4),
+/// nearly incompressible (ν = 0.49), bilinear and GIMP (where B̄ couples the
+/// whole 4 × 4 node patch).
+#[test]
+fn b_bar_tangent_matches_finite_differences() {
+    for shapes in [
+        vec!["grid.shape_functions=\"bilinear\""],
+        vec![
+            "grid.shape_functions=\"gimp\"",
+            "grid.point_layout=\"uniform\"",
+        ],
+    ] {
+        let mut overrides = vec![
+            "solver.background_stiffness=0",
+            "grid.volumetric=\"b_bar\"",
+            "materials.soil.nu=0.49",
+        ];
+        overrides.extend(shapes);
+        fd_check("elastic/platen.toml", &overrides);
+    }
+}
+
 /// Softening plasticity with prestress and rotation: the biaxial specimen
 /// (h = 1/300 m, local) after 150 steps, past the peak with a band forming. The
 /// tangent — consistent algorithmic D_alg (DESIGN D32), the spin term of the

@@ -177,7 +177,8 @@ fn map_to_grid(model: &Model, setup: &StepSetup, t: f64, profile: &Profile) -> N
     let mass = nodal_mass(model, setup);
     profile.count(Work::ExplicitNodalMass, 1);
     let momentum = transfer::nodal_mass_weighted(grid, bins, shapes, &p.mass, &p.velocity);
-    let internal = transfer::internal_force(grid, bins, shapes, &p.volume, &p.stress);
+    let stress = model.force_stresses(bins, &p.stress);
+    let internal = transfer::internal_force(grid, bins, shapes, &p.volume, &stress);
     let mut external = external_force(model, setup, t);
     let no_increment = vec![[0.0; 2]; grid.node_count()];
     model
@@ -298,12 +299,11 @@ fn stress_update(
 ) -> Result<TrialStresses, StepError> {
     let mut trial = TrialStresses::default();
     evaluate_stresses(
-        &model.particles,
-        &model.materials,
-        &setup.shapes,
+        model,
+        setup,
         du,
         nonlocal.map(|n| n.strength()),
-        None,
+        false,
         &mut trial,
     )
     .counted(profile)

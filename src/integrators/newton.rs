@@ -185,16 +185,15 @@ impl StepSystem<'_> {
         // included when the tangent is unsymmetric anyway (LU); symmetric
         // (Cholesky) scenes omit this unsymmetric geometric term and converge
         // linearly under large rotations.
-        let spin_compliances = (!model.symmetric_tangent()).then_some(model.compliances.as_slice());
+        let spin_term = !model.symmetric_tangent();
         profile
             .time(Stage::StressUpdate, || {
                 evaluate_stresses(
-                    &model.particles,
-                    &model.materials,
-                    &self.setup.shapes,
+                    model,
+                    self.setup,
                     du,
                     nonlocal.map(|n| n.strength()),
-                    spin_compliances,
+                    spin_term,
                     trial,
                 )
                 .counted(profile)
@@ -232,7 +231,13 @@ impl StepSystem<'_> {
         let model = self.model;
         let (grid, p, bins) = (&model.grid, &model.particles, &self.setup.bins);
         let mut internal = profile.time(Stage::P2G, || {
-            transfer::internal_force(grid, bins, &self.setup.shapes, &p.volume, &trial.stress)
+            transfer::internal_force(
+                grid,
+                bins,
+                &self.setup.shapes,
+                &p.volume,
+                &model.force_stresses(bins, &trial.stress),
+            )
         });
         crate::stiffness::add_reached_cells_force(
             grid,

@@ -2,18 +2,17 @@
 //! point, Δε and ω from the nodal displacement increment (DESIGN D12), Jaumann
 //! rotation of the stored stress (D13), and the constitutive update (§5).
 
-use std::sync::Arc;
-
 use rayon::prelude::*;
 
 use super::regularisation::NonlocalStrength;
+use super::StepSetup;
 use crate::constitutive::{
-    mat4_mul_vec, ConstitutiveError, ConstitutiveModel, Mat4, PointState, StrengthVariable, Voigt,
+    mat4_mul_vec, ConstitutiveError, Mat4, PointState, StrengthVariable, Voigt,
 };
-use crate::grid::ShapeAt;
-use crate::particles::Particles;
+use crate::model::Model;
 use crate::profile::{Profile, Work};
 use crate::transfer;
+use crate::volumetric;
 
 /// Trial stresses, states and tangents of all material points for a given
 /// displacement increment (not yet committed).
@@ -32,47 +31,73 @@ pub struct TrialStresses {
     /// dσ_{n+1}/dω = D_alg C g (see `stiffness::add_spin_stiffness`); filled only
     /// when compliances are passed (unsymmetric tangents).
     pub spin_sensitivity: Vec<Voigt>,
+    /// B-bar: ⅓ (θ̄_c − θ_p) per point, added to the normal strain components
+    /// ([`volumetric`] B2); empty for the standard treatment.
+    pub volumetric_correction: Vec<f64>,
 }
 
-/// Evaluate the stress update at every material point for the nodal
-/// increment `du`. `strength` (nonlocal runs) gives the variable each point's
-/// strength is evaluated at (D36); local runs pass `None`. Returns what the
+impl TrialStresses {
+    /// The strain increment Δε the stress update of point `p` was given:
+    /// from its gradient, with the B-bar correction when there is one.
+    pub fn strain_increment(&self, p: usize) -> Voigt {
+        let strain = transfer::strain_and_spin(&self.gradient[p]).0;
+        match self.volumetric_correction.get(p) {
+            Some(&c) => volumetric::corrected_strain(&strain, c),
+            None => strain,
+        }
+    }
+}
+
+/// Evaluate the stress update at every material point of `model` for the
+/// nodal increment `du`, with the shape functions and bins of `setup`.
+/// `strength` (nonlocal runs) gives the variable each point's strength is
+/// evaluated at (D36); local runs pass `None`. With `spin_term`, dσ/dω is
+/// kept for the tangent's spin term. With B-bar (`[grid] volumetric`), each
+/// point's dilatation is its cell's average ([`volumetric`] B1–B2). Returns what the
 /// updates did: [`UpdateTally::counted`] records it in the profile and gives
 /// the lowest-index failing point, if any (deterministic whatever the thread
 /// count).
 pub fn evaluate_stresses(
-    particles: &Particles,
-    materials: &[Arc<dyn ConstitutiveModel>],
-    shapes: &[ShapeAt],
+    model: &Model,
+    setup: &StepSetup,
     du: &[[f64; 2]],
     strength: Option<NonlocalStrength<'_>>,
-    compliances: Option<&[Mat4]>,
+    spin_term: bool,
     trial: &mut TrialStresses,
 ) -> UpdateTally {
+    let (particles, materials, shapes) = (&model.particles, &model.materials, &setup.shapes);
+    let compliances = spin_term.then_some(model.compliances.as_slice());
+    let b_bar = model.b_bar().then_some(&setup.bins);
     let n = particles.len();
     trial.stress.resize(n, [0.0; 4]);
     trial.state.resize(n, PointState::default());
-    trial.gradient.resize(n, [0.0; 4]);
     trial.tangent.resize(n, [[0.0; 4]; 4]);
     trial.rotated.resize(n, [0.0; 4]);
+    trial.gradient.clear();
+    trial
+        .gradient
+        .par_extend(shapes.par_iter().map(|s| transfer::gradient(s, du)));
+    // B-bar: the cell-averaged dilatation of every point ([B1]–[B2])
+    trial.volumetric_correction = match b_bar {
+        Some(bins) => volumetric::dilatation_corrections(bins, &particles.volume, &trial.gradient),
+        None => Vec::new(),
+    };
+    let (gradient, correction) = (&trial.gradient, &trial.volumetric_correction);
     let tally = trial
         .stress
         .par_iter_mut()
         .zip(trial.state.par_iter_mut())
-        .zip(
-            trial
-                .gradient
-                .par_iter_mut()
-                .zip(trial.tangent.par_iter_mut()),
-        )
+        .zip(trial.tangent.par_iter_mut())
         .zip(trial.rotated.par_iter_mut())
         .enumerate()
         .fold(
             UpdateTally::default,
-            |mut tally, (p, (((stress, state), (grad, tangent)), rotated_out))| {
-                let l = transfer::gradient(&shapes[p], du);
-                *grad = l;
-                let (strain_increment, spin) = transfer::strain_and_spin(&l);
+            |mut tally, (p, (((stress, state), tangent), rotated_out))| {
+                let (strain, spin) = transfer::strain_and_spin(&gradient[p]);
+                let strain_increment = match correction.get(p) {
+                    Some(&c) => volumetric::corrected_strain(&strain, c),
+                    None => strain,
+                };
                 let rotated = transfer::rotate_stress(&particles.stress[p], spin);
                 *rotated_out = rotated;
                 let material = &materials[particles.material[p] as usize];

@@ -12,7 +12,6 @@ use crate::model::Model;
 use crate::profile::{Profile, Stage, Work};
 use crate::scene::DoubleMapping;
 use crate::smoothing::{double_map, Equilibrium, MappingFrame};
-use crate::transfer::strain_and_spin;
 
 /// Stresses, states and energies of a converged step, ready to commit.
 pub struct ConvergedStresses {
@@ -123,18 +122,15 @@ fn smooth(
 
 /// Energies of the converged step (M5), kJ per metre run, from the
 /// constitutive stresses before double mapping (Voigt dot products,
-/// engineering shear), with one strain increment Δε per point:
+/// engineering shear), with one strain increment Δε per point (the one its
+/// stress update was given, B-bar included):
 /// - internal work Σ_p V_p(n) · ½(σ_p(n+1) + σ_p^R(n)) · Δε_p (elastic
 ///   energy stored plus dissipation);
 /// - plastic dissipation (DESIGN D43) Σ_p V_p(n) · ½(σ_p(n+1) + σ_p^R(n)) · Δε^p_p
 ///   with Δε^p = Δε − C(σ(n+1) − σ^R(n)); elastic materials contribute nothing.
 fn step_energies(model: &Model, trial: &TrialStresses) -> (f64, f64) {
     let p = &model.particles;
-    let strain: Vec<Voigt> = trial
-        .gradient
-        .iter()
-        .map(|l| strain_and_spin(l).0)
-        .collect();
+    let strain: Vec<Voigt> = (0..p.len()).map(|i| trial.strain_increment(i)).collect();
     let internal_work = (0..p.len())
         .map(|i| {
             let (now, before) = (&trial.stress[i], &trial.rotated[i]);

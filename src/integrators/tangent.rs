@@ -15,6 +15,7 @@ use crate::profile::{Profile, Stage, Work};
 use crate::scene::{LinearSolverChoice, Scene};
 use crate::stiffness;
 use crate::transfer::NONE;
+use crate::volumetric::CellMeanGradients;
 
 /// The tangent of the implicit integrator and its caches.
 pub struct Tangent {
@@ -119,7 +120,7 @@ impl Tangent {
         let same =
             matches!(&self.pattern, Some((key, a)) if *key == element_dofs && a.n_dofs() == n);
         if !same {
-            let coupling = stiffness::patch_coupling(grid);
+            let coupling = stiffness::patch_coupling(grid, system.model.b_bar());
             let assembler = Assembler::with_couplings(n, &element_dofs, coupling)?;
             self.pattern = Some((element_dofs, assembler));
         }
@@ -152,6 +153,10 @@ fn count_factorisations(before: &SolverStats, after: &SolverStats, profile: &Pro
 fn cell_blocks(system: &StepSystem, trial: &TrialStresses) -> Vec<Vec<f64>> {
     let (model, setup) = (system.model, system.setup);
     let spin = (!trial.spin_sensitivity.is_empty()).then_some(trial.spin_sensitivity.as_slice());
+    let places = model.grid.patch_side() * model.grid.patch_side();
+    let b_bar = model.b_bar().then(|| {
+        CellMeanGradients::new(&setup.bins, &setup.shapes, &model.particles.volume, places)
+    });
     let mut blocks = stiffness::cell_stiffness_blocks(
         &model.grid,
         &setup.bins,
@@ -159,6 +164,7 @@ fn cell_blocks(system: &StepSystem, trial: &TrialStresses) -> Vec<Vec<f64>> {
         &model.particles.volume,
         &trial.tangent,
         spin,
+        b_bar.as_ref(),
     );
     let dofs = stiffness::patch_dofs(&model.grid);
     model

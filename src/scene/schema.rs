@@ -174,6 +174,24 @@ pub struct GridSpec {
     /// body or followed by a monitor still stop the run).
     #[serde(default)]
     pub lost_points: LostPointPolicy,
+    /// `standard` (each point's own strain) or `b_bar` (each point's
+    /// dilatation replaced by its cell's volume average: the volumetric
+    /// locking remedy of [`crate::volumetric`], for ν → ½ and isochoric
+    /// plastic flow; both integrators).
+    #[serde(default)]
+    pub volumetric: VolumetricTreatment,
+}
+
+/// `[grid] volumetric`: how the volumetric strain of a material point is taken.
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum VolumetricTreatment {
+    /// The point's own strain (full quadrature: locks as ν → ½).
+    #[default]
+    Standard,
+    /// B-bar: the cell's volume-averaged dilatation at every point of the
+    /// cell, with its consistent tangent ([`crate::volumetric`] B1–B4).
+    BBar,
 }
 
 /// `[grid] lost_points`: the treatment of material points that leave the grid.
@@ -530,15 +548,21 @@ pub enum Side {
     Top,
 }
 
-/// `[[bc.pressure]]`: a follower pressure on a side of a rectangular body (DESIGN §8.0 traction points).
+/// `[[bc.pressure]]`: a follower pressure on a side of a rectangular body, or
+/// on edges of a polygon body (DESIGN §8.0 traction points).
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct PressureSpec {
     /// Body name (default: the first body).
     #[serde(default)]
     pub body: Option<String>,
-    /// Loaded side.
-    pub side: Side,
+    /// Loaded side of a `box` body.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub side: Option<Side>,
+    /// Loaded edges `[first, last]` (inclusive) of a `polygon` body: edge k
+    /// joins vertex k to vertex k + 1 (the last vertex to the first).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub edges: Option<[usize; 2]>,
     /// Pressure, kPa (positive pushes into the body).
     pub p: f64,
 }

@@ -276,6 +276,14 @@ impl Scene {
              (the point domains must tile the cells)"
                 .to_string(),
         );
+        check(
+            e,
+            "grid.volumetric",
+            g.volumetric == VolumetricTreatment::Standard || !self.smoothing.restore_forces,
+            "volumetric = \"b_bar\" cannot be combined with smoothing.restore_forces = true \
+             (the force-restoring correction uses the standard strain operator)"
+                .to_string(),
+        );
         if e.len() == before {
             for (c, axis) in ["x", "y"].iter().enumerate() {
                 check(
@@ -558,12 +566,7 @@ impl Scene {
                     field: format!("{f}.body"),
                     message: format!("no body named `{}`", p.body.clone().unwrap_or_default()),
                 }),
-                Some(b) => check(
-                    e,
-                    format!("{f}.body"),
-                    self.body[b].rectangle.is_some(),
-                    "pressure is supported on sides of `box` bodies only",
-                ),
+                Some(b) => self.validate_pressure_place(e, &f, p, &self.body[b]),
             }
             check(e, format!("{f}.p"), p.p.is_finite(), "must be finite");
         }
@@ -599,6 +602,45 @@ impl Scene {
                 r.velocity.iter().all(|v| v.is_finite()),
                 "must be finite",
             );
+        }
+    }
+
+    /// A pressure names a side of a `box` body or edges of a `polygon` body.
+    fn validate_pressure_place(
+        &self,
+        e: &mut Vec<FieldError>,
+        field: &str,
+        p: &PressureSpec,
+        body: &BodySpec,
+    ) {
+        match (p.side, p.edges, &body.polygon) {
+            (Some(_), None, _) => check(
+                e,
+                format!("{field}.side"),
+                body.rectangle.is_some(),
+                "`side` needs a `box` body (use `edges` on a polygon body)",
+            ),
+            (None, Some([first, last]), Some(polygon)) => check(
+                e,
+                format!("{field}.edges"),
+                first <= last && last < polygon.len(),
+                format!(
+                    "[{first}, {last}] must satisfy first <= last < {} (the polygon's edge count)",
+                    polygon.len()
+                ),
+            ),
+            (None, Some(_), None) => check(
+                e,
+                format!("{field}.edges"),
+                false,
+                "`edges` needs a `polygon` body (use `side` on a box body)",
+            ),
+            _ => check(
+                e,
+                field,
+                false,
+                "give exactly one of `side` (box body) or `edges` (polygon body)",
+            ),
         }
     }
 
