@@ -6,7 +6,9 @@
 use std::sync::Arc;
 
 use crate::bc::{Constraints, DrivenPoints, TractionPoints};
-use crate::constitutive::{invert4, ConstitutiveModel, LinearElastic, Mat4};
+use crate::constitutive::{
+    invert4, ConstitutiveModel, Hmc, LinearElastic, Mat4, ParameterProblem, VonMises,
+};
 use crate::error::StepError;
 use crate::grid::{Grid, ShapeFunctions};
 use crate::particles::Particles;
@@ -95,19 +97,19 @@ pub fn build_material(
     name: &str,
     spec: &MaterialSpec,
 ) -> Result<Arc<dyn ConstitutiveModel>, Vec<FieldError>> {
+    let named = |problems: Vec<ParameterProblem>| {
+        problems
+            .into_iter()
+            .map(|problem| FieldError {
+                field: format!("materials.{name}.{}", problem.key),
+                message: problem.message,
+            })
+            .collect::<Vec<_>>()
+    };
     Ok(match spec {
         MaterialSpec::LinearElastic(e) => Arc::new(LinearElastic::new(e.youngs_modulus, e.nu)),
-        MaterialSpec::Hmc(h) => {
-            Arc::new(crate::constitutive::hmc::Hmc::new(*h).map_err(|problems| {
-                problems
-                    .into_iter()
-                    .map(|problem| FieldError {
-                        field: format!("materials.{name}.{}", problem.key),
-                        message: problem.message,
-                    })
-                    .collect::<Vec<_>>()
-            })?)
-        }
+        MaterialSpec::Hmc(h) => Arc::new(Hmc::new(*h).map_err(named)?),
+        MaterialSpec::VonMises(v) => Arc::new(VonMises::new(*v).map_err(named)?),
     })
 }
 

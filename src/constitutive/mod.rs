@@ -13,12 +13,14 @@ pub mod elastic;
 pub mod flow_rule;
 pub mod hmc;
 pub mod softening;
+pub mod von_mises;
 pub mod yield_surface;
 
 use std::fmt::Debug;
 
 pub use elastic::LinearElastic;
 pub use hmc::{Hmc, HmcParameters};
+pub use von_mises::{VonMises, VonMisesParameters};
 
 /// Voigt 4-vector `[xx, yy, zz, xy]` (DESIGN D2).
 pub type Voigt = [f64; 4];
@@ -82,7 +84,7 @@ pub struct ParameterProblem {
 
 /// A constitutive law as seen by the MPM engine.
 pub trait ConstitutiveModel: Send + Sync + Debug {
-    /// Short model name (`"linear_elastic"`, `"hmc"`), written to `run.json`.
+    /// Short model name (`"linear_elastic"`, `"hmc"`, `"von_mises"`), written to `run.json`.
     fn name(&self) -> &'static str;
 
     /// Elastic stiffness D (DESIGN D22), kPa.

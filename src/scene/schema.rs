@@ -299,7 +299,14 @@ pub enum MaterialSpec {
     /// Hyperbolic Mohr–Coulomb with exponential softening (paper eq. 3–5, DESIGN §5),
     /// keys named as in the paper's Table 1.
     Hmc(crate::constitutive::hmc::HmcParameters),
+    /// Von Mises elastic–perfectly plastic with undrained strength `c` (yield when
+    /// √J₂ > c; Tresca's limit loads in plane strain, DESIGN §8.4).
+    VonMises(VonMisesSpec),
 }
+
+/// Parameters of `model = "von_mises"`: `E` (kPa), `nu`, `density` (t/m³), `c` (kPa);
+/// unknown keys are refused.
+pub type VonMisesSpec = crate::constitutive::von_mises::VonMisesParameters;
 
 /// Parameters of `model = "linear_elastic"`.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
@@ -320,6 +327,7 @@ impl MaterialSpec {
         match self {
             MaterialSpec::LinearElastic(e) => e.density,
             MaterialSpec::Hmc(h) => h.density,
+            MaterialSpec::VonMises(v) => v.density,
         }
     }
 
@@ -328,6 +336,7 @@ impl MaterialSpec {
         match self {
             MaterialSpec::LinearElastic(e) => e.youngs_modulus,
             MaterialSpec::Hmc(h) => h.youngs_modulus,
+            MaterialSpec::VonMises(v) => v.youngs_modulus,
         }
     }
 
@@ -336,6 +345,7 @@ impl MaterialSpec {
         match self {
             MaterialSpec::LinearElastic(e) => e.nu,
             MaterialSpec::Hmc(h) => h.poisson_ratio,
+            MaterialSpec::VonMises(v) => v.poisson_ratio,
         }
     }
 }

@@ -87,3 +87,57 @@ fn polygon_point_test() {
     assert!(polygon_contains(&tri, [0.2, 0.2]));
     assert!(!polygon_contains(&tri, [0.6, 0.6]));
 }
+
+/// `model = "von_mises"` loads and builds; c = −1 is refused naming `materials.soil.c`; an unknown
+/// key is refused naming the key (deny_unknown_fields).
+#[test]
+fn von_mises_material_loads_and_bad_keys_are_named() {
+    let scene = MINIMAL.replace(
+        "model = \"linear_elastic\"",
+        "model = \"von_mises\"\n        c = 50.0",
+    );
+    let s = Scene::from_str_with_overrides(&scene, "t", &[]).unwrap();
+    let spec = &s.materials["soil"];
+    assert_eq!(
+        spec,
+        &MaterialSpec::VonMises(VonMisesSpec {
+            youngs_modulus: 1000.0,
+            poisson_ratio: 0.3,
+            density: 2.0,
+            undrained_strength: 50.0,
+        })
+    );
+    assert_eq!(
+        (spec.density(), spec.youngs_modulus(), spec.poisson_ratio()),
+        (2.0, 1000.0, 0.3)
+    );
+    let law = crate::model::build_material("soil", spec).unwrap();
+    assert_eq!(law.name(), "von_mises");
+    assert!(law.has_symmetric_tangent() && !law.is_elastic() && !law.can_soften());
+
+    let e = Scene::from_str_with_overrides(&scene.replace("c = 50.0", "c = -1.0"), "t", &[])
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("materials.soil.c") && e.contains("c > 0"), "{e}");
+    let e = Scene::from_str_with_overrides(&scene, "t", &["materials.soil.E=0.0".into()])
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("materials.soil.E"), "{e}");
+
+    let e = Scene::from_str_with_overrides(
+        &scene.replace("c = 50.0", "c = 50.0\n        cu = 50.0"),
+        "t",
+        &[],
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("cu"), "{e}");
+    let e = Scene::from_str_with_overrides(
+        &scene.replace("c = 50.0", "c = 50.0\n        phi = 30.0"),
+        "t",
+        &[],
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("phi"), "{e}");
+}

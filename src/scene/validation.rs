@@ -52,6 +52,12 @@ impl MaterialSpec {
                     message: problem.message,
                 }));
             }
+            MaterialSpec::VonMises(v) => {
+                errors.extend(v.validate().into_iter().map(|problem| FieldError {
+                    field: format!("{prefix}.{}", problem.key),
+                    message: problem.message,
+                }));
+            }
         }
     }
 }
