@@ -1,16 +1,56 @@
-//! Assembly, symbolic + numeric factorisation and solve of the oedometer
-//! column's tangent (issue 3 bench `solve`) at ~10k and ~100k unknowns,
-//! Cholesky vs LU (faer, single-threaded factorisation); at ~10k also with GIMP
-//! shape functions (`10k_gimp`: each point reaches up to 3 × 3 nodes, so the
-//! tangent couples nodes up to two apart and the factors are denser).
+//! The implicit linear system (issue 3 bench `solve`, issue 13): assembly of
+//! the tangent and faer's sparse factorisations, on the oedometer column's
+//! tangent at ~10k and ~100k unknowns (bilinear), at ~10k with GIMP shape
+//! functions (`10k_gimp`: each point reaches up to 3 × 3 nodes, so the tangent
+//! couples nodes up to two apart and the factors are denser), and on the
+//! first-step tangent of the finest nonlocal biaxial mesh
+//! (`biaxial_h1000`: `validation/biaxial/nonlocal_h1000.toml`, GIMP, Newmark
+//! mass term). Factorisation is single-threaded (`Par::Seq`, as in a run).
+//!
+//! Group `assembly`, each stage of building K on its own:
+//! * `blocks`: the per-cell tangent blocks Σ V_p B_pᵀ D B_p (rayon, elastic D
+//!   at every point) plus the background-stiffness elements;
+//! * `pattern`: the CSC pattern and scatter map from the element dof lists
+//!   (`Assembler::with_couplings`, once per step when the active cells change);
+//! * `scatter`: blocks → sparse matrix (`Assembler::assemble`, every Newton
+//!   iteration);
+//! * `linearize`: the whole `Simulation::linearize` (stress update at a zero
+//!   increment, blocks, assembly, residual).
+//!
+//! Group `solve`, for `cholesky` and `lu` (`DirectSolver` with a fixed
+//! policy):
+//! * `{f}_symbolic`: the symbolic factorisation alone (AMD / COLAMD ordering,
+//!   elimination tree, scratch), read from the solver's own timer
+//!   (`SolverStats::symbolic_seconds`) around a fresh solver's `factorize`;
+//! * `{f}_symbolic_numeric`: a fresh solver's `factorize`, i.e. symbolic +
+//!   numeric (no reuse);
+//! * `{f}_numeric`: `factorize` again on the same pattern: numeric only (the
+//!   symbolic factorisation, factor storage and workspace reused, as every
+//!   Newton iteration does while the pattern holds);
+//! * `{f}_solve`: one forward/back substitution.
+//!
+//! Both groups sample flat (10 samples of equal iteration counts), so that the
+//! 100k factorisations finish in seconds; `{f}_symbolic` pays a whole
+//! factorisation per iteration but reports only its symbolic part.
+//! The LU numeric rows include `DirectSolver`'s singularity probe (one
+//! mat-vec and one solve), which the engine always pays.
 //! Run: `cargo bench --bench solve`.
 
 use std::path::PathBuf;
+use std::time::Duration;
 
-use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
+use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, SamplingMode};
+use mpm_geo::dofs::DofMap;
+use mpm_geo::integrators::tangent::background_block;
+use mpm_geo::integrators::StepSetup;
 use mpm_geo::scene::Scene;
 use mpm_geo::simulation::Simulation;
-use mpm_solvers::{DirectSolver, SolverPolicy};
+use mpm_geo::stiffness;
+use mpm_solvers::{Assembler, DirectSolver, SolverPolicy};
+
+fn manifest(path: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(path)
+}
 
 /// The oedometer scene widened to `nx` × `ny` cells of 0.01 m, with GIMP
 /// shape functions when `gimp`.
@@ -27,29 +67,108 @@ fn column(nx: usize, ny: usize, gimp: bool) -> Simulation {
         overrides.push("grid.shape_functions=\"gimp\"".into());
         overrides.push("grid.point_layout=\"uniform\"".into());
     }
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("validation/elastic/oedometer.toml");
+    let path = manifest("validation/elastic/oedometer.toml");
     Simulation::new(Scene::load(&path, &overrides).expect("scene")).expect("setup")
+}
+
+/// The finest nonlocal biaxial mesh (h = 1 mm) at its initial state.
+fn biaxial_h1000() -> Simulation {
+    let path = manifest("validation/biaxial/nonlocal_h1000.toml");
+    Simulation::new(Scene::load(&path, &[]).expect("scene")).expect("setup")
+}
+
+/// The matrices: label and simulation at its first step.
+fn cases() -> Vec<(&'static str, Simulation)> {
+    vec![
+        ("10k", column(50, 100, false)),
+        ("10k_gimp", column(50, 100, true)),
+        ("100k", column(158, 316, false)),
+        ("biaxial_h1000", biaxial_h1000()),
+    ]
+}
+
+fn bench_assembly(c: &mut Criterion) {
+    let mut group = c.benchmark_group("assembly");
+    group.sample_size(10);
+    group.sampling_mode(SamplingMode::Flat);
+    group.warm_up_time(Duration::from_secs(1));
+    group.measurement_time(Duration::from_secs(2));
+    for (label, mut sim) in cases() {
+        let model = &sim.model;
+        let grid = &model.grid;
+        let setup = StepSetup::new(model).expect("setup");
+        let dofs = DofMap::new(&setup.bins, &model.constraints);
+        let element_dofs = dofs.element_dofs(grid, &setup.bins);
+        let tangent: Vec<_> = model
+            .particles
+            .material
+            .iter()
+            .map(|&m| model.materials[m as usize].elastic_stiffness())
+            .collect();
+        let background = background_block(&model.scene, grid);
+        let blocks = || {
+            let cells = stiffness::cell_stiffness_blocks(
+                grid,
+                &setup.bins,
+                &setup.shapes,
+                &model.particles.volume,
+                &tangent,
+                None,
+            );
+            stiffness::system_blocks(grid, &setup.bins, cells, Some(&background))
+        };
+        let pattern = || {
+            Assembler::with_couplings(dofs.n_free, &element_dofs, stiffness::patch_coupling(grid))
+                .expect("pattern")
+        };
+        group.bench_function(BenchmarkId::new("blocks", label), |b| b.iter(blocks));
+        group.bench_function(BenchmarkId::new("pattern", label), |b| b.iter(pattern));
+        let (element_blocks, assembler) = (blocks(), pattern());
+        group.bench_function(BenchmarkId::new("scatter", label), |b| {
+            b.iter(|| assembler.assemble(&element_blocks).expect("assemble"))
+        });
+        println!(
+            "assembly/{label}: {} points, {} active + {} reached cells, {} elements, {} unknowns, nnz {}",
+            model.particles.len(),
+            setup.bins.active_cells.len(),
+            setup.bins.reached_cells.len(),
+            element_dofs.len(),
+            dofs.n_free,
+            assembler.nnz()
+        );
+        let zeros = vec![0.0; dofs.n_free];
+        group.bench_function(BenchmarkId::new("linearize", label), |b| {
+            b.iter(|| sim.linearize(&zeros).expect("linearize"))
+        });
+    }
+    group.finish();
 }
 
 fn bench_solve(c: &mut Criterion) {
     let mut group = c.benchmark_group("solve");
     group.sample_size(10);
-    for (label, nx, ny, gimp) in [
-        ("10k", 50usize, 100usize, false),
-        ("10k_gimp", 50, 100, true),
-        ("100k", 158, 316, false),
-    ] {
-        let mut sim = column(nx, ny, gimp);
+    group.sampling_mode(SamplingMode::Flat);
+    group.warm_up_time(Duration::from_secs(1));
+    group.measurement_time(Duration::from_secs(2));
+    for (label, mut sim) in cases() {
         let n = sim.unknowns().expect("unknowns");
         let zeros = vec![0.0; n];
-        group.bench_function(BenchmarkId::new("linearize_and_assemble", label), |b| {
-            b.iter(|| sim.linearize(&zeros).expect("linearize"))
-        });
         let (rhs, k) = sim.linearize(&zeros).expect("linearize");
         for (name, policy) in [
             ("cholesky", SolverPolicy::Cholesky),
             ("lu", SolverPolicy::Lu),
         ] {
+            group.bench_function(BenchmarkId::new(format!("{name}_symbolic"), label), |b| {
+                b.iter_custom(|iters| {
+                    let mut total = Duration::ZERO;
+                    for _ in 0..iters {
+                        let mut solver = DirectSolver::new(policy);
+                        solver.factorize(&k, true).expect("factorize");
+                        total += Duration::from_secs_f64(solver.stats().symbolic_seconds);
+                    }
+                    total
+                })
+            });
             group.bench_function(
                 BenchmarkId::new(format!("{name}_symbolic_numeric"), label),
                 |b| {
@@ -60,7 +179,12 @@ fn bench_solve(c: &mut Criterion) {
                 },
             );
             let mut solver = DirectSolver::new(policy);
-            solver.factorize(&k, true).expect("factorize");
+            let kind = solver.factorize(&k, true).expect("factorize");
+            assert_eq!(
+                solver.stats().cholesky_fallbacks,
+                0,
+                "{label}: K is not positive definite"
+            );
             group.bench_function(BenchmarkId::new(format!("{name}_numeric"), label), |b| {
                 b.iter(|| solver.factorize(&k, true).expect("refactorize"))
             });
@@ -71,11 +195,21 @@ fn bench_solve(c: &mut Criterion) {
                     x
                 })
             });
+            let stats = solver.stats();
+            println!(
+                "solve/{label}/{name}: {kind:?}; {} symbolic, {} numeric in the solver's timers: \
+                 symbolic {:.3} s, numeric {:.3} s, LU probe {:.3} s in total",
+                stats.symbolic,
+                stats.numeric,
+                stats.symbolic_seconds,
+                stats.numeric_seconds,
+                stats.probe_seconds
+            );
         }
         println!("solve/{label}: {n} unknowns, nnz {}", k.nnz());
     }
     group.finish();
 }
 
-criterion_group!(benches, bench_solve);
+criterion_group!(benches, bench_assembly, bench_solve);
 criterion_main!(benches);

@@ -2,11 +2,20 @@
 //! 100k material points (2×2 per cell), serial (1-thread rayon pool) and
 //! rayon (all threads); `gimp_*`: the same with GIMP shape functions, points
 //! on sub-cell centres moved by up to ±0.05 h so that domains cross cell
-//! edges (up to 3 × 3 nodes per point). Run: `cargo bench --bench transfer`.
+//! edges (up to 3 × 3 nodes per point). Group `transfer_stages` times the
+//! three parts of that step on their own, with rayon on all threads (as a run
+//! does): `shapes` (shape functions and gradients at every point, and the
+//! binning of points by cell), `p2g` (nodal mass, momentum and internal
+//! force) and `g2p` (velocity and velocity gradient at every point).
+//! Run: `cargo bench --bench transfer`.
+
+use std::time::Duration;
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
+use mpm_geo::grid::ShapeAt;
 use mpm_geo::grid::{Grid, ShapeFunctions};
 use mpm_geo::transfer::{self, ParticleBins};
+use rayon::prelude::*;
 
 struct Cloud {
     grid: Grid,
@@ -62,14 +71,19 @@ fn cloud(particles: usize, gimp: bool) -> Cloud {
     }
 }
 
-/// One step's transfers: shapes + binning, P2G of mass, momentum and internal
-/// force, G2P of velocity and its gradient.
-fn p2g_g2p(c: &Cloud) -> f64 {
+/// Shape functions at every point and the points binned by cell.
+fn shapes(c: &Cloud) -> (Vec<ShapeAt>, ParticleBins) {
     let shapes = transfer::shapes_at(&c.grid, &c.position).expect("inside");
     let bins = ParticleBins::new(&c.grid, &shapes);
-    let mass = transfer::nodal_mass(&c.grid, &bins, &shapes, &c.mass);
-    let momentum = transfer::nodal_mass_weighted(&c.grid, &bins, &shapes, &c.mass, &c.velocity);
-    let force = transfer::internal_force(&c.grid, &bins, &shapes, &c.volume, &c.stress);
+    (shapes, bins)
+}
+
+/// P2G of mass, momentum and internal force; returns the nodal velocity and
+/// the internal force.
+fn p2g(c: &Cloud, shapes: &[ShapeAt], bins: &ParticleBins) -> (Vec<[f64; 2]>, Vec<[f64; 2]>) {
+    let mass = transfer::nodal_mass(&c.grid, bins, shapes, &c.mass);
+    let momentum = transfer::nodal_mass_weighted(&c.grid, bins, shapes, &c.mass, &c.velocity);
+    let force = transfer::internal_force(&c.grid, bins, shapes, &c.volume, &c.stress);
     let v: Vec<[f64; 2]> = momentum
         .iter()
         .zip(&mass)
@@ -81,21 +95,34 @@ fn p2g_g2p(c: &Cloud) -> f64 {
             }
         })
         .collect();
-    use rayon::prelude::*;
-    let sum: f64 = shapes
+    (v, force)
+}
+
+/// G2P of the velocity and its gradient (summed, so nothing is optimised away).
+fn g2p(shapes: &[ShapeAt], v: &[[f64; 2]]) -> f64 {
+    shapes
         .par_iter()
         .map(|s| {
-            let u = transfer::interpolate(s, &v);
-            let l = transfer::gradient(s, &v);
+            let u = transfer::interpolate(s, v);
+            let l = transfer::gradient(s, v);
             u[0] + l[0] + l[3]
         })
-        .sum();
-    sum + force[0][0]
+        .sum()
+}
+
+/// One step's transfers: shapes + binning, P2G of mass, momentum and internal
+/// force, G2P of velocity and its gradient.
+fn p2g_g2p(c: &Cloud) -> f64 {
+    let (shapes, bins) = shapes(c);
+    let (v, force) = p2g(c, &shapes, &bins);
+    g2p(&shapes, &v) + force[0][0]
 }
 
 fn bench_transfer(c: &mut Criterion) {
     let mut group = c.benchmark_group("transfer");
     group.sample_size(20);
+    group.warm_up_time(Duration::from_secs(1));
+    group.measurement_time(Duration::from_secs(3));
     let serial = rayon::ThreadPoolBuilder::new()
         .num_threads(1)
         .build()
@@ -118,5 +145,30 @@ fn bench_transfer(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, bench_transfer);
+fn bench_stages(c: &mut Criterion) {
+    let mut group = c.benchmark_group("transfer_stages");
+    group.sample_size(20);
+    group.warm_up_time(Duration::from_secs(1));
+    group.measurement_time(Duration::from_secs(2));
+    for n in [10_000usize, 100_000] {
+        for (prefix, gimp) in [("", false), ("gimp_", true)] {
+            let cloud = cloud(n, gimp);
+            group.throughput(Throughput::Elements(cloud.position.len() as u64));
+            group.bench_function(BenchmarkId::new(format!("{prefix}shapes"), n), |b| {
+                b.iter(|| shapes(&cloud))
+            });
+            let (sh, bins) = shapes(&cloud);
+            group.bench_function(BenchmarkId::new(format!("{prefix}p2g"), n), |b| {
+                b.iter(|| p2g(&cloud, &sh, &bins))
+            });
+            let (v, _) = p2g(&cloud, &sh, &bins);
+            group.bench_function(BenchmarkId::new(format!("{prefix}g2p"), n), |b| {
+                b.iter(|| g2p(&sh, &v))
+            });
+        }
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench_transfer, bench_stages);
 criterion_main!(benches);

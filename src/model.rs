@@ -42,7 +42,9 @@ pub struct LostPoint {
 /// (`None` for a removed point).
 pub type PointRemap = Vec<Option<usize>>;
 
-/// The model and its evolving state.
+/// The model and its evolving state. `Clone` copies the whole state (the
+/// material laws are shared): `benches/step.rs` times one step from a fixed state.
+#[derive(Clone)]
 pub struct Model {
     /// The validated scene.
     pub scene: Scene,
