@@ -114,12 +114,17 @@ fn bench_assembly(c: &mut Criterion) {
                 &model.particles.volume,
                 &tangent,
                 None,
+                None,
             );
             stiffness::system_blocks(grid, &setup.bins, cells, Some(&background))
         };
         let pattern = || {
-            Assembler::with_couplings(dofs.n_free, &element_dofs, stiffness::patch_coupling(grid))
-                .expect("pattern")
+            Assembler::with_couplings(
+                dofs.n_free,
+                &element_dofs,
+                stiffness::patch_coupling(grid, false),
+            )
+            .expect("pattern")
         };
         group.bench_function(BenchmarkId::new("blocks", label), |b| b.iter(blocks));
         group.bench_function(BenchmarkId::new("pattern", label), |b| b.iter(pattern));
