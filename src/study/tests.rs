@@ -406,3 +406,54 @@ fn outcomes_and_missing_references() {
         assert_eq!(r.measured.stated(), stated, "{status}");
     }
 }
+
+/// A run process that panics (exit code 101) or outlives `study.timeout` is
+/// recorded as such, not as a refusal: neither is a stated outcome. (A
+/// stand-in executable plays the run.)
+#[cfg(unix)]
+#[test]
+fn panics_and_time_outs_are_faults() {
+    use std::os::unix::fs::PermissionsExt;
+    let dir = tempfile::tempdir().unwrap();
+    let planned = spec(SPEC).unwrap().plan().unwrap().runs[0].clone();
+    let script = |name: &str, body: &str| {
+        let path = dir.path().join(name);
+        std::fs::write(&path, format!("#!/bin/sh\n{body}\n")).unwrap();
+        std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o755)).unwrap();
+        path
+    };
+    let panics = script(
+        "panics",
+        "echo \"thread 'main' (7) panicked at src/x.rs:1:2:\" >&2; echo 'index out of bounds' >&2; exit 101",
+    );
+    let m = super::execute::execute(&panics, &planned, &dir.path().join("a"), 3, None).unwrap();
+    assert!(
+        m.status.starts_with("panicked: ") && m.status.contains("index out of bounds"),
+        "{}",
+        m.status
+    );
+    assert!(!m.stated());
+    assert_eq!(m.wall_seconds.len(), 1, "a panic is not repeated");
+    let hangs = script("hangs", "sleep 20");
+    let start = std::time::Instant::now();
+    let m = super::execute::execute(&hangs, &planned, &dir.path().join("b"), 1, Some(0.3)).unwrap();
+    assert!(m.status.starts_with("timed out: "), "{}", m.status);
+    assert!(!m.stated());
+    assert!(start.elapsed().as_secs_f64() < 10.0);
+    let stops = script(
+        "stops",
+        "echo 'error: run stopped: step 3: NaN' >&2; exit 1",
+    );
+    let m = super::execute::execute(&stops, &planned, &dir.path().join("c"), 1, None).unwrap();
+    assert_eq!(m.status, "stopped: run stopped: step 3: NaN");
+    assert!(m.stated());
+    let refuses = script(
+        "refuses",
+        "printf 'error: scene s is invalid:\\n  - scene.dt: too large\\n  - solver.cfl: too large\\n' >&2; exit 2",
+    );
+    let m = super::execute::execute(&refuses, &planned, &dir.path().join("d"), 1, None).unwrap();
+    assert_eq!(
+        m.status,
+        "refused: scene s is invalid: scene.dt: too large; solver.cfl: too large"
+    );
+}
