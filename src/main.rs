@@ -160,7 +160,25 @@ fn main() -> ExitCode {
                         rows.len(),
                         out.join("report.md").display()
                     );
-                    ExitCode::SUCCESS
+                    // a stopped or refused run is an outcome; a panic, a
+                    // time-out or a signal is a fault of the engine
+                    let faults: Vec<&str> = rows
+                        .iter()
+                        .filter(|r| !r.measured.stated())
+                        .map(|r| r.planned.name.as_str())
+                        .collect();
+                    if faults.is_empty() {
+                        ExitCode::SUCCESS
+                    } else {
+                        fail(
+                            1,
+                            &format!(
+                                "{} run(s) ended without a stated outcome (panic, time-out or signal): {}",
+                                faults.len(),
+                                faults.join(", ")
+                            ),
+                        )
+                    }
                 }
                 Err(e) => fail(2, &e.to_string()),
             }

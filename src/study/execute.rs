@@ -3,8 +3,8 @@
 //! `repeats` times.
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
-use std::time::Instant;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
 
 use super::spec::PlannedRun;
 use super::StudyError;
@@ -20,7 +20,11 @@ pub struct Measured {
     pub wall_seconds: Vec<f64>,
     /// Exclusive seconds per stage ([`Stage::ALL`] order) of the median repeat.
     pub stage_seconds: Vec<f64>,
-    /// `completed`, or `stopped: <why>` / `refused: <why>`.
+    /// `completed`, or `stopped: <why>` (exit code 1: the run failed mid-way),
+    /// `refused: <why>` (exit code 2 or refused by the plan: nothing ran);
+    /// anything else is a fault of the engine: `panicked: <message>` (exit
+    /// code 101), `timed out: …` (killed at `study.timeout`), `killed: …`
+    /// (ended by a signal), `failed: exit code N: …`.
     pub status: String,
     /// Steps completed.
     pub steps: usize,
@@ -52,6 +56,32 @@ impl Measured {
     pub fn completed(&self) -> bool {
         self.status == "completed"
     }
+
+    /// Whether the run ended in a stated outcome: completed, or stopped or
+    /// refused with a reason (not a panic, a time-out, a signal or an
+    /// unknown exit code).
+    pub fn stated(&self) -> bool {
+        self.completed()
+            || ["stopped: ", "refused: "].iter().any(|prefix| {
+                self.status
+                    .strip_prefix(prefix)
+                    .is_some_and(|why| !why.trim().is_empty())
+            })
+    }
+
+    /// A run refused before it was started (the plan's validation said why).
+    pub fn refused(why: &str) -> Self {
+        Self {
+            wall_seconds: Vec::new(),
+            stage_seconds: Vec::new(),
+            status: format!("refused: {}", one_line(why)),
+            steps: 0,
+            newton_iterations: 0,
+            factorisations: 0,
+            halvings: 0,
+            histories: Vec::new(),
+        }
+    }
 }
 
 /// Median of a non-empty list (mean of the middle two for an even count).
@@ -67,13 +97,18 @@ pub fn median(values: &[f64]) -> f64 {
 
 /// Run `planned` `repeats` times with the `mpm-geo` executable `exe` into
 /// `dir` (its `scene.toml` is the scene run, so a run is reproduced by
-/// `mpm-geo run dir/scene.toml`).
+/// `mpm-geo run dir/scene.toml`; its stderr is `dir/stderr.txt`), each
+/// process killed after `timeout` seconds. A run the plan refused is not run.
 pub fn execute(
     exe: &Path,
     planned: &PlannedRun,
     dir: &Path,
     repeats: usize,
+    timeout: Option<f64>,
 ) -> Result<Measured, StudyError> {
+    if let Some(why) = &planned.refused {
+        return Ok(Measured::refused(why));
+    }
     let io = |path: &Path, e: &dyn std::fmt::Display| StudyError::Io {
         path: path.display().to_string(),
         message: e.to_string(),
@@ -90,25 +125,54 @@ pub fn execute(
         if out.exists() {
             std::fs::remove_dir_all(&out).map_err(|e| io(&out, &e))?;
         }
+        let stderr_path = dir.join("stderr.txt");
+        let stderr_file = std::fs::File::create(&stderr_path).map_err(|e| io(&stderr_path, &e))?;
         let start = Instant::now();
-        let output = Command::new(exe)
+        let mut child = Command::new(exe)
             .arg("run")
             .arg(&scene_path)
             .arg("--out")
             .arg(&out)
             .arg("--quiet")
-            .output()
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(stderr_file)
+            .spawn()
             .map_err(|e| io(exe, &e))?;
+        let (status, timed_out) = loop {
+            if let Some(status) = child.try_wait().map_err(|e| io(exe, &e))? {
+                break (Some(status), false);
+            }
+            let elapsed = start.elapsed().as_secs_f64();
+            if timeout.is_some_and(|t| elapsed > t) {
+                // the process may end between the check and the kill
+                let _ = child.kill();
+                let status = child.wait().map_err(|e| io(exe, &e))?;
+                break (Some(status), true);
+            }
+            // poll finely at first: the wall time is measured to ~0.5 %
+            std::thread::sleep(Duration::from_secs_f64((elapsed / 200.0).clamp(2e-4, 0.02)));
+        };
         let wall = start.elapsed().as_secs_f64();
-        let stderr = String::from_utf8_lossy(&output.stderr);
-        last_status = match output.status.code() {
-            Some(0) => "completed".to_string(),
-            Some(1) => format!("stopped: {}", last_error_line(&stderr)),
-            _ => format!("refused: {}", last_error_line(&stderr)),
+        let stderr = std::fs::read_to_string(&stderr_path).unwrap_or_default();
+        last_status = match (timed_out, status.and_then(|s| s.code())) {
+            (true, _) => format!(
+                "timed out: killed after {wall:.1} s (study.timeout = {} s)",
+                timeout.unwrap_or(f64::NAN)
+            ),
+            (false, Some(0)) => "completed".to_string(),
+            (false, Some(1)) => format!("stopped: {}", last_error_line(&stderr)),
+            (false, Some(2)) => format!("refused: {}", last_error_line(&stderr)),
+            (false, Some(101)) => format!("panicked: {}", panic_message(&stderr)),
+            (false, Some(code)) => {
+                format!("failed: exit code {code}: {}", last_error_line(&stderr))
+            }
+            (false, None) => format!("killed: {}", signal_text(status)),
         };
         let stages = read_stage_seconds(&out.join("run.json")).unwrap_or_default();
         runs.push((wall, stages));
-        if last_status.starts_with("refused") {
+        if !last_status.starts_with("completed") && !last_status.starts_with("stopped") {
+            // a refusal, a panic or a time-out is not timed again
             break;
         }
     }
@@ -137,14 +201,60 @@ pub fn execute(
     })
 }
 
-/// The `error:` line of a run's stderr (else its last non-empty line).
+/// The `error:` line of a run's stderr (else its last non-empty line), and
+/// for a refused scene the list of fields below it, on one line.
 fn last_error_line(stderr: &str) -> String {
-    stderr
-        .lines()
-        .find_map(|l| l.strip_prefix("error: "))
-        .or_else(|| stderr.lines().rev().find(|l| !l.trim().is_empty()))
-        .unwrap_or("no message")
+    let mut lines = stderr.lines();
+    let text = match lines.by_ref().find_map(|l| l.strip_prefix("error: ")) {
+        Some(first) => {
+            // `scene … is invalid:` is followed by `  - field: message` lines
+            let items: Vec<&str> = lines
+                .take_while(|l| l.starts_with("  - "))
+                .map(|l| l.trim_start_matches("  - "))
+                .collect();
+            if items.is_empty() {
+                first.to_string()
+            } else {
+                format!("{first} {}", items.join("; "))
+            }
+        }
+        None => stderr
+            .lines()
+            .rev()
+            .find(|l| !l.trim().is_empty())
+            .unwrap_or("no message")
+            .to_string(),
+    };
+    one_line(&text)
+}
+
+/// `text` on one CSV-safe line (commas become semicolons).
+fn one_line(text: &str) -> String {
+    text.split_whitespace()
+        .collect::<Vec<_>>()
+        .join(" ")
         .replace(',', ";")
+}
+
+/// Where and why a run panicked: the `panicked at` line and the message after it.
+fn panic_message(stderr: &str) -> String {
+    let mut lines = stderr.lines();
+    match lines.by_ref().find(|l| l.contains("panicked at")) {
+        Some(at) => one_line(&format!("{at} {}", lines.next().unwrap_or(""))),
+        None => last_error_line(stderr),
+    }
+}
+
+/// The signal that ended a process, as text.
+fn signal_text(status: Option<std::process::ExitStatus>) -> String {
+    #[cfg(unix)]
+    {
+        use std::os::unix::process::ExitStatusExt;
+        if let Some(signal) = status.and_then(|s| s.signal()) {
+            return format!("signal {signal}");
+        }
+    }
+    format!("{status:?}")
 }
 
 fn read_json(path: &Path) -> Option<serde_json::Value> {

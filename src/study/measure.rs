@@ -29,7 +29,8 @@ impl Reference<'_> {
 
     fn period(&self) -> Option<f64> {
         match self {
-            Reference::ClosedForm { period, .. } => Some(*period),
+            // a closed form without a period gives NaN
+            Reference::ClosedForm { period, .. } => Some(*period).filter(|p| p.is_finite()),
             Reference::Run(history) => mean_period(history),
         }
     }

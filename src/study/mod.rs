@@ -12,7 +12,18 @@
 //! `work_precision.png` (log–log error against median wall time, one line per
 //! method, the Pareto front marked) and `report.md` (Pareto-optimal runs,
 //! crossover points, observed orders of convergence).
+//!
+//! A *case study* (`[[case]]`, e.g. `validation/studies/extreme_cases.toml`)
+//! runs a list of problems — each its own base scene, overrides, time step,
+//! reference and quantities — with every method, and reports each run's
+//! outcome: completed with its error, `stopped: why` or `refused: why` (a
+//! scene the validation refuses is recorded, not an error of the study). A
+//! closed form may read its parameters from each run's scene
+//! ([`ClosedForm::from_scene`]), and says why when it does not describe it.
+//! A run process that panics, is killed by a signal or exceeds
+//! `study.timeout` is recorded as such ([`Measured::stated`] is false).
 
+mod closed_form;
 mod execute;
 mod measure;
 mod report;
@@ -20,12 +31,13 @@ mod spec;
 
 use std::path::{Path, PathBuf};
 
+pub use closed_form::{BarVibration, ClosedForm, ClosedFormName, ColumnSettlement};
 pub use execute::{median, read_curve, Measured};
 pub use measure::{error, interpolate, log_log_slope, mean_period, Reference};
 pub use report::{crossovers, observed_orders, pareto_front, Crossover, StudyRow};
 pub use spec::{
-    Axis, BarVibration, ClosedFormName, Measure, PlannedRun, Quantity, ReferenceSpec, SeriesSpec,
-    StudyPlan, StudySection, StudySpec,
+    refined, Axis, CaseSpec, Measure, PlannedRun, Quantity, ReferenceSpec, RunReference,
+    SeriesSpec, StudyPlan, StudySection, StudySpec,
 };
 
 /// Why a study could not run.
@@ -78,35 +90,53 @@ pub fn run_study(
     options: &StudyOptions,
 ) -> Result<Vec<StudyRow>, StudyError> {
     let spec = StudySpec::load(spec_path)?;
+    run_spec(&spec, out, options)
+}
+
+/// Run a loaded (and possibly edited) study spec into `out`; returns the
+/// compared runs. A reference run that does not complete stops a study
+/// without cases; in a case study its case's runs get no error instead, and
+/// the report says why.
+pub fn run_spec(
+    spec: &StudySpec,
+    out: &Path,
+    options: &StudyOptions,
+) -> Result<Vec<StudyRow>, StudyError> {
     let plan = spec.plan()?;
     let repeats = options.repeats.unwrap_or(spec.study.repeats).max(1);
+    let timeout = spec.study.timeout;
     let say = |name: &str, m: &Measured| {
         if options.verbose {
-            eprintln!(
-                "study: {name}: {} in {:.3} s (median of {})",
-                m.status,
-                m.median_wall(),
-                m.wall_seconds.len()
-            );
+            if m.wall_seconds.is_empty() {
+                eprintln!("study: {name}: {} (not run)", m.status);
+            } else {
+                eprintln!(
+                    "study: {name}: {} in {:.3} s (median of {})",
+                    m.status,
+                    m.median_wall(),
+                    m.wall_seconds.len()
+                );
+            }
         }
     };
     // references once (timed once: they are not compared)
-    let mut references = Vec::new();
+    let mut references: Vec<(String, Measured)> = Vec::new();
     for planned in &plan.references {
         let measured = execute::execute(
             &options.executable,
             planned,
             &execute::run_dir(out, planned),
             1,
+            timeout,
         )?;
         say(&planned.name, &measured);
-        if !measured.completed() {
+        if !measured.completed() && spec.case.is_empty() {
             return Err(StudyError::Reference {
                 run: planned.name.clone(),
                 status: measured.status,
             });
         }
-        references.push((planned.method.clone(), measured));
+        references.push((planned.name.clone(), measured));
     }
     let mut rows = Vec::new();
     for planned in &plan.runs {
@@ -115,44 +145,62 @@ pub fn run_study(
             planned,
             &execute::run_dir(out, planned),
             repeats,
+            timeout,
         )?;
         say(&planned.name, &measured);
-        let errors = spec
-            .quantity
+        let mut planned = planned.clone();
+        if let RunReference::Run(name) = &planned.reference {
+            match references.iter().find(|(n, _)| n == name) {
+                Some((_, r)) if !r.completed() => {
+                    planned.reference = RunReference::Unavailable(format!(
+                        "the reference run `{name}` did not complete ({})",
+                        r.status
+                    ))
+                }
+                None => {
+                    planned.reference =
+                        RunReference::Unavailable(format!("no reference run `{name}`"))
+                }
+                _ => {}
+            }
+        }
+        let errors = planned
+            .quantities
             .iter()
             .map(|q| {
                 let history = measured.history(&q.monitor)?;
-                match &spec.reference {
-                    ReferenceSpec::ClosedForm {
-                        name: ClosedFormName::BarVibration,
-                        parameters,
-                        ..
-                    } => {
-                        let value = |t: f64| parameters.top_displacement(t);
+                match &planned.reference {
+                    RunReference::ClosedForm(closed) => {
+                        let value = |t: f64| closed.value(t);
                         let reference = Reference::ClosedForm {
                             value: &value,
-                            period: parameters.period(),
+                            period: closed.period(),
                         };
                         error(q, history, &reference)
                     }
-                    ReferenceSpec::Run { .. } | ReferenceSpec::Series {} => {
-                        let own = references
-                            .iter()
-                            .find(|(m, _)| m == &planned.method)
-                            .or_else(|| references.iter().find(|(m, _)| m == "reference"))?;
+                    RunReference::Run(name) => {
+                        let own = references.iter().find(|(n, _)| n == name)?;
                         error(q, history, &Reference::Run(own.1.history(&q.monitor)?))
                     }
+                    RunReference::Unavailable(_) => None,
                 }
             })
             .collect();
         rows.push(StudyRow {
-            planned: planned.clone(),
+            planned,
             measured,
             errors,
         });
     }
     let reference = match &spec.reference {
-        ReferenceSpec::ClosedForm { name, .. } => format!("closed form `{name:?}`"),
+        ReferenceSpec::ClosedForm {
+            name,
+            parameters: Some(_),
+            ..
+        } => format!("closed form `{name:?}`"),
+        ReferenceSpec::ClosedForm { name, .. } => {
+            format!("closed form `{name:?}`, its parameters read from each run's scene")
+        }
         ReferenceSpec::Run { set, integrator } => format!(
             "one run ({integrator:?}, overrides {})",
             if set.is_empty() {
@@ -164,10 +212,15 @@ pub fn run_study(
         ReferenceSpec::Series {} => {
             "each method against its own run at the series' `reference_value`".to_string()
         }
+        ReferenceSpec::Unavailable { why } => format!("none ({why})"),
     };
-    report::write_csv(&out.join("study.csv"), &spec, &rows)?;
-    report::write_figure(&out.join("work_precision.png"), &spec, &rows)?;
-    report::write_report(&out.join("report.md"), &spec, &reference, &rows)?;
+    report::write_csv(&out.join("study.csv"), spec, &rows)?;
+    if spec.case.is_empty() {
+        report::write_figure(&out.join("work_precision.png"), spec, &rows)?;
+        report::write_report(&out.join("report.md"), spec, &reference, &rows)?;
+    } else {
+        report::write_case_report(&out.join("report.md"), spec, &rows)?;
+    }
     Ok(rows)
 }
 

@@ -6,10 +6,12 @@ use std::path::Path;
 
 use super::execute::Measured;
 use super::measure::log_log_slope;
-use super::spec::{PlannedRun, StudySpec};
+use super::spec::{PlannedRun, RunReference, StudySpec};
 use super::StudyError;
+use crate::campaign::IntegratorChoice;
 use crate::plot::{plot_work_precision, Series};
 use crate::profile::Stage;
+use crate::scene::AnalysisKind;
 
 /// One compared run with its errors.
 #[derive(Clone, Debug)]
@@ -24,9 +26,12 @@ pub struct StudyRow {
 
 impl StudyRow {
     /// The run's error: the largest over the quantities (`None` if any is
-    /// missing or the run did not complete).
+    /// missing, the run did not complete or it has no reference).
     pub fn error(&self) -> Option<f64> {
-        if !self.measured.completed() {
+        if !self.measured.completed()
+            || matches!(self.planned.reference, RunReference::Unavailable(_))
+            || self.errors.is_empty()
+        {
             return None;
         }
         self.errors
@@ -189,10 +194,25 @@ pub fn write_csv(path: &Path, spec: &StudySpec, rows: &[StudyRow]) -> Result<(),
         message: e.to_string(),
     };
     let mut w = csv::Writer::from_path(path).map_err(|e| io(&e))?;
+    let cases = !spec.case.is_empty();
+    // error columns: every quantity of the spec and its cases, in order
+    let mut columns: Vec<String> = Vec::new();
+    for q in spec
+        .quantity
+        .iter()
+        .chain(rows.iter().flat_map(|r| r.planned.quantities.iter()))
+    {
+        if !columns.contains(&q.column()) {
+            columns.push(q.column());
+        }
+    }
     let mut header: Vec<String> = ["run", "method", "series", "integrator"]
         .iter()
         .map(|s| s.to_string())
         .collect();
+    if cases {
+        header.insert(1, "case".into());
+    }
     header.extend(spec.axis.iter().map(|a| a.name.clone()));
     header.extend(
         [
@@ -211,8 +231,11 @@ pub fn write_csv(path: &Path, spec: &StudySpec, rows: &[StudyRow]) -> Result<(),
         .map(|s| s.to_string()),
     );
     header.extend(Stage::ALL.iter().map(|s| format!("{}_seconds", s.name())));
-    header.extend(spec.quantity.iter().map(|q| q.column()));
+    header.extend(columns.iter().cloned());
     header.extend(["error".to_string(), "status".to_string()]);
+    if cases {
+        header.push("reference".into());
+    }
     w.write_record(&header).map_err(|e| io(&e))?;
     for row in rows {
         let (p, m) = (&row.planned, &row.measured);
@@ -224,6 +247,9 @@ pub fn write_csv(path: &Path, spec: &StudySpec, rows: &[StudyRow]) -> Result<(),
                 .map_or("reference".into(), |s| s.label.clone()),
             format!("{:?}", p.integrator).to_lowercase(),
         ];
+        if cases {
+            record.insert(1, p.case.clone().unwrap_or_default());
+        }
         for axis in &spec.axis {
             record.push(
                 p.axes
@@ -238,9 +264,9 @@ pub fn write_csv(path: &Path, spec: &StudySpec, rows: &[StudyRow]) -> Result<(),
             key,
             format!("{value:e}"),
             walls.len().to_string(),
-            format!("{:e}", m.median_wall()),
-            format!("{:e}", walls.iter().copied().fold(f64::INFINITY, f64::min)),
-            format!("{:e}", walls.iter().copied().fold(0.0, f64::max)),
+            fmt_opt(Some(m.median_wall()).filter(|w| w.is_finite())),
+            fmt_opt(walls.iter().copied().reduce(f64::min)),
+            fmt_opt(walls.iter().copied().reduce(f64::max)),
             m.steps.to_string(),
             m.newton_iterations.to_string(),
             m.factorisations.to_string(),
@@ -250,9 +276,19 @@ pub fn write_csv(path: &Path, spec: &StudySpec, rows: &[StudyRow]) -> Result<(),
             (0..Stage::ALL.len())
                 .map(|i| format!("{:e}", m.stage_seconds.get(i).copied().unwrap_or(0.0))),
         );
-        record.extend(row.errors.iter().map(|e| fmt_opt(*e)));
+        record.extend(columns.iter().map(|c| {
+            p.quantities
+                .iter()
+                .position(|q| &q.column() == c)
+                .map_or(String::new(), |i| {
+                    fmt_opt(row.errors.get(i).copied().flatten())
+                })
+        }));
         record.push(fmt_opt(row.error()));
         record.push(m.status.clone());
+        if cases {
+            record.push(p.reference.describe().replace(',', ";"));
+        }
         w.write_record(&record).map_err(|e| io(&e))?;
     }
     w.flush().map_err(|e| io(&e))
@@ -369,6 +405,174 @@ pub fn write_report(
         );
     }
     md += "\nFigure: `work_precision.png`. Every run's scene is `runs/<run>/scene.toml`.\n";
+    std::fs::write(path, md).map_err(|e| StudyError::Io {
+        path: path.display().to_string(),
+        message: e.to_string(),
+    })
+}
+
+/// The outcome cell of a run in a markdown table: the status, cut at
+/// `limit` characters (the full text is in `study.csv`).
+fn outcome_cell(status: &str, limit: usize) -> String {
+    let text = status.replace('|', "/");
+    if text.chars().count() <= limit {
+        text
+    } else {
+        format!("{}…", text.chars().take(limit).collect::<String>())
+    }
+}
+
+/// The error cell of a run: the error, `no reference`, or `—` (did not complete).
+fn error_cell(row: &StudyRow) -> String {
+    match (&row.planned.reference, row.error()) {
+        (_, Some(e)) => format!("{e:.3e}"),
+        _ if !row.measured.completed() => "—".into(),
+        (RunReference::Unavailable(_), None) => "no reference".into(),
+        _ => "not measured".into(),
+    }
+}
+
+/// The integrator a run actually used (a case may make the scene as written
+/// quasi-static), with its step rule.
+fn integrator_text(p: &PlannedRun) -> String {
+    let s = &p.scene.solver;
+    let mut text = match (p.integrator, p.scene.scene.analysis) {
+        (IntegratorChoice::Explicit, _) | (_, AnalysisKind::Explicit) => {
+            let mut t = "explicit MUSL".to_string();
+            if p.refused.is_none() {
+                match p.scene.scene.dt {
+                    Some(dt) => t += &format!(", Δt = {dt:e} s"),
+                    None => t += &format!(", CFL {}", s.cfl),
+                }
+            }
+            if s.damping > 0.0 {
+                t += &format!(", local damping {}", s.damping);
+            }
+            t
+        }
+        (_, AnalysisKind::ImplicitDynamic) => format!("implicit Newmark γ = {}", s.newmark_gamma),
+        (_, AnalysisKind::QuasiStatic) => "implicit quasi-static Newton".to_string(),
+    };
+    for (name, value) in &p.axes {
+        text += &format!(", {name} = {value}");
+    }
+    text
+}
+
+/// `report.md` of a case study: one row per case and method (case,
+/// integrator, outcome, error, steps, wall time), then each case's
+/// reference and the solver counts.
+pub fn write_case_report(
+    path: &Path,
+    spec: &StudySpec,
+    rows: &[StudyRow],
+) -> Result<(), StudyError> {
+    let mut md = format!("# Study `{}`\n\n", spec.study.name);
+    let _ = writeln!(
+        md,
+        "{} cases, each run with every method as a whole `mpm-geo run` process (median wall time of {} repeat(s)). Outcome: `completed`, `stopped: why` (the run failed mid-way; its outputs up to then are kept) or `refused: why` (the scene was refused before anything ran). Error: the largest relative error over the case's quantities, against the case's reference (below).\n",
+        spec.case.len(),
+        spec.study.repeats
+    );
+    let count = |prefix: &str| {
+        rows.iter()
+            .filter(|r| r.measured.stated() && r.measured.status.starts_with(prefix))
+            .count()
+    };
+    let _ = writeln!(
+        md,
+        "{} runs: {} completed, {} stopped, {} refused, {} without a stated outcome (panic, time-out or signal).\n",
+        rows.len(),
+        count("completed"),
+        count("stopped"),
+        count("refused"),
+        rows.iter().filter(|r| !r.measured.stated()).count()
+    );
+    md += "| case | integrator | outcome | error | steps | wall time (s) |\n|---|---|---|---|---|---|\n";
+    for r in rows {
+        let wall = r.measured.median_wall();
+        let _ = writeln!(
+            md,
+            "| {} | {} | {} | {} | {} | {} |",
+            r.planned.case.as_deref().unwrap_or(""),
+            integrator_text(&r.planned),
+            outcome_cell(&r.measured.status, 180),
+            error_cell(r),
+            if r.measured.wall_seconds.is_empty() {
+                "—".to_string()
+            } else {
+                r.measured.steps.to_string()
+            },
+            if wall.is_finite() {
+                format!("{wall:.3}")
+            } else {
+                "—".into()
+            },
+        );
+    }
+    md += "\n## References\n\n";
+    for case in &spec.case {
+        let mut seen: Vec<String> = Vec::new();
+        for r in rows
+            .iter()
+            .filter(|r| r.planned.case.as_deref() == Some(case.name.as_str()))
+        {
+            if r.planned.refused.is_some() {
+                continue;
+            }
+            // a stopped reference run's status can be long (a residual history)
+            let text = outcome_cell(&r.planned.reference.describe(), 400);
+            if !seen.contains(&text) {
+                seen.push(text);
+            }
+        }
+        let quantities: Vec<String> = rows
+            .iter()
+            .find(|r| r.planned.case.as_deref() == Some(case.name.as_str()))
+            .map(|r| {
+                r.planned
+                    .quantities
+                    .iter()
+                    .map(|q| format!("`{}`", q.column()))
+                    .collect()
+            })
+            .unwrap_or_default();
+        let _ = writeln!(
+            md,
+            "- **{}**: {}{}",
+            case.name,
+            if seen.is_empty() {
+                "every run refused".to_string()
+            } else {
+                seen.join("; ")
+            },
+            if quantities.is_empty() || seen.iter().all(|s| s.starts_with("no reference")) {
+                String::new()
+            } else {
+                format!(" — on {}", quantities.join(", "))
+            }
+        );
+    }
+    md += "\n## Runs\n\n| run | case | method | refined | Newton its | halvings | factorisations | status |\n|---|---|---|---|---|---|---|---|\n";
+    for r in rows {
+        let refined = r
+            .planned
+            .refine
+            .as_ref()
+            .map_or("—".to_string(), |(k, v)| format!("{k} = {v:.3e}"));
+        let _ = writeln!(
+            md,
+            "| {} | {} | {} | {refined} | {} | {} | {} | {} |",
+            r.planned.name,
+            r.planned.case.as_deref().unwrap_or(""),
+            r.planned.method,
+            r.measured.newton_iterations,
+            r.measured.halvings,
+            r.measured.factorisations,
+            outcome_cell(&r.measured.status, 60),
+        );
+    }
+    md += "\nEvery run's scene is `runs/<run>/scene.toml` (not written for a refused run), its stderr `runs/<run>/stderr.txt`; `study.csv` has the full outcomes, every error and the stage times.\n";
     std::fs::write(path, md).map_err(|e| StudyError::Io {
         path: path.display().to_string(),
         message: e.to_string(),

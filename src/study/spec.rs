@@ -34,16 +34,35 @@
 //! integrator = "as_written"                # or "explicit" (the scene's explicit twin)
 //! set = ["solver.newmark_gamma=0.5"]
 //! refine = "dt"                            # "dt" keeps the end time; or any key path
-//! values = [4e-4, 2e-4, 1e-4]
+//! values = [4e-4, 2e-4, 1e-4]              # (no refine/values: one run per method)
+//! ```
+//!
+//! A *case study* lists `[[case]]`s instead of (or with) axes: each case is a
+//! problem (its own base scene, overrides, time step, reference and
+//! quantities), run with every series. A case run whose scene the validation
+//! refuses (an explicit step above the stability limit, a quasi-static scene
+//! with no explicit twin, a parameter out of range) is recorded as
+//! `refused: <why>` instead of stopping the study; a misspelt key or a bad
+//! override still stops it before anything runs.
+//!
+//! ```toml
+//! [[case]]
+//! name = "Δt = 10 × h/c_p"
+//! scene = "../elastic/bar_implicit.toml"   # optional: replaces study.scene
+//! set = ["materials.bar.nu=0.3"]           # after study.set, before axes and series
+//! dt = 5e-3                                # optional: like refine = "dt"
+//! reference = { kind = "none", why = "…" } # optional: replaces [reference]
+//! quantity = [{ monitor = "load" }]        # optional: replaces [[quantity]]
 //! ```
 
 use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 
+use super::closed_form::{BarVibration, ClosedForm, ClosedFormName};
 use super::StudyError;
 use crate::campaign::IntegratorChoice;
-use crate::scene::{AnalysisKind, Scene};
+use crate::scene::{AnalysisKind, Scene, SceneError};
 
 /// The contents of a study spec file.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
@@ -53,13 +72,17 @@ pub struct StudySpec {
     pub study: StudySection,
     /// What the runs are compared against.
     pub reference: ReferenceSpec,
-    /// The compared quantities (at least one).
+    /// The compared quantities (at least one, unless there is no reference).
+    #[serde(default)]
     pub quantity: Vec<Quantity>,
     /// Axes crossed with every series (each combination is one method).
     #[serde(default)]
     pub axis: Vec<Axis>,
     /// The series: a method refined along one key (at least one).
     pub series: Vec<SeriesSpec>,
+    /// Cases: problems each run with every method (a case study).
+    #[serde(default)]
+    pub case: Vec<CaseSpec>,
 }
 
 /// `[study]`.
@@ -76,6 +99,10 @@ pub struct StudySection {
     /// Overrides (`key=value`) applied to every run, before the axes and series.
     #[serde(default)]
     pub set: Vec<String>,
+    /// Wall-time limit of one run process, s: a run still going after it is
+    /// killed and recorded as `timed out` (default: no limit).
+    #[serde(default)]
+    pub timeout: Option<f64>,
 }
 
 fn one() -> usize {
@@ -92,8 +119,10 @@ pub enum ReferenceSpec {
         name: ClosedFormName,
         /// The monitor it describes (every quantity must be on it).
         monitor: String,
-        /// Its parameters.
-        parameters: BarVibration,
+        /// Its parameters (`bar_vibration` only); absent: read from each
+        /// run's resolved scene, which must be one the closed form describes.
+        #[serde(default)]
+        parameters: Option<BarVibration>,
     },
     /// One reference run for the whole study (say how it was chosen: finest
     /// mesh, smallest step).
@@ -109,48 +138,28 @@ pub enum ReferenceSpec {
     /// key (same mesh and method: only the refined discretisation differs).
     /// (A struct variant, so that unknown keys in `[reference]` are refused.)
     Series {},
+    /// No reference: the runs' outcomes are recorded without an error.
+    #[serde(rename = "none")]
+    Unavailable {
+        /// Why there is none (written to the report).
+        why: String,
+    },
+}
+
+impl ReferenceSpec {
+    /// `kind` as written in the spec.
+    fn kind(&self) -> &'static str {
+        match self {
+            Self::ClosedForm { .. } => "closed_form",
+            Self::Run { .. } => "run",
+            Self::Series {} => "series",
+            Self::Unavailable { .. } => "none",
+        }
+    }
 }
 
 fn as_written() -> IntegratorChoice {
     IntegratorChoice::AsWritten
-}
-
-/// Closed forms a spec can name.
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
-#[serde(rename_all = "snake_case")]
-pub enum ClosedFormName {
-    /// First mode of a fixed–free elastic bar (DESIGN §8.4).
-    BarVibration,
-}
-
-/// Parameters of the bar closed form: u_top(t) = (v0/ω) sin ωt, ω = π c / (2H),
-/// period T = 4H/c (initial velocity v0 sin(π y / 2H), DESIGN §8.4).
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct BarVibration {
-    /// Bar height H, m.
-    pub height: f64,
-    /// Wave speed c = √(E/ρ), m/s.
-    pub wave_speed: f64,
-    /// Top velocity amplitude v0 of the initial profile, m/s.
-    pub velocity: f64,
-}
-
-impl BarVibration {
-    /// Angular frequency ω = π c / (2H), rad/s.
-    pub fn omega(&self) -> f64 {
-        std::f64::consts::PI * self.wave_speed / (2.0 * self.height)
-    }
-
-    /// Period T = 4H/c, s.
-    pub fn period(&self) -> f64 {
-        4.0 * self.height / self.wave_speed
-    }
-
-    /// Top displacement u(H, t) = (v0/ω) sin ωt, m.
-    pub fn top_displacement(&self, t: f64) -> f64 {
-        self.velocity / self.omega() * (self.omega() * t).sin()
-    }
 }
 
 /// `[[quantity]]`: one monitor and how its error is measured.
@@ -243,13 +252,77 @@ pub struct SeriesSpec {
     #[serde(default)]
     pub set: Vec<String>,
     /// Refined key: `dt` (time step, end time kept) or a scene key path
-    /// (`solver.cfl`, `grid.cell_size`).
-    pub refine: String,
-    /// Values of the refined key, coarse to fine.
+    /// (`solver.cfl`, `grid.cell_size`); absent: one run per method.
+    #[serde(default)]
+    pub refine: Option<String>,
+    /// Values of the refined key, coarse to fine (only with `refine`).
+    #[serde(default)]
     pub values: Vec<f64>,
     /// Value of the refined key of this series' reference run
     /// (`reference.kind = "series"`).
     pub reference_value: Option<f64>,
+}
+
+impl SeriesSpec {
+    /// `(index, value)` of each run of the series: one `(0, None)` without `refine`.
+    fn runs(&self) -> Vec<(usize, Option<(String, f64)>)> {
+        match &self.refine {
+            Some(key) => self
+                .values
+                .iter()
+                .enumerate()
+                .map(|(k, &v)| (k, Some((key.clone(), v))))
+                .collect(),
+            None => vec![(0, None)],
+        }
+    }
+}
+
+/// `[[case]]`: one problem of a case study, run with every method.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct CaseSpec {
+    /// Name (the `case` column of the report).
+    pub name: String,
+    /// Base scene of this case, relative to the spec file (default `study.scene`).
+    #[serde(default)]
+    pub scene: Option<PathBuf>,
+    /// Overrides of the case (after `study.set`, before the axes and series).
+    #[serde(default)]
+    pub set: Vec<String>,
+    /// Time step, s: an implicit run keeps its end time (steps = round(T/Δt)),
+    /// an explicit run gets this fixed step (refused above its stability limit).
+    #[serde(default)]
+    pub dt: Option<f64>,
+    /// What this case's runs are compared against (default `[reference]`);
+    /// a `run` reference gets the case's scene and overrides, then its own.
+    #[serde(default)]
+    pub reference: Option<ReferenceSpec>,
+    /// The quantities of this case (default `[[quantity]]`).
+    #[serde(default)]
+    pub quantity: Option<Vec<Quantity>>,
+}
+
+/// What one planned run's error is measured against.
+#[derive(Clone, Debug, PartialEq)]
+pub enum RunReference {
+    /// A closed form with its parameters.
+    ClosedForm(ClosedForm),
+    /// The reference run of this name (a [`StudyPlan::references`] entry).
+    Run(String),
+    /// No error is measured, and why.
+    Unavailable(String),
+}
+
+impl RunReference {
+    /// One line for the report.
+    pub fn describe(&self) -> String {
+        match self {
+            Self::ClosedForm(c) => c.describe(),
+            Self::Run(name) => format!("reference run `{name}`"),
+            Self::Unavailable(why) => format!("no reference: {why}"),
+        }
+    }
 }
 
 /// One run of a study, fully resolved.
@@ -265,10 +338,19 @@ pub struct PlannedRun {
     pub axes: Vec<(String, String)>,
     /// Integrator of the run.
     pub integrator: IntegratorChoice,
-    /// Refined key and its value (`None` for the study's reference run).
+    /// Refined key and its value (`None` for the study's reference run and
+    /// a series without `refine`; a case's `dt` shows as `dt`).
     pub refine: Option<(String, f64)>,
-    /// The scene run.
+    /// The scene run (when `refused`, as far as it was built).
     pub scene: Scene,
+    /// The case (case studies).
+    pub case: Option<String>,
+    /// Why the run's scene was refused (case studies): it is not run.
+    pub refused: Option<String>,
+    /// What its error is measured against.
+    pub reference: RunReference,
+    /// The quantities its error is measured on.
+    pub quantities: Vec<Quantity>,
 }
 
 /// The runs of a study: the compared runs and the reference runs.
@@ -283,8 +365,8 @@ pub struct StudyPlan {
 }
 
 impl StudySpec {
-    /// Read and check a spec file; the base scene path is resolved against
-    /// the spec's directory.
+    /// Read and check a spec file; the base scene paths (`study.scene`,
+    /// `case.scene`) are resolved against the spec's directory.
     pub fn load(path: &Path) -> Result<Self, StudyError> {
         let spec_error = |message: String| StudyError::Spec {
             path: path.display().to_string(),
@@ -292,9 +374,14 @@ impl StudySpec {
         };
         let text = std::fs::read_to_string(path).map_err(|e| spec_error(e.to_string()))?;
         let mut spec: StudySpec = toml::from_str(&text).map_err(|e| spec_error(e.to_string()))?;
+        let dir = path.parent().unwrap_or(Path::new("."));
         if spec.study.scene.is_relative() {
-            let dir = path.parent().unwrap_or(Path::new("."));
             spec.study.scene = dir.join(&spec.study.scene);
+        }
+        for case in &mut spec.case {
+            if let Some(scene) = case.scene.as_mut().filter(|s| s.is_relative()) {
+                *scene = dir.join(&*scene);
+            }
         }
         spec.check().map_err(spec_error)?;
         Ok(spec)
@@ -311,45 +398,24 @@ impl StudySpec {
                 self.study.repeats
             ));
         }
-        if self.quantity.is_empty() {
-            return Err("quantity: at least one [[quantity]] is needed".into());
-        }
-        for (i, q) in self.quantity.iter().enumerate() {
-            match (q.measure, q.time) {
-                (Measure::AtTime, Some(t)) if t.is_finite() && t >= 0.0 => {}
-                (Measure::AtTime, _) => {
-                    return Err(format!(
-                        "quantity[{i}].time: `at_time` needs a finite time >= 0"
-                    ))
-                }
-                (_, Some(_)) => {
-                    return Err(format!(
-                        "quantity[{i}].time: only the `at_time` measure takes a time"
-                    ))
-                }
-                _ => {}
-            }
-            if let ReferenceSpec::ClosedForm { monitor, .. } = &self.reference {
-                if &q.monitor != monitor {
-                    return Err(format!(
-                        "quantity[{i}].monitor: the closed form describes `{monitor}`, not `{}`",
-                        q.monitor
-                    ));
-                }
+        if let Some(t) = self.study.timeout {
+            if !(t.is_finite() && t > 0.0) {
+                return Err(format!("study.timeout: must be finite and > 0 s, got {t}"));
             }
         }
-        if let ReferenceSpec::ClosedForm { parameters: p, .. } = &self.reference {
-            for (field, v) in [
-                ("height", p.height),
-                ("wave_speed", p.wave_speed),
-                ("velocity", p.velocity),
-            ] {
-                if !(v.is_finite() && v != 0.0) || (field != "velocity" && v < 0.0) {
-                    return Err(format!(
-                        "reference.parameters.{field}: must be finite and nonzero (> 0 for lengths and speeds), got {v}"
-                    ));
-                }
+        check_reference("reference", &self.reference)?;
+        if self.case.is_empty() {
+            check_quantities("quantity", &self.quantity, &self.reference)?;
+        } else {
+            if matches!(self.reference, ReferenceSpec::Series {}) {
+                return Err("reference.kind: `series` is not available with [[case]] (give each case its reference)".into());
             }
+            // the spec's quantities serve the cases without their own
+            check_quantities(
+                "quantity",
+                &self.quantity,
+                &ReferenceSpec::Unavailable { why: String::new() },
+            )?;
         }
         for (i, a) in self.axis.iter().enumerate() {
             if a.values.is_empty() || a.name.trim().is_empty() {
@@ -365,16 +431,29 @@ impl StudySpec {
             return Err("series: at least one [[series]] is needed".into());
         }
         for (i, s) in self.series.iter().enumerate() {
-            if s.values.is_empty() || s.values.iter().any(|v| !(v.is_finite() && *v > 0.0)) {
-                return Err(format!(
-                    "series[{i}].values: needs at least one value, each finite and > 0"
-                ));
+            match &s.refine {
+                Some(_) => {
+                    if s.values.is_empty() || s.values.iter().any(|v| !(v.is_finite() && *v > 0.0))
+                    {
+                        return Err(format!(
+                            "series[{i}].values: needs at least one value, each finite and > 0"
+                        ));
+                    }
+                }
+                None => {
+                    if !s.values.is_empty() {
+                        return Err(format!(
+                            "series[{i}].values: only with `refine` (a series without it is one run per method)"
+                        ));
+                    }
+                }
             }
             match (&self.reference, s.reference_value) {
-                (ReferenceSpec::Series {}, Some(v)) if v.is_finite() && v > 0.0 => {}
+                (ReferenceSpec::Series {}, Some(v))
+                    if v.is_finite() && v > 0.0 && s.refine.is_some() => {}
                 (ReferenceSpec::Series {}, _) => {
                     return Err(format!(
-                        "series[{i}].reference_value: `reference.kind = \"series\"` needs a finite value > 0"
+                        "series[{i}].reference_value: `reference.kind = \"series\"` needs `refine` and a finite value > 0"
                     ))
                 }
                 (_, Some(_)) => {
@@ -385,32 +464,90 @@ impl StudySpec {
                 _ => {}
             }
         }
+        for (i, case) in self.case.iter().enumerate() {
+            let field = format!("case[{i}]");
+            if case.name.trim().is_empty() {
+                return Err(format!("{field}.name: must not be empty"));
+            }
+            if self.case[..i].iter().any(|c| c.name == case.name) {
+                return Err(format!("{field}.name: `{}` is used twice", case.name));
+            }
+            if let Some(dt) = case.dt {
+                if !(dt.is_finite() && dt > 0.0) {
+                    return Err(format!("{field}.dt: must be finite and > 0 s, got {dt}"));
+                }
+                if let Some(j) = self
+                    .series
+                    .iter()
+                    .position(|s| s.refine.as_deref() == Some("dt"))
+                {
+                    return Err(format!("{field}.dt: series[{j}] refines `dt` already"));
+                }
+            }
+            let reference = case.reference.as_ref().unwrap_or(&self.reference);
+            if let Some(r) = &case.reference {
+                if matches!(r, ReferenceSpec::Series {}) {
+                    return Err(format!(
+                        "{field}.reference.kind: `series` is not available in a case"
+                    ));
+                }
+                check_reference(&format!("{field}.reference"), r)?;
+            }
+            match &case.quantity {
+                Some(q) => check_quantities(&format!("{field}.quantity"), q, reference)?,
+                None => check_quantities("quantity", &self.quantity, reference).map_err(|e| {
+                    format!("{e} (for {field}, which has no `quantity` of its own)")
+                })?,
+            }
+        }
         Ok(())
     }
 
     /// Every run of the study, each scene built and validated (nothing runs
-    /// before every scene is known to be valid).
+    /// before every scene is known to be valid; in a case study a run whose
+    /// scene the validation refuses is planned as `refused`).
     pub fn plan(&self) -> Result<StudyPlan, StudyError> {
+        if !self.case.is_empty() {
+            return self.plan_cases();
+        }
         let methods = self.methods();
         let mut runs = Vec::new();
         let mut references = Vec::new();
         for (method_index, method) in methods.iter().enumerate() {
             let series = &self.series[method.series];
             let base = self.scene_for(&method.overrides, series.integrator)?;
-            for (k, &value) in series.values.iter().enumerate() {
-                let scene = refined(&base, &series.refine, value)?;
+            for (k, refine) in series.runs() {
+                let scene = match &refine {
+                    Some((key, value)) => refined(&base, key, *value)?,
+                    None => without_snapshots(&base),
+                };
+                let name = match refine {
+                    Some(_) => format!("m{method_index:02}_{k:02}_{}", slug(&method.label)),
+                    None => format!("m{method_index:02}_{}", slug(&method.label)),
+                };
+                let reference = match &self.reference {
+                    ReferenceSpec::Series {} => {
+                        RunReference::Run(format!("m{method_index:02}_reference"))
+                    }
+                    ReferenceSpec::Run { .. } => RunReference::Run("reference".into()),
+                    other => run_reference(other, &scene),
+                };
                 runs.push(PlannedRun {
-                    name: format!("m{method_index:02}_{k:02}_{}", slug(&method.label)),
+                    name,
                     method: method.label.clone(),
                     series: method.series,
                     axes: method.axes.clone(),
                     integrator: series.integrator,
-                    refine: Some((series.refine.clone(), value)),
+                    refine,
                     scene,
+                    case: None,
+                    refused: None,
+                    reference,
+                    quantities: self.quantity.clone(),
                 });
             }
-            if let (ReferenceSpec::Series {}, Some(value)) =
-                (&self.reference, series.reference_value)
+            if let (ReferenceSpec::Series {}, Some(value), Some(key)) =
+                (&self.reference, series.reference_value, &series.refine)
             {
                 references.push(PlannedRun {
                     name: format!("m{method_index:02}_reference"),
@@ -418,8 +555,12 @@ impl StudySpec {
                     series: method.series,
                     axes: method.axes.clone(),
                     integrator: series.integrator,
-                    refine: Some((series.refine.clone(), value)),
-                    scene: refined(&base, &series.refine, value)?,
+                    refine: Some((key.clone(), value)),
+                    scene: refined(&base, key, value)?,
+                    case: None,
+                    refused: None,
+                    reference: RunReference::Unavailable("a reference run".into()),
+                    quantities: self.quantity.clone(),
                 });
             }
         }
@@ -432,6 +573,10 @@ impl StudySpec {
                 integrator: *integrator,
                 refine: None,
                 scene: self.scene_for(set, *integrator)?,
+                case: None,
+                refused: None,
+                reference: RunReference::Unavailable("a reference run".into()),
+                quantities: self.quantity.clone(),
             });
         }
         Ok(StudyPlan {
@@ -441,7 +586,107 @@ impl StudySpec {
         })
     }
 
-    /// The series crossed with the axes: label, axis values and overrides of
+    /// The plan of a case study: every case with every method (and every
+    /// value of a refined series), and one reference run per case with a
+    /// `run` reference.
+    fn plan_cases(&self) -> Result<StudyPlan, StudyError> {
+        let methods = self.methods();
+        let mut runs = Vec::new();
+        let mut references = Vec::new();
+        for (case_index, case) in self.case.iter().enumerate() {
+            let scene_path = case.scene.as_ref().unwrap_or(&self.study.scene);
+            let reference_spec = case.reference.as_ref().unwrap_or(&self.reference);
+            let quantities = case
+                .quantity
+                .clone()
+                .unwrap_or_else(|| self.quantity.clone());
+            let mut case_overrides = self.study.set.clone();
+            case_overrides.extend(case.set.iter().cloned());
+            // the case's reference run, if any (refused: the case has no reference)
+            let mut case_reference = None;
+            if let ReferenceSpec::Run { integrator, set } = reference_spec {
+                let name = format!("c{case_index:02}_reference");
+                let mut overrides = case_overrides.clone();
+                overrides.extend(set.iter().cloned());
+                case_reference = Some(match build(scene_path, &overrides, *integrator, &[])? {
+                    Ok(scene) => {
+                        references.push(PlannedRun {
+                            name: name.clone(),
+                            method: "reference".into(),
+                            series: usize::MAX,
+                            axes: Vec::new(),
+                            integrator: *integrator,
+                            refine: None,
+                            scene,
+                            case: Some(case.name.clone()),
+                            refused: None,
+                            reference: RunReference::Unavailable("a reference run".into()),
+                            quantities: quantities.clone(),
+                        });
+                        RunReference::Run(name)
+                    }
+                    Err(why) => {
+                        RunReference::Unavailable(format!("the reference run is refused: {why}"))
+                    }
+                });
+            }
+            for (method_index, method) in methods.iter().enumerate() {
+                let series = &self.series[method.series];
+                let mut overrides = case_overrides.clone();
+                overrides.extend(method.overrides.iter().cloned());
+                for (k, refine) in series.runs() {
+                    let mut steps = Vec::new();
+                    if let Some(dt) = case.dt {
+                        steps.push(("dt".to_string(), dt));
+                    }
+                    steps.extend(refine.clone());
+                    let suffix = match refine {
+                        Some(_) => format!("_{k:02}"),
+                        None => String::new(),
+                    };
+                    let name = format!(
+                        "c{case_index:02}_m{method_index:02}{suffix}_{}",
+                        slug(&format!("{} {}", case.name, method.label))
+                    );
+                    let built = build(scene_path, &overrides, series.integrator, &steps)?;
+                    let (scene, refused) = match built {
+                        Ok(scene) => (scene, None),
+                        // the scene as far as it was built: the base with the overrides
+                        Err(why) => (
+                            parse_unchecked(scene_path, &overrides).map_err(scene_error)?,
+                            Some(why),
+                        ),
+                    };
+                    let reference = match (&refused, &case_reference) {
+                        (Some(_), _) => RunReference::Unavailable("the run is refused".into()),
+                        (None, Some(r)) => r.clone(),
+                        (None, None) => run_reference(reference_spec, &scene),
+                    };
+                    runs.push(PlannedRun {
+                        name,
+                        method: method.label.clone(),
+                        series: method.series,
+                        axes: method.axes.clone(),
+                        integrator: series.integrator,
+                        refine: refine.or_else(|| case.dt.map(|dt| ("dt".to_string(), dt))),
+                        scene,
+                        case: Some(case.name.clone()),
+                        refused,
+                        reference,
+                        quantities: quantities.clone(),
+                    });
+                }
+            }
+        }
+        Ok(StudyPlan {
+            spec: self.clone(),
+            runs,
+            references,
+        })
+    }
+
+    /// The series crossed with the axes: label, axis values and overrides
+    /// (axes, then series; `study.set` comes first, added by the caller) of
     /// each method.
     fn methods(&self) -> Vec<Method> {
         // (axis name, value label, overrides) per axis of each combination
@@ -464,8 +709,10 @@ impl StudySpec {
         let mut methods = Vec::new();
         for (s, series) in self.series.iter().enumerate() {
             for combo in &combos {
-                let mut overrides = self.study.set.clone();
-                overrides.extend(combo.iter().flat_map(|(_, _, set)| set.iter().cloned()));
+                let mut overrides: Vec<String> = combo
+                    .iter()
+                    .flat_map(|(_, _, set)| set.iter().cloned())
+                    .collect();
                 overrides.extend(series.set.iter().cloned());
                 let mut label = series.label.clone();
                 for (name, value, _) in combo {
@@ -506,6 +753,122 @@ impl StudySpec {
     }
 }
 
+/// The parameters of a reference, naming `field`.
+fn check_reference(field: &str, reference: &ReferenceSpec) -> Result<(), String> {
+    match reference {
+        ReferenceSpec::ClosedForm {
+            name: ClosedFormName::BarVibration,
+            parameters: Some(p),
+            ..
+        } => {
+            for (key, v) in [
+                ("height", p.height),
+                ("wave_speed", p.wave_speed),
+                ("velocity", p.velocity),
+            ] {
+                if !(v.is_finite() && v != 0.0) || (key != "velocity" && v < 0.0) {
+                    return Err(format!(
+                        "{field}.parameters.{key}: must be finite and nonzero (> 0 for lengths and speeds), got {v}"
+                    ));
+                }
+            }
+        }
+        ReferenceSpec::ClosedForm {
+            name: ClosedFormName::ColumnSettlement,
+            parameters: Some(_),
+            ..
+        } => {
+            return Err(format!(
+                "{field}.parameters: `column_settlement` reads its parameters from each run's scene"
+            ))
+        }
+        ReferenceSpec::Unavailable { why } if why.trim().is_empty() => {
+            return Err(format!("{field}.why: say why there is no reference"))
+        }
+        _ => {}
+    }
+    Ok(())
+}
+
+/// The quantities `field` against `reference`: at least one unless there is
+/// no reference; `time` with `at_time` only; on the closed form's monitor; a
+/// period only where the closed form has one.
+fn check_quantities(
+    field: &str,
+    quantities: &[Quantity],
+    reference: &ReferenceSpec,
+) -> Result<(), String> {
+    if quantities.is_empty() && !matches!(reference, ReferenceSpec::Unavailable { .. }) {
+        return Err(format!(
+            "{field}: at least one [[quantity]] is needed (reference kind `{}`)",
+            reference.kind()
+        ));
+    }
+    for (i, q) in quantities.iter().enumerate() {
+        match (q.measure, q.time) {
+            (Measure::AtTime, Some(t)) if t.is_finite() && t >= 0.0 => {}
+            (Measure::AtTime, _) => {
+                return Err(format!(
+                    "{field}[{i}].time: `at_time` needs a finite time >= 0"
+                ))
+            }
+            (_, Some(_)) => {
+                return Err(format!(
+                    "{field}[{i}].time: only the `at_time` measure takes a time"
+                ))
+            }
+            _ => {}
+        }
+        if let ReferenceSpec::ClosedForm { monitor, name, .. } = reference {
+            if &q.monitor != monitor {
+                return Err(format!(
+                    "{field}[{i}].monitor: the closed form describes `{monitor}`, not `{}`",
+                    q.monitor
+                ));
+            }
+            if q.measure == Measure::Period && *name == ClosedFormName::ColumnSettlement {
+                return Err(format!(
+                    "{field}[{i}].measure: `column_settlement` has no period"
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The reference of a run of `scene` (a case's reference run and a series'
+/// own reference run are named by the caller).
+fn run_reference(spec: &ReferenceSpec, scene: &Scene) -> RunReference {
+    match spec {
+        ReferenceSpec::ClosedForm {
+            parameters: Some(p),
+            ..
+        } => RunReference::ClosedForm(ClosedForm::Bar(*p)),
+        ReferenceSpec::ClosedForm {
+            name,
+            parameters: None,
+            ..
+        } => match ClosedForm::from_scene(*name, scene) {
+            Ok(c) => RunReference::ClosedForm(c),
+            Err(why) => RunReference::Unavailable(format!(
+                "the closed form `{}` does not describe this scene: {why}",
+                closed_form_name(*name)
+            )),
+        },
+        ReferenceSpec::Unavailable { why } => RunReference::Unavailable(why.clone()),
+        ReferenceSpec::Run { .. } | ReferenceSpec::Series {} => {
+            RunReference::Run("reference".into())
+        }
+    }
+}
+
+fn closed_form_name(name: ClosedFormName) -> &'static str {
+    match name {
+        ClosedFormName::BarVibration => "bar_vibration",
+        ClosedFormName::ColumnSettlement => "column_settlement",
+    }
+}
+
 /// One method: a series with one combination of axis values.
 struct Method {
     series: usize,
@@ -514,22 +877,101 @@ struct Method {
     overrides: Vec<String>,
 }
 
+fn scene_error(e: SceneError) -> StudyError {
+    StudyError::Scene(e.to_string())
+}
+
+/// A validation refusal becomes the run's outcome (`Ok(Err(why))`, one line);
+/// any other scene error (unreadable file, unknown key, bad override) is a
+/// spec error that stops the study.
+fn refusal(e: SceneError) -> Result<String, StudyError> {
+    match e {
+        SceneError::Invalid { errors, .. } => Ok(errors
+            .iter()
+            .map(|e| e.to_string())
+            .collect::<Vec<_>>()
+            .join("; ")),
+        other => Err(scene_error(other)),
+    }
+}
+
+/// The scene at `path` with `overrides` for `integrator`, refined along
+/// `steps` (`(key, value)`, as [`refined`]), without snapshots. The outer
+/// error stops the study; the inner one is a validation refusal, as text.
+fn build(
+    path: &Path,
+    overrides: &[String],
+    integrator: IntegratorChoice,
+    steps: &[(String, f64)],
+) -> Result<Result<Scene, String>, StudyError> {
+    let attempt = || -> Result<Scene, SceneError> {
+        let mut scene = Scene::load(path, overrides)?;
+        if integrator == IntegratorChoice::Explicit {
+            scene = scene.explicit_twin()?;
+        }
+        for (key, value) in steps {
+            scene = refine_scene(&scene, key, *value)?;
+        }
+        Ok(without_snapshots(&scene))
+    };
+    match attempt() {
+        Ok(scene) => Ok(Ok(scene)),
+        Err(e) => refusal(e).map(Err),
+    }
+}
+
+/// The scene at `path` with `overrides`, parsed but not validated (the scene
+/// of a refused run).
+fn parse_unchecked(path: &Path, overrides: &[String]) -> Result<Scene, SceneError> {
+    let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io {
+        path: path.display().to_string(),
+        source,
+    })?;
+    let mut table: toml::Table = text
+        .parse()
+        .map_err(|e: toml::de::Error| SceneError::Parse {
+            path: path.display().to_string(),
+            message: e.to_string(),
+        })?;
+    for o in overrides {
+        crate::scene::apply_override(&mut table, o)?;
+    }
+    toml::Value::Table(table)
+        .try_into()
+        .map_err(|e: toml::de::Error| SceneError::Parse {
+            path: path.display().to_string(),
+            message: e.to_string(),
+        })
+}
+
 /// `scene` with the refined key set to `value`. `dt` keeps the end time of an
 /// implicit scene (steps = round(T / Δt)); an explicit scene gets a fixed Δt.
 pub fn refined(scene: &Scene, key: &str, value: f64) -> Result<Scene, StudyError> {
+    refine_scene(scene, key, value).map_err(scene_error)
+}
+
+/// [`refined`] with the scene's own error (a validation refusal stays one).
+fn refine_scene(scene: &Scene, key: &str, value: f64) -> Result<Scene, SceneError> {
     let mut overrides = Vec::new();
     if key == "dt" {
         overrides.push(format!("scene.dt={value:e}"));
         if scene.scene.analysis != AnalysisKind::Explicit {
+            let invalid = |message: String| SceneError::Invalid {
+                path: scene.scene.name.clone(),
+                errors: vec![crate::scene::FieldError {
+                    field: "scene.dt".into(),
+                    message,
+                }],
+            };
             let (Some(steps), Some(dt)) = (scene.scene.steps, scene.scene.dt) else {
-                return Err(StudyError::Scene(
+                return Err(invalid(
                     "refine = \"dt\": the implicit scene needs scene.steps and scene.dt".into(),
                 ));
             };
             let end = steps as f64 * dt;
             let new_steps = (end / value).round().max(1.0);
             if new_steps > 1e8 {
-                return Err(StudyError::Scene(format!(
+                return Err(invalid(format!(
                     "refine = \"dt\": Δt = {value:e} s gives {new_steps:e} steps"
                 )));
             }
@@ -538,11 +980,22 @@ pub fn refined(scene: &Scene, key: &str, value: f64) -> Result<Scene, StudyError
     } else {
         overrides.push(format!("{key}={value:e}"));
     }
-    // a study times the computation and reads curve.csv: no snapshot files
-    overrides.push("output.snapshots=[]".into());
-    let text = toml::to_string(scene).map_err(|e| StudyError::Scene(e.to_string()))?;
-    Scene::from_str_with_overrides(&text, &scene.scene.name, &overrides)
-        .map_err(|e| StudyError::Scene(e.to_string()))
+    let text = toml::to_string(scene).map_err(|e| SceneError::Parse {
+        path: scene.scene.name.clone(),
+        message: e.to_string(),
+    })?;
+    let scene = Scene::from_str_with_overrides(&text, &scene.scene.name, &overrides)?;
+    Ok(without_snapshots(&scene))
+}
+
+/// A study times the computation and reads `curve.csv`: no snapshot files
+/// (by step, every n steps or at times).
+fn without_snapshots(scene: &Scene) -> Scene {
+    let mut scene = scene.clone();
+    scene.output.snapshots.clear();
+    scene.output.snapshot_every = 0;
+    scene.output.snapshot_times.clear();
+    scene
 }
 
 /// A TOML value as `--set` text (strings quoted).
