@@ -5,7 +5,7 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
-use mpm_geo::campaign::CampaignOptions;
+use mpm_geo::campaign::{CampaignOptions, Part};
 use mpm_geo::run::run_scene;
 use mpm_geo::scene::{Formulation, Scene};
 
@@ -57,6 +57,14 @@ enum Command {
         /// out/campaign-<dir name>-paper by default.
         #[arg(long, value_enum, default_value_t = FormulationArg::Ours)]
         formulation: FormulationArg,
+        /// Run only the K-th of N disjoint parts (e.g. `--shard 2/3`), for a
+        /// cluster job array; no report (see `--collect`).
+        #[arg(long, value_name = "K/N", conflicts_with = "collect")]
+        shard: Option<String>,
+        /// Run nothing: build the report from the runs every shard left in
+        /// the output directory.
+        #[arg(long)]
+        collect: bool,
     },
     /// Error against run time: run a study spec's sweep (each run a whole
     /// process, timed `repeats` times) and write study.csv,
@@ -70,6 +78,13 @@ enum Command {
         /// Repeats per run instead of the spec's `study.repeats`.
         #[arg(long)]
         repeats: Option<usize>,
+        /// Run only the K-th of N disjoint parts of the study's runs (e.g.
+        /// `--shard 2/3`), for a cluster job array; no report (see `--collect`).
+        #[arg(long, value_name = "K/N", conflicts_with = "collect")]
+        shard: Option<String>,
+        /// Run nothing: build the report from the runs every shard measured.
+        #[arg(long)]
+        collect: bool,
     },
     /// Homogeneous test on one material point (biaxial, triaxial, simple shear) → CSV.
     Point(mpm_geo::point_driver::PointArgs),
@@ -92,6 +107,15 @@ enum FormulationArg {
     Paper,
 }
 
+/// `--shard K/N` / `--collect` of `campaign` and `study`.
+fn parse_part(shard: Option<String>, collect: bool) -> Result<Part, String> {
+    match (shard, collect) {
+        (Some(text), _) => Part::shard(&text),
+        (None, true) => Ok(Part::Collect),
+        (None, false) => Ok(Part::Whole),
+    }
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
@@ -102,7 +126,13 @@ fn main() -> ExitCode {
             overrides,
             step_refinement,
             formulation,
+            shard,
+            collect,
         } => {
+            let part = match parse_part(shard, collect) {
+                Ok(part) => part,
+                Err(e) => return fail(2, &e),
+            };
             let name = dir
                 .file_name()
                 .map(|s| s.to_string_lossy().into_owned())
@@ -118,16 +148,25 @@ fn main() -> ExitCode {
                 overrides,
                 step_refinement,
                 formulation,
+                part,
             };
             match mpm_geo::campaign::run_campaign(&dir, &out, &options) {
                 Ok(runs) => {
                     let stopped = runs.iter().filter(|r| r.error.is_some()).count();
-                    eprintln!(
-                        "campaign: {} runs ({} stopped early); report in {}",
-                        runs.len(),
-                        stopped,
-                        out.join("report.md").display()
-                    );
+                    if let Part::Shard { index, count } = part {
+                        eprintln!(
+                            "campaign: shard {index}/{count}: {} runs ({stopped} stopped early) in {}; build the report with --collect",
+                            runs.len(),
+                            out.display()
+                        );
+                    } else {
+                        eprintln!(
+                            "campaign: {} runs ({} stopped early); report in {}",
+                            runs.len(),
+                            stopped,
+                            out.join("report.md").display()
+                        );
+                    }
                     if stopped == 0 {
                         ExitCode::SUCCESS
                     } else {
@@ -137,7 +176,17 @@ fn main() -> ExitCode {
                 Err(e) => fail(2, &e.to_string()),
             }
         }
-        Command::Study { spec, out, repeats } => {
+        Command::Study {
+            spec,
+            out,
+            repeats,
+            shard,
+            collect,
+        } => {
+            let part = match parse_part(shard, collect) {
+                Ok(part) => part,
+                Err(e) => return fail(2, &e),
+            };
             let stem = spec
                 .file_stem()
                 .map(|s| s.to_string_lossy().into_owned())
@@ -151,14 +200,21 @@ fn main() -> ExitCode {
                 executable,
                 repeats,
                 verbose: true,
+                part,
             };
             match mpm_geo::study::run_study(&spec, &out, &options) {
                 Ok(rows) => {
                     let stopped = rows.iter().filter(|r| !r.measured.completed()).count();
+                    let report = match part {
+                        Part::Shard { index, count } => format!(
+                            "shard {index}/{count} in {}; build the report with --collect",
+                            out.display()
+                        ),
+                        _ => format!("report in {}", out.join("report.md").display()),
+                    };
                     eprintln!(
-                        "study: {} runs ({stopped} did not complete); report in {}",
-                        rows.len(),
-                        out.join("report.md").display()
+                        "study: {} runs ({stopped} did not complete); {report}",
+                        rows.len()
                     );
                     // a stopped or refused run is an outcome; a panic, a
                     // time-out or a signal is a fault of the engine

@@ -28,7 +28,7 @@ pub struct OutputObserver {
 
 /// The material points' positions and strains at one snapshot time (what the
 /// campaigns plot as the paper's Fig. 10).
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct FieldSnapshot {
     /// The snapshot time asked for in `[output] snapshot_times`, s.
     pub requested_time: f64,

@@ -40,7 +40,7 @@ fn failure_stresses(model: &Hmc, confinement: f64) -> (f64, f64) {
 /// The scene's soil: the HMC material of DESIGN §8.2 with the sharp cone.
 fn soil() -> Hmc {
     match &common::scene(SCENE, &[]).materials["soil"] {
-        MaterialSpec::Hmc(parameters) => Hmc::new(parameters.clone()).unwrap(),
+        MaterialSpec::Hmc(parameters) => Hmc::new(*parameters).unwrap(),
         other => panic!("soil is not HMC: {other:?}"),
     }
 }

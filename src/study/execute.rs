@@ -14,7 +14,7 @@ use crate::profile::Stage;
 pub type Histories = Vec<(String, Vec<(f64, f64)>)>;
 
 /// What one run measured (from its process, `run.json` and `curve.csv`).
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct Measured {
     /// Wall time of the whole process per repeat, s.
     pub wall_seconds: Vec<f64>,
@@ -324,4 +324,47 @@ pub fn read_curve(path: &Path) -> Option<Histories> {
 /// The directory of a run inside the study's output directory.
 pub fn run_dir(out: &Path, planned: &PlannedRun) -> PathBuf {
     out.join("runs").join(&planned.name)
+}
+
+/// File of a run's measurement in its directory.
+const MEASURED_FILE: &str = "measured.json";
+
+/// Fingerprint of a run: its scene, repeats and time-out (a change of any of
+/// them measures it again).
+pub fn fingerprint(planned: &PlannedRun, repeats: usize, timeout: Option<f64>) -> String {
+    let scene = toml::to_string(&planned.scene).unwrap_or_default();
+    crate::campaign::fingerprint_text(&format!("{scene}|{repeats}|{timeout:?}"))
+}
+
+/// Estimated cost of a run, to balance shards: steps (1000 when the
+/// explicit integrator chooses them) over h².
+pub fn cost(scene: &crate::scene::Scene) -> f64 {
+    scene.scene.steps.unwrap_or(1000) as f64 / scene.grid.cell_size.powi(2)
+}
+
+/// The measurement kept in `dir` when it has `fingerprint` (else `None`:
+/// measure it).
+pub fn load_measured(dir: &Path, fingerprint: &str) -> Option<Measured> {
+    let json = read_json(&dir.join(MEASURED_FILE))?;
+    if json.get("fingerprint")?.as_str()? != fingerprint {
+        return None;
+    }
+    serde_json::from_value(json.get("measured")?.clone()).ok()
+}
+
+/// Keep `measured` in `dir` (written under a temporary name and renamed).
+pub fn save_measured(dir: &Path, fingerprint: &str, measured: &Measured) -> Result<(), StudyError> {
+    let path = dir.join(MEASURED_FILE);
+    let fail = |e: &dyn std::fmt::Display| StudyError::Io {
+        path: path.display().to_string(),
+        message: e.to_string(),
+    };
+    let text = serde_json::to_string(&serde_json::json!({
+        "fingerprint": fingerprint,
+        "measured": measured,
+    }))
+    .map_err(|e| fail(&e))?;
+    let temporary = dir.join(format!(".{MEASURED_FILE}.tmp"));
+    std::fs::write(&temporary, text).map_err(|e| fail(&e))?;
+    std::fs::rename(&temporary, &path).map_err(|e| fail(&e))
 }
