@@ -11,7 +11,7 @@ use super::report::{last_value, read_curve, write_outputs, write_step_convergenc
 use super::spec::{Benchmark, CampaignSpec, SPEC_FILE};
 use super::{CampaignError, CampaignRun, CurveColumns, Effort, EnergyBalance};
 use crate::output::deviatoric_hencky_strain;
-use crate::run::run_scene;
+use crate::run::{run_scene_with, RunOptions};
 use crate::scene::{Formulation, Scene};
 
 /// How a campaign is run.
@@ -219,7 +219,13 @@ fn run_one(planned: Planned, out: &Path) -> Result<CampaignRun, CampaignError> {
         profile: String::new(),
         step_factor,
     };
-    let set_up = match run_scene(scene, out, false) {
+    // the campaign owns its runs' directories: an earlier campaign's files
+    // there are replaced
+    let options = RunOptions {
+        show_progress: false,
+        overwrite: true,
+    };
+    let set_up = match run_scene_with(scene, out, &options) {
         Err(e) => {
             run.error = Some(e.to_string());
             false

@@ -116,7 +116,7 @@ pub fn execute(
     std::fs::create_dir_all(dir).map_err(|e| io(dir, &e))?;
     let scene_path = dir.join("scene.toml");
     let text = toml::to_string(&planned.scene).map_err(|e| io(&scene_path, &e))?;
-    std::fs::write(&scene_path, text).map_err(|e| io(&scene_path, &e))?;
+    crate::atomic_file::write_atomic(&scene_path, text).map_err(|e| io(&scene_path, &e))?;
     let out = dir.join("output");
     let mut runs: Vec<(f64, Vec<f64>)> = Vec::new();
     let mut last_status = String::new();
