@@ -36,10 +36,7 @@ impl AtomicPath {
             .file_name()
             .map(|s| s.to_string_lossy().into_owned())
             .unwrap_or_default();
-        let temp = path.with_file_name(format!(
-            "{TEMP_PREFIX}{}.{n}.{name}",
-            std::process::id()
-        ));
+        let temp = path.with_file_name(format!("{TEMP_PREFIX}{}.{n}.{name}", std::process::id()));
         Self {
             path: path.to_path_buf(),
             temp,

@@ -6,6 +6,8 @@
 //! stops the run with exit 1 naming step, time and path, and leaves every
 //! file whole or absent. The tests drive the `mpm-geo` binary as a user would.
 
+#![cfg(target_os = "linux")]
+
 mod common;
 
 use std::path::{Path, PathBuf};
@@ -169,7 +171,10 @@ fn wait_for_rows(out: &Path, rows: usize, child: &mut Child) {
 fn a_signal_ends_the_run_after_a_whole_step_and_a_second_run_is_refused() {
     let tmp = tempfile::tempdir().unwrap();
     let scene = bar();
-    let cases = [(libc::SIGTERM, "SIGTERM", 143), (libc::SIGINT, "SIGINT", 130)];
+    let cases = [
+        (libc::SIGTERM, "SIGTERM", 143),
+        (libc::SIGINT, "SIGINT", 130),
+    ];
     let mut children: Vec<(Child, PathBuf)> = cases
         .iter()
         .map(|(_, name, _)| {
@@ -192,7 +197,10 @@ fn a_signal_ends_the_run_after_a_whole_step_and_a_second_run_is_refused() {
             text.contains("locked by process") && text.contains(&child.id().to_string()),
             "{text}"
         );
-        assert_eq!(std::fs::read(out.join("particles_000000.vtu")).unwrap(), before);
+        assert_eq!(
+            std::fs::read(out.join("particles_000000.vtu")).unwrap(),
+            before
+        );
 
         send(child, *signal);
         let status = wait(child, Duration::from_secs(60));
@@ -209,9 +217,15 @@ fn a_signal_ends_the_run_after_a_whole_step_and_a_second_run_is_refused() {
         // (serde_json reads the time to within an ulp or so)
         let last = rows.last().unwrap();
         assert_eq!(last.0, step);
-        assert!((last.1 - time).abs() <= 1e-14 * time, "{last:?} vs t = {time}");
+        assert!(
+            (last.1 - time).abs() <= 1e-14 * time,
+            "{last:?} vs t = {time}"
+        );
         assert!(time < 1000.0);
-        assert!(log.contains(&format!("interrupted by {name} after step {step}")), "{log}");
+        assert!(
+            log.contains(&format!("interrupted by {name} after step {step}")),
+            "{log}"
+        );
         let snapshots = whole_snapshots(out);
         assert_eq!(snapshots.len(), step / 200 + 1);
         assert!(!out.join(".mpm-geo.lock").exists(), "lock left behind");
@@ -226,7 +240,12 @@ fn a_reused_directory_is_refused_unless_overwrite_then_cleared_of_the_old_run() 
     let (code, text) = run(
         &scene,
         &out,
-        &["--set", "scene.end_time=0.01", "--set", "output.snapshot_every=10"],
+        &[
+            "--set",
+            "scene.end_time=0.01",
+            "--set",
+            "output.snapshot_every=10",
+        ],
     );
     assert_eq!(code, 0, "{text}");
     assert!(out.join("particles_000040.vtu").exists());
@@ -251,11 +270,20 @@ fn a_reused_directory_is_refused_unless_overwrite_then_cleared_of_the_old_run() 
     let report = json(&out.join("run.json"));
     assert_eq!(report["status"], "completed");
     assert_eq!(report["scene"]["scene"]["name"], "oedometer", "{report}");
-    assert!(!out.join("particles_000040.vtu").exists(), "old snapshot kept");
+    assert!(
+        !out.join("particles_000040.vtu").exists(),
+        "old snapshot kept"
+    );
     whole_snapshots(&out);
     let rows = whole_rows(&out.join("curve.csv"));
-    assert_eq!(rows.last().unwrap().0, report["steps_completed"].as_u64().unwrap() as usize);
-    assert_eq!(std::fs::read_to_string(out.join("notes.txt")).unwrap(), "mine");
+    assert_eq!(
+        rows.last().unwrap().0,
+        report["steps_completed"].as_u64().unwrap() as usize
+    );
+    assert_eq!(
+        std::fs::read_to_string(out.join("notes.txt")).unwrap(),
+        "mine"
+    );
 }
 
 #[test]
@@ -293,7 +321,15 @@ exit $rc"#;
     let out_inside = format!("{}/out", mount.display());
     let scene = bar();
     let status = Command::new("unshare")
-        .args(["--user", "--map-root-user", "--mount", "sh", "-c", script, "sh"])
+        .args([
+            "--user",
+            "--map-root-user",
+            "--mount",
+            "sh",
+            "-c",
+            script,
+            "sh",
+        ])
         .args(["run", &scene, "--out", &out_inside, "--quiet"])
         .args(args)
         .env("SIZE", size)
@@ -338,7 +374,15 @@ fn a_full_disk_stops_the_run_naming_step_time_and_path_and_leaves_files_whole() 
     let tmp = tempfile::tempdir().unwrap();
     // a: snapshots fill the disk; b: the curve does (no snapshots)
     let cases: [(&str, &[&str]); 2] = [
-        ("96k", &["--set", "scene.end_time=1000", "--set", "output.snapshot_every=50"]),
+        (
+            "96k",
+            &[
+                "--set",
+                "scene.end_time=1000",
+                "--set",
+                "output.snapshot_every=50",
+            ],
+        ),
         ("64k", &["--set", "scene.end_time=1000"]),
     ];
     let mut failed_on = Vec::new();
@@ -358,13 +402,22 @@ fn a_full_disk_stops_the_run_naming_step_time_and_path_and_leaves_files_whole() 
         let rows = whole_rows(&keep.join("curve.csv"));
         let last = *rows.last().unwrap();
         // the row of the failing step is whole or absent
-        assert!(last.0 == step || last.0 + 1 == step, "{last:?} at step {step}");
+        assert!(
+            last.0 == step || last.0 + 1 == step,
+            "{last:?} at step {step}"
+        );
         if last.0 == step {
-            assert!((last.1 - time).abs() <= 1e-6 * time, "{last:?} vs t = {time}");
+            assert!(
+                (last.1 - time).abs() <= 1e-6 * time,
+                "{last:?} vs t = {time}"
+            );
         }
         let snapshots = whole_snapshots(&keep);
         if name.ends_with(".vtu") {
-            assert!(!snapshots.contains(&name), "{name} written although it failed");
+            assert!(
+                !snapshots.contains(&name),
+                "{name} written although it failed"
+            );
         }
         // run.json is whole: `failed` with the same message, or still the
         // `running` written before step 1 if no space was left for it
