@@ -228,6 +228,17 @@ fn a_signal_ends_the_run_after_a_whole_step_and_a_second_run_is_refused() {
         );
         let snapshots = whole_snapshots(out);
         assert_eq!(snapshots.len(), step / 200 + 1);
+        // the collection gives each snapshot the time of its step
+        let pvd = std::fs::read_to_string(out.join("particles.pvd")).unwrap();
+        let times: Vec<f64> = pvd
+            .split("timestep=\"")
+            .skip(1)
+            .map(|s| s.split('"').next().unwrap().parse().unwrap())
+            .collect();
+        for (name, t) in snapshots.iter().zip(&times) {
+            let snap_step: usize = name[10..16].parse().unwrap();
+            assert_eq!(*t, rows[snap_step].1, "{name}");
+        }
         assert!(!out.join(".mpm-geo.lock").exists(), "lock left behind");
     }
 }
