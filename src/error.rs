@@ -24,9 +24,15 @@ pub enum RunError {
         #[source]
         cause: StepError,
     },
-    /// Writing an output failed.
-    #[error("output {path}: {message}")]
+    /// Writing an output failed (the first such error ends the run; every
+    /// file written before it is whole, the one being written is absent or
+    /// keeps its previous version, `curve.csv` ends with a whole row).
+    #[error("step {step} (t = {time:.6e} s): cannot write {path}: {message}")]
     Output {
+        /// Step whose outputs were being written (0: the initial state).
+        step: usize,
+        /// Time of that step, s.
+        time: f64,
         /// File that could not be written.
         path: String,
         /// Why.

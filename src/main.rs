@@ -6,7 +6,7 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 
 use mpm_geo::campaign::{CampaignOptions, Part};
-use mpm_geo::run::run_scene;
+use mpm_geo::run::{run_scene_with, RunOptions};
 use mpm_geo::scene::{Formulation, Scene};
 
 /// 2D plane-strain material point method for brittle geomaterials.
@@ -32,6 +32,11 @@ enum Command {
         /// No progress bar.
         #[arg(long)]
         quiet: bool,
+        /// Remove an earlier run's files from the output directory
+        /// (run.json, curve.csv, particles_*.vtu, *.pvd, checkpoints) instead
+        /// of refusing it; other files there are kept.
+        #[arg(long)]
+        overwrite: bool,
     },
     /// Run every scene of a directory (in parallel) and write curves.csv,
     /// metrics.csv, report.md and plots (mesh-objectivity campaign).
@@ -268,6 +273,7 @@ fn main() -> ExitCode {
             out,
             overrides,
             quiet,
+            overwrite,
         } => {
             let loaded = match Scene::load(&scene, &overrides) {
                 Ok(s) => s,
@@ -281,7 +287,14 @@ fn main() -> ExitCode {
                 .map(|s| s.to_string_lossy().into_owned())
                 .unwrap_or_else(|| "run".into());
             let out = out.unwrap_or_else(|| PathBuf::from("out").join(stem));
-            match run_scene(loaded, &out, !quiet) {
+            if let Err(e) = mpm_geo::interrupt::install() {
+                eprintln!("warning: SIGINT/SIGTERM will end the run without run.json: {e}");
+            }
+            let options = RunOptions {
+                show_progress: !quiet,
+                overwrite,
+            };
+            match run_scene_with(loaded, &out, &options) {
                 Err(e) => fail(2, &e.to_string()),
                 Ok(outcome) => {
                     eprintln!("{}", outcome.simulation.profile.table(outcome.wall_seconds));
@@ -313,15 +326,25 @@ fn main() -> ExitCode {
                             mass / total
                         );
                     }
-                    match outcome.error {
-                        Some(e) => fail(
+                    match (outcome.error, outcome.interrupted) {
+                        (Some(e), _) => fail(
                             1,
                             &format!(
                                 "run stopped: {e}\noutputs up to the last completed step are in {}",
                                 out.display()
                             ),
                         ),
-                        None => {
+                        (None, Some(signal)) => {
+                            eprintln!(
+                                "interrupted by {} after step {} (t = {:.6e} s); outputs up to it are in {}",
+                                signal.name(),
+                                sim.step,
+                                sim.time,
+                                out.display()
+                            );
+                            ExitCode::from(signal.exit_code())
+                        }
+                        (None, None) => {
                             eprintln!("outputs in {}", out.display());
                             ExitCode::SUCCESS
                         }

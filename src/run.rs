@@ -1,5 +1,8 @@
-//! Running a scene to an output directory: the observer that writes
-//! `curve.csv`, snapshots and `run.json`, and drives the progress bar.
+//! Running a scene to an output directory: the directory is locked and
+//! checked ([`crate::output_dir`]), `run.json` says `running` before the first
+//! step, and the observer writes `curve.csv`, snapshots and their `.pvd`
+//! collection and drives the progress bar; at the end `run.json` says
+//! `completed`, `failed` or `interrupted`.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -9,10 +12,22 @@ use serde_json::json;
 
 use crate::error::RunError;
 use crate::integrators::StepReport;
-use crate::output::{deviatoric_hencky_strain, write_json, write_vtu, CurveWriter};
+use crate::interrupt::Interruption;
+use crate::output::{
+    deviatoric_hencky_strain, write_json, write_pvd, write_vtu, CurveWriter, OutputError,
+};
+use crate::output_dir;
 use crate::profile::Stage;
 use crate::scene::{AnalysisKind, Scene};
-use crate::simulation::{Observer, Simulation};
+use crate::simulation::{Observer, RunEnd, Simulation};
+
+/// Name of the snapshots' ParaView collection in the output directory.
+pub const PVD_FILE: &str = "particles.pvd";
+
+/// The run error of an output failure at `sim`'s current step and time.
+fn at(sim: &Simulation) -> impl Fn(OutputError) -> RunError + '_ {
+    |e| e.at(sim.model.step, sim.model.time)
+}
 
 /// Writes a run's outputs as it goes.
 pub struct OutputObserver {
@@ -24,6 +39,8 @@ pub struct OutputObserver {
     pending_times: Vec<f64>,
     /// The fields at the snapshot times reached so far.
     fields: Vec<FieldSnapshot>,
+    /// The snapshots written so far, (time, file name), for the `.pvd`.
+    snapshots: Vec<(f64, String)>,
 }
 
 /// The material points' positions and strains at one snapshot time (what the
@@ -59,12 +76,15 @@ impl FieldSnapshot {
 impl OutputObserver {
     /// Create `dir` and `curve.csv` in it.
     pub fn new(dir: &Path, sim: &Simulation, show_progress: bool) -> Result<Self, RunError> {
-        std::fs::create_dir_all(dir).map_err(|e| RunError::Output {
-            path: dir.display().to_string(),
-            message: e.to_string(),
+        std::fs::create_dir_all(dir).map_err(|e| {
+            OutputError {
+                path: dir.to_path_buf(),
+                source: e,
+            }
+            .at(sim.model.step, sim.model.time)
         })?;
         let names: Vec<String> = sim.monitors.iter().map(|m| m.name.clone()).collect();
-        let curve = CurveWriter::create(&dir.join("curve.csv"), &names)?;
+        let curve = CurveWriter::create(&dir.join("curve.csv"), &names).map_err(at(sim))?;
         let progress = if show_progress {
             let total = match sim.model.analysis() {
                 AnalysisKind::Explicit => 1000,
@@ -89,6 +109,7 @@ impl OutputObserver {
             last_row_step: usize::MAX,
             pending_times,
             fields: Vec::new(),
+            snapshots: Vec::new(),
         })
     }
 
@@ -115,19 +136,24 @@ impl OutputObserver {
             || (o.snapshot_every > 0 && step.is_multiple_of(o.snapshot_every))
     }
 
-    fn write_snapshot(&self, sim: &Simulation) -> Result<(), RunError> {
-        write_vtu(
-            &self
-                .dir
-                .join(format!("particles_{:06}.vtu", sim.model.step)),
-            &sim.model.particles,
-        )
+    /// Write `particles_<step>.vtu` and rewrite the `.pvd` collection.
+    fn write_snapshot(&mut self, sim: &Simulation) -> Result<(), RunError> {
+        let name = format!("particles_{:06}.vtu", sim.model.step);
+        write_vtu(&self.dir.join(&name), &sim.model.particles).map_err(at(sim))?;
+        self.snapshots.push((sim.model.time, name));
+        write_pvd(&self.dir.join(PVD_FILE), &self.snapshots).map_err(at(sim))
+    }
+
+    /// The snapshots written so far: (time, file name), as in the `.pvd`.
+    pub fn snapshots(&self) -> &[(f64, String)] {
+        &self.snapshots
     }
 
     fn write_row(&mut self, sim: &Simulation) -> Result<(), RunError> {
         let model = &sim.model;
         self.curve
-            .row(model.step, model.time, &sim.monitor_values())?;
+            .row(model.step, model.time, &sim.monitor_values())
+            .map_err(at(sim))?;
         self.last_row_step = model.step;
         Ok(())
     }
@@ -197,6 +223,22 @@ impl Observer for OutputObserver {
             Ok(())
         })
     }
+
+    fn on_interrupt(
+        &mut self,
+        sim: &Simulation,
+        _interruption: Interruption,
+    ) -> Result<(), RunError> {
+        sim.profile.time(Stage::Output, || {
+            // the interrupted step's row, even if `curve_every` skips it
+            if self.last_row_step != sim.model.step {
+                self.write_row(sim)?;
+            }
+            // checkpoint hook: a checkpoint of this step to resume from is
+            // written here (src/checkpoint/)
+            Ok(())
+        })
+    }
 }
 
 /// Outcome of a run started by [`run_scene`].
@@ -205,47 +247,145 @@ pub struct RunOutcome {
     pub simulation: Simulation,
     /// Wall time, s.
     pub wall_seconds: f64,
-    /// The error that stopped the run, if any (outputs up to it are kept).
+    /// The first error that stopped the run, if any: a failed step or an
+    /// output that could not be written (outputs up to it are kept, whole).
     pub error: Option<RunError>,
+    /// The signal that stopped the run after a completed step, if any.
+    pub interrupted: Option<Interruption>,
     /// The fields at the `[output] snapshot_times` the run reached.
     pub fields: Vec<FieldSnapshot>,
 }
 
-/// Run a validated scene, writing `curve.csv`, snapshots and `run.json` into `out`.
-/// Setup errors (the scene's geometry) are returned as `Err`; a failure during
-/// the run is returned in [`RunOutcome::error`] after `run.json` is written.
+/// How a run writes its output directory.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct RunOptions {
+    /// Draw a progress bar on stderr.
+    pub show_progress: bool,
+    /// Remove an earlier run's files from the directory instead of refusing
+    /// it ([`output_dir::prepare`]).
+    pub overwrite: bool,
+}
+
+/// Run a validated scene, writing `curve.csv`, snapshots and `run.json` into
+/// `out`, which must not hold an earlier run's files (see [`run_scene_with`]).
 pub fn run_scene(
     scene: Scene,
     out: &Path,
     show_progress: bool,
 ) -> Result<RunOutcome, Box<dyn std::error::Error + Send + Sync>> {
+    let options = RunOptions {
+        show_progress,
+        overwrite: false,
+    };
+    run_scene_with(scene, out, &options)
+}
+
+/// Run a validated scene into `out`: lock the directory (refused if another
+/// run holds it, or if it holds an earlier run's files and not
+/// `options.overwrite`), write `run.json` with status `running`, run, and
+/// rewrite `run.json` with the end status. Setup errors (the scene's
+/// geometry, the directory) are returned as `Err` and write nothing; a
+/// failure during the run (a step, or the first output that could not be
+/// written) is returned in [`RunOutcome::error`], a signal in
+/// [`RunOutcome::interrupted`].
+pub fn run_scene_with(
+    scene: Scene,
+    out: &Path,
+    options: &RunOptions,
+) -> Result<RunOutcome, Box<dyn std::error::Error + Send + Sync>> {
     let start = Instant::now();
     let mut sim = Simulation::new(scene)?;
-    let mut observer = sim.profile.time(Stage::Output, || {
-        OutputObserver::new(out, &sim, show_progress)
-    })?;
-    let result = sim.run(&mut observer);
-    observer.finish(&sim)?;
+    let _lock = output_dir::prepare(out, options.overwrite)?;
+    let mut observer = None;
+    let result = start_and_run(&mut sim, out, options.show_progress, &mut observer);
+    let (mut error, interrupted) = match result {
+        Ok(RunEnd::Completed) => (None, None),
+        Ok(RunEnd::Interrupted(signal)) => (None, Some(signal)),
+        Err(e) => (Some(e), None),
+    };
+    if let Some(observer) = observer.as_mut() {
+        if let Err(e) = observer.finish(&sim) {
+            error.get_or_insert(e);
+        }
+    }
     let wall_seconds = start.elapsed().as_secs_f64();
-    let error = result.err();
-    write_run_json(&out.join("run.json"), &sim, wall_seconds, error.as_ref())?;
+    let status = match (&error, interrupted) {
+        (Some(e), _) => RunStatus::Failed(e),
+        (None, Some(signal)) => RunStatus::Interrupted(signal),
+        (None, None) => RunStatus::Completed,
+    };
+    if let Err(e) = write_run_json(&out.join("run.json"), &sim, wall_seconds, status) {
+        // the first error is the one reported; run.json keeps its last
+        // whole version (`running`) if even this fails
+        error.get_or_insert(e.at(sim.model.step, sim.model.time));
+    }
     Ok(RunOutcome {
         simulation: sim,
         wall_seconds,
+        interrupted: interrupted.filter(|_| error.is_none()),
         error,
-        fields: observer.fields,
+        fields: observer.map(|o| o.fields).unwrap_or_default(),
     })
+}
+
+/// `run.json` saying `running`, the observer (its `curve.csv`), the time loop.
+fn start_and_run(
+    sim: &mut Simulation,
+    out: &Path,
+    show_progress: bool,
+    observer: &mut Option<OutputObserver>,
+) -> Result<RunEnd, RunError> {
+    write_run_json(&out.join("run.json"), sim, 0.0, RunStatus::Running).map_err(at(sim))?;
+    let new = sim.profile.time(Stage::Output, || {
+        OutputObserver::new(out, sim, show_progress)
+    })?;
+    sim.run(observer.insert(new))
+}
+
+/// The status a `run.json` records.
+#[derive(Clone, Copy, Debug)]
+pub enum RunStatus<'a> {
+    /// Written before the first step; a `run.json` that still says so after
+    /// the process ended belongs to a run that was killed.
+    Running,
+    /// The run reached its end.
+    Completed,
+    /// A step failed or an output could not be written.
+    Failed(&'a RunError),
+    /// A signal stopped the run after a completed step.
+    Interrupted(Interruption),
+}
+
+impl RunStatus<'_> {
+    /// `running`, `completed`, `failed` or `interrupted`.
+    pub fn name(&self) -> &'static str {
+        match self {
+            RunStatus::Running => "running",
+            RunStatus::Completed => "completed",
+            RunStatus::Failed(_) => "failed",
+            RunStatus::Interrupted(_) => "interrupted",
+        }
+    }
 }
 
 /// `run.json`: resolved scene, crate version, solver choices and the tangent
 /// solver's factorisation counts, per-stage profile, work counters
-/// ([`crate::profile::Work`], every counter, zeros too), status.
+/// ([`crate::profile::Work`], every counter, zeros too), status (with the
+/// error, or the signal of an interrupted run), written whole.
 pub fn write_run_json(
     path: &Path,
     sim: &Simulation,
     wall_seconds: f64,
-    error: Option<&RunError>,
-) -> Result<(), RunError> {
+    status: RunStatus<'_>,
+) -> Result<(), OutputError> {
+    let error = match status {
+        RunStatus::Failed(e) => Some(e.to_string()),
+        _ => None,
+    };
+    let interrupted = match status {
+        RunStatus::Interrupted(i) => Some(json!({"signal": i.name(), "exit_code": i.exit_code()})),
+        _ => None,
+    };
     let model = &sim.model;
     let materials: Vec<_> = model
         .material_names
@@ -262,9 +402,10 @@ pub fn write_run_json(
         .collect();
     let value = json!({
         "mpm_geo_version": env!("CARGO_PKG_VERSION"),
-        "status": if error.is_some() { "failed" } else { "completed" },
+        "status": status.name(),
         "warnings": model.scene.warnings(),
-        "error": error.map(|e| e.to_string()),
+        "error": error,
+        "interrupted": interrupted,
         "steps_completed": model.step,
         "time": model.time,
         "particles": model.particles.len(),

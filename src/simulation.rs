@@ -7,6 +7,7 @@ use mpm_solvers::SparseMatrix;
 
 use crate::error::{RunError, StepError};
 use crate::integrators::{ImplicitIntegrator, Integrator, StepReport};
+use crate::interrupt::{self, Interruption};
 use crate::model::Model;
 use crate::monitor::Monitor;
 use crate::profile::{Profile, Stage};
@@ -18,6 +19,25 @@ pub trait Observer {
     fn on_start(&mut self, sim: &Simulation) -> Result<(), RunError>;
     /// Called after every completed step.
     fn on_step(&mut self, sim: &Simulation, report: &StepReport) -> Result<(), RunError>;
+    /// Called once when a signal stops the run, after the `on_step` of the
+    /// last completed step: the place to finish that step's outputs and to
+    /// leave a checkpoint to resume from. The default does nothing.
+    fn on_interrupt(
+        &mut self,
+        _sim: &Simulation,
+        _interruption: Interruption,
+    ) -> Result<(), RunError> {
+        Ok(())
+    }
+}
+
+/// How [`Simulation::run`] ended without an error.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RunEnd {
+    /// The last step / end time was reached.
+    Completed,
+    /// A signal stopped the run after a completed step ([`crate::interrupt`]).
+    Interrupted(Interruption),
 }
 
 /// An observer that does nothing (library use, tests).
@@ -98,13 +118,19 @@ impl Simulation {
 
     /// Run to the end, reporting every step to `observer`. On a failure the
     /// error names step, time and cause; everything the observer wrote stays.
-    pub fn run(&mut self, observer: &mut dyn Observer) -> Result<(), RunError> {
+    /// A signal caught by [`crate::interrupt`] stops the run after the step
+    /// in progress and its outputs ([`Observer::on_interrupt`]).
+    pub fn run(&mut self, observer: &mut dyn Observer) -> Result<RunEnd, RunError> {
         observer.on_start(self)?;
         while !self.finished() {
             let report = self.step_once()?;
             observer.on_step(self, &report)?;
+            if let Some(interruption) = interrupt::requested().filter(|_| !self.finished()) {
+                observer.on_interrupt(self, interruption)?;
+                return Ok(RunEnd::Interrupted(interruption));
+            }
         }
-        Ok(())
+        Ok(RunEnd::Completed)
     }
 
     /// Current monitor values, in column order.

@@ -68,6 +68,23 @@ fn campaign_writes_curves_metrics_report_and_plots() {
     for run in ["local_h300", "nonlocal_h300"] {
         assert!(out.join(run).join("run.json").exists());
     }
+    // run again into the same directory: the campaign replaces its own
+    // runs' files (the `run` command would refuse them without --overwrite)
+    let status = Command::new(env!("CARGO_BIN_EXE_mpm-geo"))
+        .args(["campaign", scenes.to_str().unwrap(), "--out"])
+        .arg(&out)
+        .args(["--set", "scene.steps=20"])
+        .args(["--set", "grid.shape_functions=bilinear"])
+        .args(["--set", "grid.point_layout=gauss"])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let curves = std::fs::read_to_string(out.join("curves.csv")).unwrap();
+    assert_eq!(curves.lines().count(), 1 + 2 * 21);
+    for run in ["local_h300", "nonlocal_h300"] {
+        let curve = std::fs::read_to_string(out.join(run).join("curve.csv")).unwrap();
+        assert_eq!(curve.lines().count(), 1 + 21, "{run}: old rows kept");
+    }
 }
 
 /// `--step-refinement 2` runs each scene again with twice the steps at half

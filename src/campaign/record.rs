@@ -112,9 +112,7 @@ impl RunRecord {
             CampaignError::Output(path.display().to_string(), e.to_string())
         };
         let text = serde_json::to_string(self).map_err(|e| fail(&e))?;
-        let temporary = dir.join(format!(".{RECORD_FILE}.tmp"));
-        std::fs::write(&temporary, text).map_err(|e| fail(&e))?;
-        std::fs::rename(&temporary, &path).map_err(|e| fail(&e))
+        crate::atomic_file::write_atomic(&path, text).map_err(|e| fail(&e))
     }
 }
 

@@ -12,7 +12,7 @@ use super::report::{last_value, read_curve, write_outputs, write_step_convergenc
 use super::spec::{Benchmark, CampaignSpec, SPEC_FILE};
 use super::{CampaignError, CampaignRun, CurveColumns, Effort, EnergyBalance};
 use crate::output::deviatoric_hencky_strain;
-use crate::run::run_scene;
+use crate::run::{run_scene_with, RunOptions};
 use crate::scene::{Formulation, Scene};
 
 /// How a campaign is run.
@@ -238,7 +238,14 @@ fn refine_steps(name: &str, scene: &Scene, k: usize) -> Result<Scene, CampaignEr
 fn execute(planned: &Planned, out: &Path) -> Result<RunRecord, CampaignError> {
     let mut record = RunRecord::new(planned.fingerprint.clone());
     let start = Instant::now();
-    match run_scene(planned.scene.clone(), out, false) {
+    // the campaign owns its runs' directories: an earlier campaign's files
+    // there (of another scene: a finished run of this one is not run again)
+    // are replaced
+    let options = RunOptions {
+        show_progress: false,
+        overwrite: true,
+    };
+    match run_scene_with(planned.scene.clone(), out, &options) {
         Err(e) => record.error = Some(e.to_string()),
         Ok(outcome) => {
             let model = &outcome.simulation.model;

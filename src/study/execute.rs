@@ -116,7 +116,7 @@ pub fn execute(
     std::fs::create_dir_all(dir).map_err(|e| io(dir, &e))?;
     let scene_path = dir.join("scene.toml");
     let text = toml::to_string(&planned.scene).map_err(|e| io(&scene_path, &e))?;
-    std::fs::write(&scene_path, text).map_err(|e| io(&scene_path, &e))?;
+    crate::atomic_file::write_atomic(&scene_path, text).map_err(|e| io(&scene_path, &e))?;
     let out = dir.join("output");
     let mut runs: Vec<(f64, Vec<f64>)> = Vec::new();
     let mut last_status = String::new();
@@ -364,7 +364,5 @@ pub fn save_measured(dir: &Path, fingerprint: &str, measured: &Measured) -> Resu
         "measured": measured,
     }))
     .map_err(|e| fail(&e))?;
-    let temporary = dir.join(format!(".{MEASURED_FILE}.tmp"));
-    std::fs::write(&temporary, text).map_err(|e| fail(&e))?;
-    std::fs::rename(&temporary, &path).map_err(|e| fail(&e))
+    crate::atomic_file::write_atomic(&path, text).map_err(|e| fail(&e))
 }
