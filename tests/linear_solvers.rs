@@ -27,7 +27,11 @@ use mpm_solvers::{LinearSolver, Method};
 fn run(path: &str, overrides: &[&str], out: &Path) -> Vec<Vec<f64>> {
     let scene = common::scene(path, overrides);
     let outcome = run_scene(scene, out, false).unwrap_or_else(|e| panic!("{e}"));
-    assert!(outcome.error.is_none(), "{:?}", outcome.error.map(|e| e.to_string()));
+    assert!(
+        outcome.error.is_none(),
+        "{:?}",
+        outcome.error.map(|e| e.to_string())
+    );
     let text = std::fs::read_to_string(out.join("curve.csv")).unwrap();
     text.lines()
         .skip(1)
@@ -74,7 +78,9 @@ fn exported_system_round_trips_and_resolves() {
     for json in &systems {
         let s = read_system(json).unwrap();
         let mut solver = LinearSolver::new(options).unwrap();
-        solver.factorize(&s.k, s.meta["symmetric"].as_bool().unwrap()).unwrap();
+        solver
+            .factorize(&s.k, s.meta["symmetric"].as_bool().unwrap())
+            .unwrap();
         let mut x = s.rhs.clone();
         solver.solve_in_place(&mut x).unwrap();
         let d = relative_difference(&x, s.x.as_ref().unwrap());
@@ -93,13 +99,31 @@ fn every_solver_agrees_on_elastic_and_softening_systems() {
     // elastic: every method, and the runs' curves
     let elastic = "elastic/platen.toml";
     let base = ["scene.steps=3"];
-    let lu = run(elastic, &[base[0], "solver.linear_solver=\"lu\"", "output.systems=[3]"], &dir.path().join("lu"));
+    let lu = run(
+        elastic,
+        &[base[0], "solver.linear_solver=\"lu\"", "output.systems=[3]"],
+        &dir.path().join("lu"),
+    );
     let mut variants = vec![
-        vec!["solver.linear_solver=\"cholesky\"", "solver.factorization=\"simplicial\""],
-        vec!["solver.linear_solver=\"cholesky\"", "solver.ordering=\"colamd\""],
-        vec!["solver.linear_solver=\"lu\"", "solver.factorization=\"simplicial\"", "solver.ordering=\"amd\""],
+        vec![
+            "solver.linear_solver=\"cholesky\"",
+            "solver.factorization=\"simplicial\"",
+        ],
+        vec![
+            "solver.linear_solver=\"cholesky\"",
+            "solver.ordering=\"colamd\"",
+        ],
+        vec![
+            "solver.linear_solver=\"lu\"",
+            "solver.factorization=\"simplicial\"",
+            "solver.ordering=\"amd\"",
+        ],
         vec!["solver.linear_solver=\"pcg\"", "solver.pcg_tolerance=1e-12"],
-        vec!["solver.linear_solver=\"pcg\"", "solver.pcg_preconditioner=\"incomplete_cholesky\"", "solver.pcg_tolerance=1e-12"],
+        vec![
+            "solver.linear_solver=\"pcg\"",
+            "solver.pcg_preconditioner=\"incomplete_cholesky\"",
+            "solver.pcg_tolerance=1e-12",
+        ],
     ];
     if Method::Ldl.available() {
         variants.push(vec!["solver.linear_solver=\"ldl\""]);
@@ -120,19 +144,43 @@ fn every_solver_agrees_on_elastic_and_softening_systems() {
         assert!(rows.len() >= 11, "{} solvers", rows.len());
         for r in rows {
             assert_eq!(r.status, "ok", "{}", r.solver);
-            let (diff, res) = if r.solver.starts_with("PCG") { (1e-6, 1e-12) } else { (1e-8, 1e-10) };
-            assert!(r.diff_to_lu <= diff, "{} on {}: {:e}", r.solver, r.system, r.diff_to_lu);
-            assert!(r.residual <= res, "{} on {}: residual {:e}", r.solver, r.system, r.residual);
+            let (diff, res) = if r.solver.starts_with("PCG") {
+                (1e-6, 1e-12)
+            } else {
+                (1e-8, 1e-10)
+            };
+            assert!(
+                r.diff_to_lu <= diff,
+                "{} on {}: {:e}",
+                r.solver,
+                r.system,
+                r.diff_to_lu
+            );
+            assert!(
+                r.residual <= res,
+                "{} on {}: residual {:e}",
+                r.solver,
+                r.system,
+                r.residual
+            );
         }
     }
     // softening (unsymmetric tangent): the LU variants
     let soft = "biaxial/nonlocal_h300.toml";
-    let base = ["scene.analysis=quasi_static", "scene.dt=1e-2", "scene.steps=12", "output.snapshots=[]"];
+    let base = [
+        "scene.analysis=quasi_static",
+        "scene.dt=1e-2",
+        "scene.steps=12",
+        "output.snapshots=[]",
+    ];
     let mut o = base.to_vec();
     o.push("output.systems=[12]");
     let lu = run(soft, &o, &dir.path().join("soft_lu"));
     let mut o = base.to_vec();
-    o.extend(["solver.factorization=\"simplicial\"", "solver.ordering=\"amd\""]);
+    o.extend([
+        "solver.factorization=\"simplicial\"",
+        "solver.ordering=\"amd\"",
+    ]);
     let amd = run(soft, &o, &dir.path().join("soft_amd"));
     let d = curve_difference(&lu, &amd);
     assert!(d <= 1e-5, "softening curve differs by {d:e}");
@@ -142,9 +190,17 @@ fn every_solver_agrees_on_elastic_and_softening_systems() {
         let s = read_system(json).unwrap();
         assert_eq!(s.meta["symmetric"], false);
         let rows = bench_system(&s, &bench);
-        assert!(rows.iter().all(|r| !r.symmetric && r.solver.starts_with("faer LU")));
+        assert!(rows
+            .iter()
+            .all(|r| !r.symmetric && r.solver.starts_with("faer LU")));
         for r in rows {
-            assert!(r.diff_to_lu <= 1e-8, "{} on {}: {:e}", r.solver, r.system, r.diff_to_lu);
+            assert!(
+                r.diff_to_lu <= 1e-8,
+                "{} on {}: {:e}",
+                r.solver,
+                r.system,
+                r.diff_to_lu
+            );
         }
     }
 }
@@ -165,7 +221,10 @@ fn inapplicable_solvers_are_refused_before_the_run() {
         let message = if method == "ldl" && !Method::Ldl.available() {
             // refused by the scene validation: not built in
             let overrides: Vec<String> = overrides.iter().map(|s| s.to_string()).collect();
-            match Scene::load(&common::validation("biaxial/nonlocal_h300.toml"), &overrides) {
+            match Scene::load(
+                &common::validation("biaxial/nonlocal_h300.toml"),
+                &overrides,
+            ) {
                 Err(e @ SceneError::Invalid { .. }) => e.to_string(),
                 other => panic!("ldl without the feature: {:?}", other.map(|_| ())),
             }

@@ -67,7 +67,11 @@ pub struct BenchRow {
 }
 
 /// The solvers run on a system: label and options.
-pub fn solver_configs(symmetric: bool, n: usize, bench: &BenchOptions) -> Vec<(String, LinearOptions)> {
+pub fn solver_configs(
+    symmetric: bool,
+    n: usize,
+    bench: &BenchOptions,
+) -> Vec<(String, LinearOptions)> {
     let direct = |method, factorization, ordering| LinearOptions {
         method,
         direct: SolverOptions {
@@ -79,23 +83,53 @@ pub fn solver_configs(symmetric: bool, n: usize, bench: &BenchOptions) -> Vec<(S
     };
     use Factorization::{Auto, Simplicial, Supernodal};
     let mut out = vec![
-        ("faer LU (COLAMD)".to_string(), direct(Method::Lu, Auto, Ordering::Default)),
-        ("faer LU supernodal (COLAMD)".into(), direct(Method::Lu, Supernodal, Ordering::Default)),
-        ("faer LU simplicial (COLAMD)".into(), direct(Method::Lu, Simplicial, Ordering::Default)),
-        ("faer LU simplicial (AMD)".into(), direct(Method::Lu, Simplicial, Ordering::Amd)),
+        (
+            "faer LU (COLAMD)".to_string(),
+            direct(Method::Lu, Auto, Ordering::Default),
+        ),
+        (
+            "faer LU supernodal (COLAMD)".into(),
+            direct(Method::Lu, Supernodal, Ordering::Default),
+        ),
+        (
+            "faer LU simplicial (COLAMD)".into(),
+            direct(Method::Lu, Simplicial, Ordering::Default),
+        ),
+        (
+            "faer LU simplicial (AMD)".into(),
+            direct(Method::Lu, Simplicial, Ordering::Amd),
+        ),
     ];
     if n <= bench.identity_max_n {
-        out.push(("faer LU simplicial (identity)".into(), direct(Method::Lu, Simplicial, Ordering::Identity)));
+        out.push((
+            "faer LU simplicial (identity)".into(),
+            direct(Method::Lu, Simplicial, Ordering::Identity),
+        ));
     }
     if symmetric {
         out.extend([
-            ("faer Cholesky (AMD)".to_string(), direct(Method::Cholesky, Auto, Ordering::Amd)),
-            ("faer Cholesky supernodal (AMD)".into(), direct(Method::Cholesky, Supernodal, Ordering::Amd)),
-            ("faer Cholesky simplicial (AMD)".into(), direct(Method::Cholesky, Simplicial, Ordering::Amd)),
-            ("faer Cholesky (COLAMD)".into(), direct(Method::Cholesky, Auto, Ordering::Colamd)),
+            (
+                "faer Cholesky (AMD)".to_string(),
+                direct(Method::Cholesky, Auto, Ordering::Amd),
+            ),
+            (
+                "faer Cholesky supernodal (AMD)".into(),
+                direct(Method::Cholesky, Supernodal, Ordering::Amd),
+            ),
+            (
+                "faer Cholesky simplicial (AMD)".into(),
+                direct(Method::Cholesky, Simplicial, Ordering::Amd),
+            ),
+            (
+                "faer Cholesky (COLAMD)".into(),
+                direct(Method::Cholesky, Auto, Ordering::Colamd),
+            ),
         ]);
         if n <= bench.identity_max_n {
-            out.push(("faer Cholesky (identity)".into(), direct(Method::Cholesky, Auto, Ordering::Identity)));
+            out.push((
+                "faer Cholesky (identity)".into(),
+                direct(Method::Cholesky, Auto, Ordering::Identity),
+            ));
         }
         for (label, preconditioner) in [
             ("PCG Jacobi", Preconditioner::Jacobi),
@@ -115,7 +149,10 @@ pub fn solver_configs(symmetric: bool, n: usize, bench: &BenchOptions) -> Vec<(S
             ));
         }
         if Method::Ldl.available() {
-            out.push(("sprs_ldl LDLᵀ (AMD)".into(), direct(Method::Ldl, Auto, Ordering::Default)));
+            out.push((
+                "sprs_ldl LDLᵀ (AMD)".into(),
+                direct(Method::Ldl, Auto, Ordering::Default),
+            ));
         }
     }
     out
@@ -166,11 +203,23 @@ pub fn solve_once(
 /// Runs every applicable solver on `system`.
 pub fn bench_system(system: &System, bench: &BenchOptions) -> Vec<BenchRow> {
     let k = &system.k;
-    let flag = system.meta.get("symmetric").and_then(|v| v.as_bool()).unwrap_or(true);
+    let flag = system
+        .meta
+        .get("symmetric")
+        .and_then(|v| v.as_bool())
+        .unwrap_or(true);
     let symmetric = flag && k.is_symmetric(1e-12);
-    let reference = solve_once(LinearOptions { method: Method::Lu, ..Default::default() }, k, false, &system.rhs)
-        .map(|r| r.0)
-        .ok();
+    let reference = solve_once(
+        LinearOptions {
+            method: Method::Lu,
+            ..Default::default()
+        },
+        k,
+        false,
+        &system.rhs,
+    )
+    .map(|r| r.0)
+    .ok();
     let mut rows = Vec::new();
     for (label, options) in solver_configs(symmetric, k.n(), bench) {
         let mut times = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
@@ -226,7 +275,9 @@ pub fn bench_system(system: &System, bench: &BenchOptions) -> Vec<BenchRow> {
             fill: stats.factor_nnz,
             iterations: (options.method == Method::Pcg).then_some(stats.pcg_iterations),
             residual: relative_residual(k, &x, &system.rhs),
-            diff_to_lu: reference.as_ref().map_or(f64::NAN, |r| relative_difference(&x, r)),
+            diff_to_lu: reference
+                .as_ref()
+                .map_or(f64::NAN, |r| relative_difference(&x, r)),
             status,
         });
     }

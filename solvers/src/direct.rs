@@ -10,8 +10,7 @@ use faer::sparse::linalg::cholesky::{
     CholeskySymbolicParams, SymbolicCholesky, SymbolicCholeskyRaw, SymmetricOrdering,
 };
 use faer::sparse::linalg::lu::{
-    factorize_symbolic_lu, simplicial::SimplicialLu, LuRef, LuSymbolicParams, NumericLu,
-    SymbolicLu,
+    factorize_symbolic_lu, simplicial::SimplicialLu, LuRef, LuSymbolicParams, NumericLu, SymbolicLu,
 };
 use faer::sparse::linalg::{LuError, SupernodalThreshold};
 use faer::{Conj, MatMut, Par, Side};
@@ -357,7 +356,9 @@ impl DirectSolver {
                 _ => None,
             };
             let ordering = match &custom {
-                Some((fwd, inv)) => SymmetricOrdering::Custom(PermRef::new_checked(fwd, inv, k.n())),
+                Some((fwd, inv)) => {
+                    SymmetricOrdering::Custom(PermRef::new_checked(fwd, inv, k.n()))
+                }
                 None => SymmetricOrdering::Amd,
             };
             let sym = factorize_symbolic_cholesky(
@@ -440,15 +441,18 @@ impl DirectSolver {
                 Ordering::Identity => ((0..n).collect(), (0..n).collect()),
                 Ordering::Default | Ordering::Colamd => colamd_order(k)?,
             };
-            let req = faer::sparse::linalg::lu::simplicial::factorize_simplicial_numeric_lu_scratch::<
-                usize,
-                f64,
-            >(n, n)
-            .or(faer::sparse::linalg::lu::simplicial::solve_in_place_scratch::<usize, f64>(
-                n,
-                1,
-                Par::Seq,
-            ));
+            let req =
+                faer::sparse::linalg::lu::simplicial::factorize_simplicial_numeric_lu_scratch::<
+                    usize,
+                    f64,
+                >(n, n)
+                .or(
+                    faer::sparse::linalg::lu::simplicial::solve_in_place_scratch::<usize, f64>(
+                        n,
+                        1,
+                        Par::Seq,
+                    ),
+                );
             self.custom_lu = Some(CustomLu {
                 col_fwd,
                 col_inv,
@@ -476,9 +480,8 @@ impl DirectSolver {
         );
         self.stats.numeric_seconds += t.elapsed().as_secs_f64();
         lu_result(res)?;
-        self.stats.factor_nnz = Some(
-            c.lu.l_factor_unsorted().compute_nnz() + c.lu.u_factor_unsorted().compute_nnz(),
-        );
+        self.stats.factor_nnz =
+            Some(c.lu.l_factor_unsorted().compute_nnz() + c.lu.u_factor_unsorted().compute_nnz());
         self.stats.last_variant = Some("simplicial");
         Ok(())
     }
@@ -490,8 +493,8 @@ impl DirectSolver {
                 supernodal_flop_ratio_threshold: self.options.factorization.threshold(),
                 ..Default::default()
             };
-            let sym = factorize_symbolic_lu(k.pattern.symbolic.as_ref(), params)
-                .map_err(faer_err)?;
+            let sym =
+                factorize_symbolic_lu(k.pattern.symbolic.as_ref(), params).map_err(faer_err)?;
             let req = sym.factorize_numeric_lu_scratch::<f64>(Par::Seq, Default::default());
             self.lu_scratch = Some(MemBuffer::try_new(req).map_err(faer_err)?);
             self.lu_symbolic = Some(sym);

@@ -8,8 +8,8 @@
 use std::time::Instant;
 
 use crate::pcg::{Pcg, PcgOptions};
-use crate::{DirectSolver, FactorKind, SolverError, SolverOptions, SolverPolicy, SolverStats};
 use crate::SparseMatrix;
+use crate::{DirectSolver, FactorKind, SolverError, SolverOptions, SolverPolicy, SolverStats};
 
 /// Which linear solver [`LinearSolver`] uses.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -106,7 +106,10 @@ impl LinearSolver {
             ));
         }
         if options.method == Method::Lu {
-            options.direct.check_lu().map_err(SolverError::Unsupported)?;
+            options
+                .direct
+                .check_lu()
+                .map_err(SolverError::Unsupported)?;
         }
         let policy = match options.method {
             Method::Lu => SolverPolicy::Lu,
@@ -253,9 +256,8 @@ impl LinearSolver {
                         self.own.pcg_iterations += out.iterations;
                         self.own.last_pcg_iterations = Some(out.iterations);
                         self.own.last_pcg_residual = Some(out.residual);
-                        self.own.max_pcg_residual = Some(
-                            self.own.max_pcg_residual.unwrap_or(0.0).max(out.residual),
-                        );
+                        self.own.max_pcg_residual =
+                            Some(self.own.max_pcg_residual.unwrap_or(0.0).max(out.residual));
                         rhs.copy_from_slice(&out.x);
                         Ok(Used::Pcg)
                     }

@@ -60,7 +60,10 @@ fn read_triplets(path: &Path) -> Result<TriMatI<f64, usize>, SolverError> {
 fn read_vector(path: &Path) -> Result<Vec<f64>, SolverError> {
     let t = read_triplets(path)?;
     if t.cols() != 1 {
-        return Err(io_err(path, format!("expected an n x 1 vector, found {} columns", t.cols())));
+        return Err(io_err(
+            path,
+            format!("expected an n x 1 vector, found {} columns", t.cols()),
+        ));
     }
     let mut v = vec![0.0; t.rows()];
     for (&val, (r, _)) in t.triplet_iter() {
@@ -73,7 +76,10 @@ fn read_vector(path: &Path) -> Result<Vec<f64>, SolverError> {
 pub fn read_matrix(path: &Path) -> Result<SparseMatrix, SolverError> {
     let t = read_triplets(path)?;
     if t.rows() != t.cols() {
-        return Err(io_err(path, format!("matrix is {} x {}, not square", t.rows(), t.cols())));
+        return Err(io_err(
+            path,
+            format!("matrix is {} x {}, not square", t.rows(), t.cols()),
+        ));
     }
     let triplets: Vec<(usize, usize, f64)> =
         t.triplet_iter().map(|(&v, (r, c))| (r, c, v)).collect();
@@ -137,7 +143,10 @@ pub fn read_system(json: &Path) -> Result<System, SolverError> {
     let k = read_matrix(&k_path)?;
     let rhs = read_vector(&rhs_path)?;
     if rhs.len() != k.n() {
-        return Err(io_err(&rhs_path, format!("length {} for a {} x {} matrix", rhs.len(), k.n(), k.n())));
+        return Err(io_err(
+            &rhs_path,
+            format!("length {} for a {} x {} matrix", rhs.len(), k.n(), k.n()),
+        ));
     }
     let x = file("solution")?.map(|p| read_vector(&p)).transpose()?;
     let name = json

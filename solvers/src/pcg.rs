@@ -198,15 +198,17 @@ impl Pcg {
                     tolerance: tol,
                 });
             }
-            if !(rz > 0.0) {
+            if rz.is_nan() || rz <= 0.0 {
                 return Err(SolverError::NotPositiveDefinite {
                     method: "PCG",
-                    detail: format!("preconditioned residual rᵀM⁻¹r = {rz:.3e} <= 0 at iteration {iterations}"),
+                    detail: format!(
+                        "preconditioned residual rᵀM⁻¹r = {rz:.3e} <= 0 at iteration {iterations}"
+                    ),
                 });
             }
             k.mul_vec(&p, &mut q);
             let curvature = dot(&p, &q);
-            if !(curvature > 0.0) {
+            if curvature.is_nan() || curvature <= 0.0 {
                 return Err(SolverError::NotPositiveDefinite {
                     method: "PCG",
                     detail: format!(

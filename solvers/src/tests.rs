@@ -622,8 +622,16 @@ fn orderings_change_fill_not_the_answer() {
         s.stats().factor_nnz.unwrap()
     };
     let amd = fill(Method::Cholesky, Factorization::Simplicial, Ordering::Amd);
-    let identity = fill(Method::Cholesky, Factorization::Simplicial, Ordering::Identity);
-    let colamd = fill(Method::Cholesky, Factorization::Simplicial, Ordering::Colamd);
+    let identity = fill(
+        Method::Cholesky,
+        Factorization::Simplicial,
+        Ordering::Identity,
+    );
+    let colamd = fill(
+        Method::Cholesky,
+        Factorization::Simplicial,
+        Ordering::Colamd,
+    );
     assert!(2 * identity > 3 * amd, "identity {identity} vs AMD {amd}");
     assert!(colamd < identity, "COLAMD {colamd} vs identity {identity}");
     let lu = fill(Method::Lu, Factorization::Simplicial, Ordering::Amd);
@@ -705,7 +713,11 @@ fn inapplicable_methods_fall_back_with_a_warning() {
         assert_eq!(s.solve_in_place(&mut x).unwrap(), Used::Lu);
         assert!(rel_residual(&k_indef, &x, &b) <= 1e-10);
         assert_eq!(s.stats().fallbacks, 1);
-        assert!(s.warnings()[0].contains("not positive definite"), "{:?}", s.warnings());
+        assert!(
+            s.warnings()[0].contains("not positive definite"),
+            "{:?}",
+            s.warnings()
+        );
     }
     let k_unsym = unsymmetric_system(20, 12);
     let b = random_rhs(k_unsym.n(), 4);
@@ -719,12 +731,20 @@ fn inapplicable_methods_fall_back_with_a_warning() {
             ..Default::default()
         })
         .unwrap();
-        assert_eq!(s.factorize(&k_unsym, false).unwrap(), Used::Lu, "{method:?}");
+        assert_eq!(
+            s.factorize(&k_unsym, false).unwrap(),
+            Used::Lu,
+            "{method:?}"
+        );
         let mut x = b.clone();
         s.solve_in_place(&mut x).unwrap();
         assert!(rel_residual(&k_unsym, &x, &b) <= 1e-10, "{method:?}");
         assert_eq!(s.stats().fallbacks, 1, "{method:?}");
-        assert!(s.warnings()[0].contains("unsymmetric"), "{:?}", s.warnings());
+        assert!(
+            s.warnings()[0].contains("unsymmetric"),
+            "{:?}",
+            s.warnings()
+        );
     }
     // the unsymmetric system by every LU variant: agreement with faer LU
     let x_lu = lu_reference(&k_unsym, &b);
@@ -794,8 +814,19 @@ fn matrix_market_round_trip_is_exact() {
     assert_eq!(bits(back.x.as_deref().unwrap()), bits(&x));
     assert_eq!(back.meta["step"], 3);
     assert_eq!(crate::mm::list_systems(&dir).unwrap(), vec![json]);
-    let rows = crate::bench::run_bench(&dir, &BenchOptions { repeats: 1, ..Default::default() }, |_| {}).unwrap();
-    assert!(rows.iter().all(|r| !r.symmetric && r.status == "ok"), "{rows:?}");
+    let rows = crate::bench::run_bench(
+        &dir,
+        &BenchOptions {
+            repeats: 1,
+            ..Default::default()
+        },
+        |_| {},
+    )
+    .unwrap();
+    assert!(
+        rows.iter().all(|r| !r.symmetric && r.status == "ok"),
+        "{rows:?}"
+    );
     assert!(rows.iter().all(|r| r.diff_to_lu <= 1e-8), "{rows:?}");
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -117,7 +117,9 @@ impl SystemExport {
         });
         match mm::write_system(&self.dir, &stem, k, rhs, Some(x), meta) {
             Ok(_) => self.written += 1,
-            Err(e) => self.warnings.push(format!("system {stem} not written: {e}")),
+            Err(e) => self
+                .warnings
+                .push(format!("system {stem} not written: {e}")),
         }
     }
 }

@@ -16,8 +16,8 @@
 //! constitutive interface and the same boundary-condition devices.
 
 pub mod commit;
-mod export;
 pub mod explicit;
+mod export;
 pub mod g2p;
 pub mod implicit;
 pub mod newton;

@@ -5,6 +5,7 @@
 
 use mpm_solvers::{Assembler, LinearSolver, SolverStats, SparseMatrix, Used};
 
+use super::export::SystemExport;
 use super::newton::StepSystem;
 use super::{SolverUsage, TrialStresses};
 use crate::constitutive::LinearElastic;
@@ -12,7 +13,6 @@ use crate::error::StepError;
 use crate::grid::Grid;
 use crate::model::Model;
 use crate::profile::{Profile, Stage, Work};
-use super::export::SystemExport;
 use crate::scene::{FieldError, Scene, SceneError};
 use crate::stiffness;
 use crate::transfer::NONE;

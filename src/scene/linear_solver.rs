@@ -7,8 +7,8 @@ use mpm_solvers::{
 };
 
 use super::{
-    AnalysisKind, FactorizationChoice, FieldError, LinearSolverChoice, OrderingChoice,
-    OutputSpec, PreconditionerChoice, SolverSpec,
+    AnalysisKind, FactorizationChoice, FieldError, LinearSolverChoice, OrderingChoice, OutputSpec,
+    PreconditionerChoice, SolverSpec,
 };
 
 impl SolverSpec {
@@ -83,7 +83,7 @@ impl SolverSpec {
         if self.pcg_max_iterations == 0 {
             refuse("solver.pcg_max_iterations", "must be >= 1".into());
         }
-        if !(output.systems_max_mb > 0.0) {
+        if output.systems_max_mb.is_nan() || output.systems_max_mb <= 0.0 {
             refuse(
                 "output.systems_max_mb",
                 format!("must be > 0 (got {})", output.systems_max_mb),

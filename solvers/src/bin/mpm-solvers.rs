@@ -67,7 +67,10 @@ fn main() -> ExitCode {
         }
     };
     if rows.is_empty() {
-        eprintln!("error: no exported systems (*.json with a `matrix` key) in {}", dir.display());
+        eprintln!(
+            "error: no exported systems (*.json with a `matrix` key) in {}",
+            dir.display()
+        );
         return ExitCode::from(1);
     }
     if let Err(e) = std::fs::create_dir_all(&out) {
