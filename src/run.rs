@@ -296,6 +296,11 @@ pub fn run_scene_with(
     let start = Instant::now();
     let mut sim = Simulation::new(scene)?;
     let _lock = output_dir::prepare(out, options.overwrite)?;
+    let systems = sim.model.scene.output.systems.clone();
+    let max_mb = sim.model.scene.output.systems_max_mb;
+    if let Some(implicit) = sim.integrator.implicit_mut() {
+        implicit.export_systems(out.join("systems"), systems, max_mb);
+    }
     let mut observer = None;
     let result = start_and_run(&mut sim, out, options.show_progress, &mut observer);
     let (mut error, interrupted) = match result {
@@ -394,6 +399,14 @@ pub fn write_run_json(
         .map(|(name, m)| json!({"name": name, "model": m.name(), "symmetric_tangent": m.has_symmetric_tangent()}))
         .collect();
     let factorisation = sim.integrator.factorisation_stats();
+    let implicit = sim.integrator.implicit();
+    let solver_warnings = implicit.map_or_else(Vec::new, |i| i.solver_warnings());
+    let all_warnings = [model.scene.warnings(), solver_warnings.clone()].concat();
+    let newton_iterations = sim.integrator.usage().newton_iterations;
+    let linear_seconds = factorisation.symbolic_seconds
+        + factorisation.numeric_seconds
+        + factorisation.solve_seconds
+        + factorisation.probe_seconds;
     let work: serde_json::Map<String, serde_json::Value> = sim
         .profile
         .work()
@@ -403,7 +416,7 @@ pub fn write_run_json(
     let value = json!({
         "mpm_geo_version": env!("CARGO_PKG_VERSION"),
         "status": status.name(),
-        "warnings": model.scene.warnings(),
+        "warnings": all_warnings,
         "error": error,
         "interrupted": interrupted,
         "steps_completed": model.step,
@@ -430,6 +443,29 @@ pub fn write_run_json(
                 "numeric_seconds": factorisation.numeric_seconds,
                 "solve_seconds": factorisation.solve_seconds,
                 "probe_seconds": factorisation.probe_seconds,
+            },
+            "linear": {
+                "options": {
+                    "linear_solver": model.scene.solver.linear_solver,
+                    "factorization": model.scene.solver.factorization,
+                    "ordering": model.scene.solver.ordering,
+                    "pcg_preconditioner": model.scene.solver.pcg_preconditioner,
+                    "pcg_tolerance": model.scene.solver.pcg_tolerance,
+                },
+                "symbolic_seconds": factorisation.symbolic_seconds,
+                "numeric_seconds": factorisation.numeric_seconds,
+                "solve_seconds": factorisation.solve_seconds,
+                "probe_seconds": factorisation.probe_seconds,
+                "seconds_per_newton_iteration": if newton_iterations > 0 { linear_seconds / newton_iterations as f64 } else { 0.0 },
+                "factor_nnz": factorisation.factor_nnz,
+                "factor_variant": factorisation.last_variant,
+                "pcg_iterations": factorisation.pcg_iterations,
+                "pcg_last_iterations": factorisation.last_pcg_iterations,
+                "pcg_final_residual": factorisation.last_pcg_residual,
+                "pcg_max_final_residual": factorisation.max_pcg_residual,
+                "fallbacks_to_lu": factorisation.fallbacks,
+                "warnings": solver_warnings,
+                "systems_exported": implicit.map_or(0, |i| i.systems_written()),
             },
         },
         "profile": sim.profile.totals(wall_seconds),

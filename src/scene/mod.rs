@@ -17,6 +17,7 @@ mod schema;
 mod validation;
 mod variants;
 
+mod linear_solver;
 pub use overrides::apply_override;
 pub use schema::*;
 pub use validation::{polygon_contains, FieldError};

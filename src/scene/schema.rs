@@ -243,6 +243,51 @@ pub enum LinearSolverChoice {
     Cholesky,
     /// Sparse LU with partial pivoting.
     Lu,
+    /// Preconditioned conjugate gradients (`pcg_preconditioner`, `pcg_tolerance`); only for
+    /// scenes whose materials all have a symmetric tangent (refused otherwise), LU where K
+    /// turns out indefinite (recorded in run.json).
+    Pcg,
+    /// sprs_ldl's LDLᵀ (build with `--features ldl`); symmetric scenes only.
+    Ldl,
+}
+
+/// `[solver] factorization`: faer's supernodal or simplicial factorisation.
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum FactorizationChoice {
+    /// faer's automatic choice.
+    #[default]
+    Auto,
+    /// Always supernodal.
+    Supernodal,
+    /// Always simplicial.
+    Simplicial,
+}
+
+/// `[solver] ordering`: fill-reducing ordering of the factorisation.
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum OrderingChoice {
+    /// AMD for Cholesky and LDLᵀ, COLAMD for LU.
+    #[default]
+    Default,
+    /// Approximate minimum degree (LU: simplicial only).
+    Amd,
+    /// Column approximate minimum degree.
+    Colamd,
+    /// None: the dof numbering (LU: simplicial only).
+    Identity,
+}
+
+/// `[solver] pcg_preconditioner`.
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum PreconditionerChoice {
+    /// Diagonal scaling.
+    #[default]
+    Jacobi,
+    /// Zero-fill incomplete Cholesky, IC(0).
+    IncompleteCholesky,
 }
 
 /// `[solver]`: Newton, linear solver and explicit settings (defaults of DESIGN §3–4).
@@ -257,8 +302,18 @@ pub struct SolverSpec {
     pub max_iterations: Option<usize>,
     /// Number of step halvings allowed when Newton fails (DESIGN §3: 4, i.e. 1/16).
     pub max_halvings: usize,
-    /// `auto`, `cholesky` or `lu`.
+    /// `auto`, `cholesky`, `lu`, `pcg` or `ldl`.
     pub linear_solver: LinearSolverChoice,
+    /// faer's `auto`, `supernodal` or `simplicial` factorisation.
+    pub factorization: FactorizationChoice,
+    /// Fill-reducing ordering: `default`, `amd`, `colamd` or `identity`.
+    pub ordering: OrderingChoice,
+    /// PCG preconditioner: `jacobi` or `incomplete_cholesky`.
+    pub pcg_preconditioner: PreconditionerChoice,
+    /// PCG stops when ‖R − Kδu‖/‖R‖ ≤ this, in (0, 1).
+    pub pcg_tolerance: f64,
+    /// PCG iteration limit (LU is used for a system that does not converge, recorded).
+    pub pcg_max_iterations: usize,
     /// ε_bg of DESIGN D19 (background stiffness added to the tangent only).
     pub background_stiffness: f64,
     /// Penalty factor β_pen of DESIGN D41 (k_p = β_pen E); default 1e3 implicit, 10 explicit.
@@ -281,6 +336,11 @@ impl Default for SolverSpec {
             max_iterations: None,
             max_halvings: 4,
             linear_solver: LinearSolverChoice::Auto,
+            factorization: FactorizationChoice::Auto,
+            ordering: OrderingChoice::Default,
+            pcg_preconditioner: PreconditionerChoice::Jacobi,
+            pcg_tolerance: 1e-10,
+            pcg_max_iterations: 10_000,
             background_stiffness: 1e-6,
             penalty_factor: None,
             cfl: 0.5,
@@ -643,6 +703,11 @@ pub struct OutputSpec {
     /// Also write a snapshot at the end of the first step that reaches each of
     /// these times, s (explicit runs choose their own steps).
     pub snapshot_times: Vec<f64>,
+    /// Implicit runs: steps whose every Newton iteration's system (tangent, residual,
+    /// correction) is written to `systems/` in Matrix Market format with a JSON description.
+    pub systems: Vec<usize>,
+    /// A system whose files would exceed this many MB is skipped with a warning.
+    pub systems_max_mb: f64,
 }
 
 impl Default for OutputSpec {
@@ -652,6 +717,8 @@ impl Default for OutputSpec {
             snapshots: Vec::new(),
             snapshot_every: 0,
             snapshot_times: Vec::new(),
+            systems: Vec::new(),
+            systems_max_mb: 500.0,
         }
     }
 }

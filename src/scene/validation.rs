@@ -108,6 +108,8 @@ impl Scene {
     pub fn validate(&self) -> Vec<FieldError> {
         let mut e = Vec::new();
         self.validate_analysis(&mut e);
+        self.solver
+            .validate_linear(&self.output, self.scene.analysis, &mut e);
         let grid_ok = self.validate_grid(&mut e);
         for (name, m) in &self.materials {
             m.validate(&format!("materials.{name}"), &mut e);

@@ -34,8 +34,24 @@ pub struct Measured {
     pub factorisations: usize,
     /// Step halvings (implicit).
     pub halvings: usize,
+    /// The linear solver's figures from `run.json` (issue 16).
+    pub linear: LinearFigures,
     /// Monitor histories `(t, value)` by monitor name (from `curve.csv`).
     pub histories: Histories,
+}
+
+/// The linear solver's time per Newton iteration, fill and PCG work of a run
+/// (`run.json` `solver.linear`).
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct LinearFigures {
+    /// Seconds of ordering, factorisation and solves per Newton iteration.
+    pub seconds_per_newton_iteration: f64,
+    /// Stored entries of the last factor (or preconditioner), if known.
+    pub factor_nnz: Option<u64>,
+    /// Conjugate-gradient iterations, all systems together.
+    pub pcg_iterations: u64,
+    /// Systems solved by LU instead of the method asked for.
+    pub fallbacks: u64,
 }
 
 impl Measured {
@@ -79,6 +95,7 @@ impl Measured {
             newton_iterations: 0,
             factorisations: 0,
             halvings: 0,
+            linear: LinearFigures::default(),
             histories: Vec::new(),
         }
     }
@@ -197,6 +214,7 @@ pub fn execute(
         newton_iterations: usage.1,
         factorisations: usage.2,
         halvings: usage.3,
+        linear: read_linear(&out.join("run.json")).unwrap_or_default(),
         histories,
     })
 }
@@ -287,9 +305,25 @@ fn read_usage(path: &Path) -> Option<(usize, usize, usize, usize)> {
     Some((
         steps,
         count("newton_iterations"),
-        count("cholesky") + count("lu"),
+        count("cholesky") + count("lu") + count("pcg") + count("ldl"),
         count("halvings"),
     ))
+}
+
+/// The linear solver's figures from `run.json`.
+fn read_linear(path: &Path) -> Option<LinearFigures> {
+    let json = read_json(path)?;
+    let linear = json.get("solver")?.get("linear")?;
+    let u = |key: &str| linear.get(key).and_then(|v| v.as_u64());
+    Some(LinearFigures {
+        seconds_per_newton_iteration: linear
+            .get("seconds_per_newton_iteration")
+            .and_then(|v| v.as_f64())
+            .unwrap_or(0.0),
+        factor_nnz: u("factor_nnz"),
+        pcg_iterations: u("pcg_iterations").unwrap_or(0),
+        fallbacks: u("fallbacks_to_lu").unwrap_or(0),
+    })
 }
 
 /// Every monitor column of `curve.csv` as `(t, value)` pairs.

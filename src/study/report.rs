@@ -228,6 +228,10 @@ pub fn write_csv(path: &Path, spec: &StudySpec, rows: &[StudyRow]) -> Result<(),
             "newton_iterations",
             "factorisations",
             "halvings",
+            "linear_seconds_per_newton_iteration",
+            "factor_nnz",
+            "pcg_iterations",
+            "linear_fallbacks",
         ]
         .iter()
         .map(|s| s.to_string()),
@@ -273,6 +277,12 @@ pub fn write_csv(path: &Path, spec: &StudySpec, rows: &[StudyRow]) -> Result<(),
             m.newton_iterations.to_string(),
             m.factorisations.to_string(),
             m.halvings.to_string(),
+            format!("{:e}", m.linear.seconds_per_newton_iteration),
+            m.linear
+                .factor_nnz
+                .map_or_else(String::new, |n| n.to_string()),
+            m.linear.pcg_iterations.to_string(),
+            m.linear.fallbacks.to_string(),
         ]);
         record.extend(
             (0..Stage::ALL.len())
