@@ -10,7 +10,7 @@ use crate::integrators::{ImplicitIntegrator, Integrator, StepReport};
 use crate::model::Model;
 use crate::monitor::Monitor;
 use crate::profile::{Profile, Stage};
-use crate::scene::{Scene, SceneError};
+use crate::scene::{ResourceLimits, Scene, SceneError};
 
 /// Receives the run's progress; the CLI writes outputs and a progress bar here.
 pub trait Observer {
@@ -46,9 +46,12 @@ pub struct Simulation {
 
 impl Simulation {
     /// Build a run from a validated scene: the model (seeded points, boundary
-    /// devices), its integrator and the monitors. Problems that only show
-    /// once points are seeded are reported as field errors.
+    /// devices), its integrator and the monitors. The scene's estimated
+    /// memory and step count are checked first against its `[limits]`
+    /// ([`Scene::check_resources`]); problems that only show once points are
+    /// seeded are reported as field errors.
     pub fn new(scene: Scene) -> Result<Self, SceneError> {
+        scene.check_resources(&ResourceLimits::for_scene(&scene))?;
         let profile = Profile::default();
         let (model, integrator, monitors) = profile.time(Stage::Build, || {
             let mut model = Model::new(scene)?;
