@@ -91,6 +91,7 @@ impl Simulation {
                 cause,
             })?;
         self.model.account_rigid_work(start);
+        self.check_monitors()?;
         for remap in &report.removed_points {
             for monitor in &mut self.monitors {
                 monitor.remap_particle(remap);
@@ -106,6 +107,25 @@ impl Simulation {
         while !self.finished() {
             let report = self.step_once()?;
             observer.on_step(self, &report)?;
+        }
+        Ok(())
+    }
+
+    /// A NaN or infinite monitor stops the run after the step that made it
+    /// so, naming the monitor (no row of `curve.csv` is written for it).
+    fn check_monitors(&self) -> Result<(), RunError> {
+        for m in &self.monitors {
+            let value = m.value(&self.model);
+            if !value.is_finite() {
+                return Err(RunError::Step {
+                    step: self.model.step,
+                    time: self.model.time,
+                    cause: StepError::NonFiniteMonitor {
+                        name: m.name.clone(),
+                        value,
+                    },
+                });
+            }
         }
         Ok(())
     }

@@ -178,6 +178,7 @@ impl Scene {
                 ));
             }
         }
+        w.extend(self.unused_key_warnings());
         let gravity = self.loads.gravity != 0.0 || self.loads.gravity_ramp.is_some();
         for m in &self.monitor {
             if gravity && m.kind == MonitorKind::ExternalWork {
@@ -200,6 +201,55 @@ impl Scene {
             ));
         }
         w
+    }
+
+    /// Keys set to a non-default value that this analysis does not read
+    /// (their range is still checked by [`Scene::validate`]).
+    fn unused_key_warnings(&self) -> Vec<String> {
+        let defaults = SolverSpec::default();
+        let s = &self.solver;
+        let mut unused: Vec<&str> = Vec::new();
+        match self.scene.analysis {
+            AnalysisKind::Explicit => {
+                if self.scene.steps.is_some() {
+                    unused.push("scene.steps");
+                }
+                if s.newmark_gamma != defaults.newmark_gamma {
+                    unused.push("solver.newmark_gamma");
+                }
+                if s.max_iterations.is_some() {
+                    unused.push("solver.max_iterations");
+                }
+                if s.linear_solver != defaults.linear_solver {
+                    unused.push("solver.linear_solver");
+                }
+            }
+            AnalysisKind::QuasiStatic | AnalysisKind::ImplicitDynamic => {
+                if self.scene.end_time.is_some() {
+                    unused.push("scene.end_time");
+                }
+                if s.cfl != defaults.cfl {
+                    unused.push("solver.cfl");
+                }
+                if s.damping != defaults.damping {
+                    unused.push("solver.damping");
+                }
+                if self.scene.analysis == AnalysisKind::QuasiStatic
+                    && s.newmark_gamma != defaults.newmark_gamma
+                {
+                    unused.push("solver.newmark_gamma");
+                }
+            }
+        }
+        unused
+            .into_iter()
+            .map(|key| {
+                format!(
+                    "{key} is set but not used by a {:?} analysis (ignored)",
+                    self.scene.analysis
+                )
+            })
+            .collect()
     }
 
     fn validate_analysis(&self, e: &mut Vec<FieldError>) {
