@@ -204,7 +204,7 @@ impl Scene {
             })
             .collect();
         let mut point_fields = vec!["grid.cell_size".to_string(), "grid.points_per_cell".into()];
-        point_fields.extend(body_keys);
+        point_fields.extend(body_keys.iter().cloned());
         let mut parts = vec![
             MemoryPart {
                 what: format!("{points:.3e} material points"),
@@ -249,11 +249,8 @@ impl Scene {
             };
             let nonzeros = unknowns * 2.0 * stencil;
             let fill = FILL_COEFFICIENT * unknowns.powf(FILL_EXPONENT);
-            let fields = vec![
-                "grid.cell_size".to_string(),
-                "grid.shape_functions".into(),
-                "body (extent)".into(),
-            ];
+            let mut fields = vec!["grid.cell_size".to_string(), "grid.shape_functions".into()];
+            fields.extend(body_keys.iter().cloned());
             parts.push(MemoryPart {
                 what: format!("tangent matrix ({unknowns:.3e} unknowns, {nonzeros:.3e} nonzeros)"),
                 bytes: nonzeros * BYTES_PER_NONZERO,
