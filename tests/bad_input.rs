@@ -439,8 +439,7 @@ fn non_finite_state_during_a_run_stops_it_with_point_and_step() {
     sim.model.particles.velocity[40][1] = f64::NAN;
     let text = sim
         .step_once()
-        .err()
-        .expect("the NaN stops the run")
+        .expect_err("the NaN stops the run")
         .to_string();
     assert!(
         text.starts_with("step 2 ")

@@ -361,7 +361,7 @@ impl Scene {
     /// `limits`, naming the keys that drive the estimate; the estimate otherwise.
     pub fn check_resources(&self, limits: &ResourceLimits) -> Result<ResourceEstimate, SceneError> {
         let estimate = self.estimate_resources();
-        if !(estimate.bytes <= limits.max_memory) {
+        if estimate.bytes.is_nan() || estimate.bytes > limits.max_memory {
             return Err(SceneError::MemoryLimit {
                 path: self.scene.name.clone(),
                 estimate: Box::new(estimate),
@@ -369,7 +369,7 @@ impl Scene {
                 source_of_limit: limits.memory_source.clone(),
             });
         }
-        if !(estimate.steps <= limits.max_steps as f64) {
+        if estimate.steps.is_nan() || estimate.steps > limits.max_steps as f64 {
             return Err(SceneError::StepLimit {
                 path: self.scene.name.clone(),
                 steps: estimate.steps,
