@@ -217,6 +217,36 @@ pub enum StepError {
         /// Particle index.
         particle: usize,
     },
+    /// A material point variable other than the stress became NaN or
+    /// infinite (found by the one pass of the commit stage).
+    #[error("non-finite value: {quantity} of material point {particle} at ({:.6e}, {:.6e}) m", position[0], position[1])]
+    NonFinitePoint {
+        /// Particle index.
+        particle: usize,
+        /// Which variable (`position`, `velocity`, `volume`, …).
+        quantity: &'static str,
+        /// Its position, m (its initial position if the position itself is not finite).
+        position: [f64; 2],
+    },
+    /// A nodal result of the step (reaction, displacement increment) became
+    /// NaN or infinite.
+    #[error("non-finite value: {quantity} at grid node {node} ({:.6e}, {:.6e}) m", position[0], position[1])]
+    NonFiniteNode {
+        /// Node index.
+        node: usize,
+        /// Which nodal result.
+        quantity: &'static str,
+        /// Node position, m.
+        position: [f64; 2],
+    },
+    /// A monitor (a `curve.csv` column) became NaN or infinite after the step.
+    #[error("non-finite value: monitor `{name}` = {value}")]
+    NonFiniteMonitor {
+        /// Monitor name.
+        name: String,
+        /// Its value.
+        value: f64,
+    },
     /// The explicit time step is not a positive finite number.
     #[error("non-finite value: explicit time step {dt}")]
     InvalidTimeStep {

@@ -37,6 +37,13 @@ enum Command {
         /// of refusing it; other files there are kept.
         #[arg(long)]
         overwrite: bool,
+        /// Memory limit for the run's estimate, e.g. `8G`, `512M` (default:
+        /// half the available memory; scene key `limits.max_memory_gb`).
+        #[arg(long, value_name = "SIZE", value_parser = parse_memory_arg)]
+        max_memory: Option<f64>,
+        /// Step-count limit (default 1e7; scene key `limits.max_steps`).
+        #[arg(long, value_name = "N")]
+        max_steps: Option<u64>,
     },
     /// Run every scene of a directory (in parallel) and write curves.csv,
     /// metrics.csv, report.md and plots (mesh-objectivity campaign).
@@ -100,6 +107,13 @@ enum Command {
         /// Override a scene value (repeatable).
         #[arg(long = "set", value_name = "KEY=VALUE")]
         overrides: Vec<String>,
+        /// Memory limit for the run's estimate, e.g. `8G`, `512M` (default:
+        /// half the available memory; scene key `limits.max_memory_gb`).
+        #[arg(long, value_name = "SIZE", value_parser = parse_memory_arg)]
+        max_memory: Option<f64>,
+        /// Step-count limit (default 1e7; scene key `limits.max_steps`).
+        #[arg(long, value_name = "N")]
+        max_steps: Option<u64>,
     },
 }
 
@@ -248,24 +262,34 @@ fn main() -> ExitCode {
             Ok(()) => ExitCode::SUCCESS,
             Err(e) => fail(1, &e.to_string()),
         },
-        Command::Check { scene, overrides } => match Scene::load(&scene, &overrides) {
-            Ok(s) => match mpm_geo::simulation::Simulation::new(s) {
-                Ok(sim) => {
-                    let sim = &sim.model;
-                    for w in sim.scene.warnings() {
-                        eprintln!("warning: {w}");
+        Command::Check {
+            scene,
+            overrides,
+            max_memory,
+            max_steps,
+        } => match Scene::load(&scene, &overrides) {
+            Ok(mut s) => {
+                set_limits(&mut s, max_memory, max_steps);
+                let estimate = s.estimate_resources();
+                match mpm_geo::simulation::Simulation::new(s) {
+                    Ok(sim) => {
+                        let sim = &sim.model;
+                        for w in sim.scene.warnings() {
+                            eprintln!("warning: {w}");
+                        }
+                        println!(
+                            "{}: valid ({} material points, {}×{} cells; {})",
+                            scene.display(),
+                            sim.particles.len(),
+                            sim.grid.cells[0],
+                            sim.grid.cells[1],
+                            estimate
+                        );
+                        ExitCode::SUCCESS
                     }
-                    println!(
-                        "{}: valid ({} material points, {}×{} cells)",
-                        scene.display(),
-                        sim.particles.len(),
-                        sim.grid.cells[0],
-                        sim.grid.cells[1]
-                    );
-                    ExitCode::SUCCESS
+                    Err(e) => fail(2, &e.to_string()),
                 }
-                Err(e) => fail(2, &e.to_string()),
-            },
+            }
             Err(e) => fail(2, &e.to_string()),
         },
         Command::Run {
@@ -274,11 +298,14 @@ fn main() -> ExitCode {
             overrides,
             quiet,
             overwrite,
+            max_memory,
+            max_steps,
         } => {
-            let loaded = match Scene::load(&scene, &overrides) {
+            let mut loaded = match Scene::load(&scene, &overrides) {
                 Ok(s) => s,
                 Err(e) => return fail(2, &e.to_string()),
             };
+            set_limits(&mut loaded, max_memory, max_steps);
             for w in loaded.warnings() {
                 eprintln!("warning: {w}");
             }
@@ -353,6 +380,20 @@ fn main() -> ExitCode {
             }
         }
     }
+}
+
+/// `--max-memory` (bytes) and `--max-steps` replace the scene's `[limits]`.
+fn set_limits(scene: &mut Scene, max_memory: Option<f64>, max_steps: Option<u64>) {
+    if let Some(bytes) = max_memory {
+        scene.limits.max_memory_gb = Some(bytes / 1e9);
+    }
+    if let Some(n) = max_steps {
+        scene.limits.max_steps = Some(n);
+    }
+}
+
+fn parse_memory_arg(text: &str) -> Result<f64, String> {
+    mpm_geo::scene::parse_memory(text)
 }
 
 fn fail(code: u8, message: &str) -> ExitCode {

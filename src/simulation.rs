@@ -11,7 +11,7 @@ use crate::interrupt::{self, Interruption};
 use crate::model::Model;
 use crate::monitor::Monitor;
 use crate::profile::{Profile, Stage};
-use crate::scene::{Scene, SceneError};
+use crate::scene::{ResourceLimits, Scene, SceneError};
 
 /// Receives the run's progress; the CLI writes outputs and a progress bar here.
 pub trait Observer {
@@ -66,9 +66,12 @@ pub struct Simulation {
 
 impl Simulation {
     /// Build a run from a validated scene: the model (seeded points, boundary
-    /// devices), its integrator and the monitors. Problems that only show
-    /// once points are seeded are reported as field errors.
+    /// devices), its integrator and the monitors. The scene's estimated
+    /// memory and step count are checked first against its `[limits]`
+    /// ([`Scene::check_resources`]); problems that only show once points are
+    /// seeded are reported as field errors.
     pub fn new(scene: Scene) -> Result<Self, SceneError> {
+        scene.check_resources(&ResourceLimits::for_scene(&scene))?;
         let profile = Profile::default();
         let (model, integrator, monitors) = profile.time(Stage::Build, || {
             let mut model = Model::new(scene)?;
@@ -108,6 +111,7 @@ impl Simulation {
                 cause,
             })?;
         self.model.account_rigid_work(start);
+        self.check_monitors()?;
         for remap in &report.removed_points {
             for monitor in &mut self.monitors {
                 monitor.remap_particle(remap);
@@ -131,6 +135,25 @@ impl Simulation {
             }
         }
         Ok(RunEnd::Completed)
+    }
+
+    /// A NaN or infinite monitor stops the run after the step that made it
+    /// so, naming the monitor (no row of `curve.csv` is written for it).
+    fn check_monitors(&self) -> Result<(), RunError> {
+        for m in &self.monitors {
+            let value = m.value(&self.model);
+            if !value.is_finite() {
+                return Err(RunError::Step {
+                    step: self.model.step,
+                    time: self.model.time,
+                    cause: StepError::NonFiniteMonitor {
+                        name: m.name.clone(),
+                        value,
+                    },
+                });
+            }
+        }
+        Ok(())
     }
 
     /// Current monitor values, in column order.

@@ -38,6 +38,25 @@ pub struct Scene {
     /// Stress smoothing.
     #[serde(default)]
     pub smoothing: SmoothingSpec,
+    /// Resource limits checked before the run (defaults: half the available
+    /// memory, 1e7 steps).
+    #[serde(default)]
+    pub limits: LimitsSpec,
+}
+
+/// `[limits]`: what a run may use, checked before anything big is allocated
+/// ([`Scene::check_resources`]); `--max-memory` and `--max-steps` set them.
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct LimitsSpec {
+    /// Largest estimated memory, GB (10⁹ bytes); default half the memory
+    /// available when the run starts.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max_memory_gb: Option<f64>,
+    /// Largest number of steps (implicit `steps`, explicit `end_time` over the
+    /// stable step); default 10⁷.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max_steps: Option<u64>,
 }
 
 /// When the nonlocal variable is updated (DESIGN §6).
@@ -350,8 +369,10 @@ impl Default for SolverSpec {
     }
 }
 
-/// A material, tagged by `model`.
-#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+/// A material, tagged by `model`. Read by `model` first, then as the
+/// model's own parameter table, so that an error names the key inside the
+/// material (`materials.soil`: `E`: invalid type …).
+#[derive(Debug, Clone, Serialize, PartialEq)]
 #[serde(tag = "model", rename_all = "snake_case")]
 pub enum MaterialSpec {
     /// Isotropic linear elasticity (DESIGN D22).
@@ -362,6 +383,41 @@ pub enum MaterialSpec {
     /// Von Mises elastic–perfectly plastic with undrained strength `c` (yield when
     /// √J₂ > c; Tresca's limit loads in plane strain, DESIGN §8.4).
     VonMises(VonMisesSpec),
+}
+
+impl<'de> Deserialize<'de> for MaterialSpec {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        use serde::de::Error;
+        const MODELS: &str = "`linear_elastic`, `hmc` or `von_mises`";
+        let mut table = toml::Table::deserialize(deserializer)?;
+        let model = match table.remove("model") {
+            Some(toml::Value::String(model)) => model,
+            Some(other) => {
+                return Err(D::Error::custom(format!(
+                    "key `model`: expected a string ({MODELS}), found {}",
+                    other.type_str()
+                )))
+            }
+            None => return Err(D::Error::custom(format!("missing key `model` ({MODELS})"))),
+        };
+        let parameters = toml::Value::Table(table);
+        let parsed = match model.as_str() {
+            "linear_elastic" => parameters.try_into().map(MaterialSpec::LinearElastic),
+            "hmc" => parameters.try_into().map(MaterialSpec::Hmc),
+            "von_mises" => parameters.try_into().map(MaterialSpec::VonMises),
+            other => {
+                return Err(D::Error::custom(format!(
+                    "key `model`: unknown model `{other}`, expected {MODELS}"
+                )))
+            }
+        };
+        parsed.map_err(|e: toml::de::Error| {
+            D::Error::custom(format!(
+                "model `{model}`: {}",
+                e.to_string().trim().replace('\n', " ")
+            ))
+        })
+    }
 }
 
 /// Parameters of `model = "von_mises"`: `E` (kPa), `nu`, `density` (t/m³), `c` (kPa);
