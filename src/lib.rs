@@ -34,6 +34,7 @@ pub mod campaign;
 pub mod constitutive;
 pub mod dofs;
 pub mod error;
+pub mod error_id;
 pub mod grid;
 pub mod integrators;
 pub mod interrupt;

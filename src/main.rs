@@ -6,6 +6,7 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 
 use mpm_geo::campaign::{CampaignOptions, Part};
+use mpm_geo::error_id::{ErrorId, Identified};
 use mpm_geo::run::{run_scene_with, RunOptions};
 use mpm_geo::scene::{Formulation, Scene};
 
@@ -100,6 +101,8 @@ enum Command {
     },
     /// Homogeneous test on one material point (biaxial, triaxial, simple shear) → CSV.
     Point(mpm_geo::point_driver::PointArgs),
+    /// Print the table of error identifiers (docs/guide.md §11).
+    Errors,
     /// Validate a scene without running it (exit 0 when valid).
     Check {
         /// Scene file (TOML).
@@ -150,7 +153,7 @@ fn main() -> ExitCode {
         } => {
             let part = match parse_part(shard, collect) {
                 Ok(part) => part,
-                Err(e) => return fail(2, &e),
+                Err(e) => return fail(2, ErrorId::CliArgument, &e),
             };
             let name = dir
                 .file_name()
@@ -192,7 +195,7 @@ fn main() -> ExitCode {
                         ExitCode::from(1)
                     }
                 }
-                Err(e) => fail(2, &e.to_string()),
+                Err(e) => fail_with(2, &e),
             }
         }
         Command::Study {
@@ -204,7 +207,7 @@ fn main() -> ExitCode {
         } => {
             let part = match parse_part(shard, collect) {
                 Ok(part) => part,
-                Err(e) => return fail(2, &e),
+                Err(e) => return fail(2, ErrorId::CliArgument, &e),
             };
             let stem = spec
                 .file_stem()
@@ -213,7 +216,13 @@ fn main() -> ExitCode {
             let out = out.unwrap_or_else(|| PathBuf::from("out").join(format!("study-{stem}")));
             let executable = match std::env::current_exe() {
                 Ok(exe) => exe,
-                Err(e) => return fail(2, &format!("cannot find the mpm-geo executable: {e}")),
+                Err(e) => {
+                    return fail(
+                        2,
+                        ErrorId::StudyIo,
+                        &format!("cannot find the mpm-geo executable: {e}"),
+                    )
+                }
             };
             let options = mpm_geo::study::StudyOptions {
                 executable,
@@ -247,6 +256,7 @@ fn main() -> ExitCode {
                     } else {
                         fail(
                             1,
+                            ErrorId::StudyFaults,
                             &format!(
                                 "{} run(s) ended without a stated outcome (panic, time-out or signal): {}",
                                 faults.len(),
@@ -255,12 +265,16 @@ fn main() -> ExitCode {
                         )
                     }
                 }
-                Err(e) => fail(2, &e.to_string()),
+                Err(e) => fail_with(2, &e),
             }
+        }
+        Command::Errors => {
+            print!("{}", mpm_geo::error_id::markdown_table());
+            ExitCode::SUCCESS
         }
         Command::Point(args) => match mpm_geo::point_driver::run(&args) {
             Ok(()) => ExitCode::SUCCESS,
-            Err(e) => fail(1, &e.to_string()),
+            Err(e) => fail_with(1, &e),
         },
         Command::Check {
             scene,
@@ -287,10 +301,10 @@ fn main() -> ExitCode {
                         );
                         ExitCode::SUCCESS
                     }
-                    Err(e) => fail(2, &e.to_string()),
+                    Err(e) => fail_with(2, &e),
                 }
             }
-            Err(e) => fail(2, &e.to_string()),
+            Err(e) => fail_with(2, &e),
         },
         Command::Run {
             scene,
@@ -303,7 +317,7 @@ fn main() -> ExitCode {
         } => {
             let mut loaded = match Scene::load(&scene, &overrides) {
                 Ok(s) => s,
-                Err(e) => return fail(2, &e.to_string()),
+                Err(e) => return fail_with(2, &e),
             };
             set_limits(&mut loaded, max_memory, max_steps);
             for w in loaded.warnings() {
@@ -322,7 +336,7 @@ fn main() -> ExitCode {
                 overwrite,
             };
             match run_scene_with(loaded, &out, &options) {
-                Err(e) => fail(2, &e.to_string()),
+                Err(e) => fail_with(2, e.as_ref()),
                 Ok(outcome) => {
                     eprintln!("{}", outcome.simulation.profile.table(outcome.wall_seconds));
                     eprintln!("{}", outcome.simulation.profile.work_line());
@@ -356,6 +370,7 @@ fn main() -> ExitCode {
                     match (outcome.error, outcome.interrupted) {
                         (Some(e), _) => fail(
                             1,
+                            e.error_id(),
                             &format!(
                                 "run stopped: {e}\noutputs up to the last completed step are in {}",
                                 out.display()
@@ -382,6 +397,12 @@ fn main() -> ExitCode {
     }
 }
 
+/// [`fail`] with the error's own identifier.
+fn fail_with(code: u8, error: &(dyn std::error::Error + 'static)) -> ExitCode {
+    let id = mpm_geo::error_id::identify(error).unwrap_or(ErrorId::RunInternal);
+    fail(code, id, &error.to_string())
+}
+
 /// `--max-memory` (bytes) and `--max-steps` replace the scene's `[limits]`.
 fn set_limits(scene: &mut Scene, max_memory: Option<f64>, max_steps: Option<u64>) {
     if let Some(bytes) = max_memory {
@@ -396,7 +417,8 @@ fn parse_memory_arg(text: &str) -> Result<f64, String> {
     mpm_geo::scene::parse_memory(text)
 }
 
-fn fail(code: u8, message: &str) -> ExitCode {
-    eprintln!("error: {message}");
+/// Print `error[ID]: message` and return the exit code.
+fn fail(code: u8, id: ErrorId, message: &str) -> ExitCode {
+    eprintln!("error[{}]: {message}", id.name());
     ExitCode::from(code)
 }

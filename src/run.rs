@@ -383,9 +383,12 @@ pub fn write_run_json(
     wall_seconds: f64,
     status: RunStatus<'_>,
 ) -> Result<(), OutputError> {
-    let error = match status {
-        RunStatus::Failed(e) => Some(e.to_string()),
-        _ => None,
+    let (error, error_id) = match status {
+        RunStatus::Failed(e) => (
+            Some(e.to_string()),
+            Some(crate::error_id::Identified::error_id(e).name()),
+        ),
+        _ => (None, None),
     };
     let interrupted = match status {
         RunStatus::Interrupted(i) => Some(json!({"signal": i.name(), "exit_code": i.exit_code()})),
@@ -418,6 +421,7 @@ pub fn write_run_json(
         "status": status.name(),
         "warnings": all_warnings,
         "error": error,
+        "error_id": error_id,
         "interrupted": interrupted,
         "steps_completed": model.step,
         "time": model.time,

@@ -223,7 +223,16 @@ pub fn execute(
 /// for a refused scene the list of fields below it, on one line.
 fn last_error_line(stderr: &str) -> String {
     let mut lines = stderr.lines();
-    let text = match lines.by_ref().find_map(|l| l.strip_prefix("error: ")) {
+    // `error[ID]: message` (or `error: message` of older builds), kept with its identifier
+    let message = |line: &str| {
+        let rest = line.strip_prefix("error")?;
+        if let Some(text) = rest.strip_prefix(": ") {
+            return Some(text.to_string());
+        }
+        let (id, text) = rest.strip_prefix('[')?.split_once("]: ")?;
+        Some(format!("[{id}] {text}"))
+    };
+    let text = match lines.by_ref().find_map(message) {
         Some(first) => {
             // `scene … is invalid:` is followed by `  - field: message` lines
             let items: Vec<&str> = lines

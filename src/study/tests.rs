@@ -443,18 +443,21 @@ fn panics_and_time_outs_are_faults() {
     assert!(start.elapsed().as_secs_f64() < 10.0);
     let stops = script(
         "stops",
-        "echo 'error: run stopped: step 3: NaN' >&2; exit 1",
+        "echo 'error[RUN_NON_FINITE]: run stopped: step 3: NaN' >&2; exit 1",
     );
     let m = super::execute::execute(&stops, &planned, &dir.path().join("c"), 1, None).unwrap();
-    assert_eq!(m.status, "stopped: run stopped: step 3: NaN");
+    assert_eq!(
+        m.status,
+        "stopped: [RUN_NON_FINITE] run stopped: step 3: NaN"
+    );
     assert!(m.stated());
     let refuses = script(
         "refuses",
-        "printf 'error: scene s is invalid:\\n  - scene.dt: too large\\n  - solver.cfl: too large\\n' >&2; exit 2",
+        "printf 'error[SCENE_INVALID]: scene s is invalid:\\n  - scene.dt: too large\\n  - solver.cfl: too large\\n' >&2; exit 2",
     );
     let m = super::execute::execute(&refuses, &planned, &dir.path().join("d"), 1, None).unwrap();
     assert_eq!(
         m.status,
-        "refused: scene s is invalid: scene.dt: too large; solver.cfl: too large"
+        "refused: [SCENE_INVALID] scene s is invalid: scene.dt: too large; solver.cfl: too large"
     );
 }

@@ -1,0 +1,390 @@
+//! Stable identifiers of the errors that end a run or refuse an input.
+//!
+//! The command line prints every error as `error[ID]: message`, `run.json`
+//! records the identifier of the error that stopped a run (`error_id`), and
+//! the user guide (`docs/guide.md` §11) lists every identifier with what it
+//! means and what to do about it. The list is defined once, here, by
+//! [`error_ids!`]; `mpm-geo errors` prints it as the guide's table, and
+//! `tests/guide.rs` checks that the guide holds exactly that table.
+//!
+//! [`identify`] finds the identifier of any error the library returns,
+//! through the [`Identified`] implementations of its error types.
+
+use mpm_solvers::SolverError;
+
+use crate::campaign::CampaignError;
+use crate::error::{RunError, StepError};
+use crate::output_dir::OutputDirError;
+use crate::point_driver::PointDriverError;
+use crate::scene::SceneError;
+use crate::study::StudyError;
+
+/// Defines [`ErrorId`]: variant, identifier, meaning and remedy, in the
+/// order of the guide's table.
+macro_rules! error_ids {
+    ($($variant:ident => $name:literal: $meaning:literal; $remedy:literal;)*) => {
+        /// A stable error identifier (docs/guide.md §11).
+        #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+        pub enum ErrorId {
+            $(
+                #[doc = $meaning]
+                $variant,
+            )*
+        }
+
+        impl ErrorId {
+            /// Every identifier, in the guide's order.
+            pub const ALL: &'static [ErrorId] = &[$(ErrorId::$variant,)*];
+
+            /// The identifier as printed, e.g. `SCENE_INVALID`.
+            pub fn name(self) -> &'static str {
+                match self {
+                    $(ErrorId::$variant => $name,)*
+                }
+            }
+
+            /// What the error means.
+            pub fn meaning(self) -> &'static str {
+                match self {
+                    $(ErrorId::$variant => $meaning,)*
+                }
+            }
+
+            /// What to do about it.
+            pub fn remedy(self) -> &'static str {
+                match self {
+                    $(ErrorId::$variant => $remedy,)*
+                }
+            }
+        }
+    };
+}
+
+error_ids! {
+    CliArgument => "CLI_ARGUMENT":
+        "a command-line argument is malformed (e.g. `--shard 4/3`)";
+        "see `mpm-geo help COMMAND`";
+    SceneRead => "SCENE_READ":
+        "the scene file cannot be read";
+        "check the path and the file's permissions";
+    SceneSyntax => "SCENE_SYNTAX":
+        "the scene is not valid TOML, has an unknown key or a value of the wrong type (the message names the key)";
+        "fix the named key; docs/scene.md lists every key and type";
+    SceneOverride => "SCENE_OVERRIDE":
+        "a `--set key=value` does not apply (no such key, or a value of the wrong type)";
+        "write it as `--set table.key=value`, arrays by index (`body.0.box`)";
+    SceneInvalid => "SCENE_INVALID":
+        "values out of range or inconsistent: every field is listed (also contradictory conditions on one dof, self-intersecting polygons, initial stresses far outside the yield surface)";
+        "fix each listed field; `mpm-geo check` shows them without running";
+    SceneNonFinite => "SCENE_NON_FINITE":
+        "a number in the scene is `nan` or `inf` (the keys are named)";
+        "give a finite value";
+    SceneMemoryLimit => "SCENE_MEMORY_LIMIT":
+        "the estimated memory of the run is over the limit; each part is listed with the keys that drive it";
+        "coarsen the grid (`grid.cell_size`), shrink the body or the nonlocal cutoff, or raise `--max-memory` / `limits.max_memory_gb` if the machine has the memory";
+    SceneStepLimit => "SCENE_STEP_LIMIT":
+        "the run would take more steps than the limit (explicit: end time over the stable step)";
+        "check E, density, `cfl` and `dt`; raise `--max-steps` / `limits.max_steps` if the count is meant";
+    OutputLocked => "OUTPUT_LOCKED":
+        "another run is writing into the output directory (its lock file names the process)";
+        "wait for it, or choose another `--out`";
+    OutputLockUnreadable => "OUTPUT_LOCK_UNREADABLE":
+        "the output directory's lock file cannot be read";
+        "make sure no run is writing there, then remove `.mpm-geo.lock`";
+    OutputReused => "OUTPUT_REUSED":
+        "the output directory holds an earlier run's files";
+        "choose another `--out`, or add `--overwrite` to remove that run's files (other files are kept)";
+    OutputDirectory => "OUTPUT_DIRECTORY":
+        "the output directory cannot be created or listed";
+        "check the path, the permissions and the free space";
+    OutputWrite => "OUTPUT_WRITE":
+        "an output file could not be written (full disk, permissions); the message names the step, time and path";
+        "free space or fix the permissions, then run again (every file written so far is whole)";
+    RunPointLeftGrid => "RUN_POINT_LEFT_GRID":
+        "a material point left the background grid";
+        "enlarge `grid.size` (room for heave or run-out), or set `grid.lost_points = \"remove\"` for fragments";
+    RunBoundaryPointLeftGrid => "RUN_BOUNDARY_POINT_LEFT_GRID":
+        "a traction or contact point left the background grid";
+        "enlarge `grid.size` around the loaded boundary";
+    RunNewtonFailed => "RUN_NEWTON_FAILED":
+        "Newton did not converge after every allowed step halving (the residual history is given)";
+        "use smaller steps (`scene.steps`, `scene.dt`), more halvings (`solver.max_halvings`), or check the boundary conditions";
+    RunStressUpdate => "RUN_STRESS_UPDATE":
+        "the stress update (return mapping) failed at a material point";
+        "use smaller steps; check the material parameters near the named point";
+    RunNonFinite => "RUN_NON_FINITE":
+        "a NaN or infinite value appeared in a point, node or monitor (named, with the step)";
+        "usually an unstable step: reduce `dt` or `cfl`, or check the materials and loads";
+    RunTimeStep => "RUN_TIME_STEP":
+        "the explicit time step is not finite or is above the stability limit";
+        "lower `solver.cfl` or `scene.dt`";
+    RunLinearSolver => "RUN_LINEAR_SOLVER":
+        "the linear solver failed (a singular tangent: a body not held, a mechanism)";
+        "fix the boundary conditions so that every body is held; see `solver.linear_solver`";
+    RunNonlocal => "RUN_NONLOCAL":
+        "the nonlocal averaging failed (a non-finite position or volume)";
+        "as RUN_NON_FINITE: reduce the step";
+    RunInternal => "RUN_INTERNAL":
+        "an internal request the integrator cannot serve (a tangent of an explicit run, inputs of the wrong length)";
+        "report it with the scene: this is a bug";
+    CheckpointMissing => "CHECKPOINT_MISSING":
+        "the directory has no checkpoint";
+        "run the scene with `--checkpoint-every N` past a checkpointed step";
+    CheckpointNotACheckpoint => "CHECKPOINT_NOT_A_CHECKPOINT":
+        "the checkpoint file is not an mpm-geo checkpoint";
+        "run the scene again";
+    CheckpointVersion => "CHECKPOINT_VERSION":
+        "the checkpoint was written by another version of its format";
+        "resume with the mpm-geo that wrote it, or run the scene again";
+    CheckpointTruncated => "CHECKPOINT_TRUNCATED":
+        "the checkpoint file is cut off";
+        "run the scene again";
+    CheckpointCorrupt => "CHECKPOINT_CORRUPT":
+        "the checkpoint's checksum does not match (damaged file)";
+        "run the scene again";
+    CheckpointForeign => "CHECKPOINT_FOREIGN":
+        "the checkpoint belongs to a run of another scene";
+        "resume each run in its own directory";
+    CheckpointOutputs => "CHECKPOINT_OUTPUTS":
+        "the outputs in the directory were changed after the checkpoint";
+        "run the scene again";
+    CheckpointScene => "CHECKPOINT_SCENE":
+        "the scene stored with the checkpoint cannot be rebuilt";
+        "run the scene again";
+    CheckpointIo => "CHECKPOINT_IO":
+        "the checkpoint could not be read or written";
+        "check the free space and the permissions";
+    CampaignDirectory => "CAMPAIGN_DIRECTORY":
+        "the campaign directory cannot be read or holds no scene";
+        "give a directory of scene files (and an optional campaign.toml)";
+    CampaignScene => "CAMPAIGN_SCENE":
+        "a scene or option of the campaign is refused (nothing was run)";
+        "fix the named scene; `mpm-geo check` each scene";
+    CampaignOutput => "CAMPAIGN_OUTPUT":
+        "a campaign output could not be written";
+        "check the free space and the permissions";
+    CampaignUnfinished => "CAMPAIGN_UNFINISHED":
+        "`--collect` found runs without a finished record";
+        "run the missing shards (their runs are listed), then collect again";
+    CampaignCurve => "CAMPAIGN_CURVE":
+        "a run's `curve.csv` cannot be read as its curve";
+        "run that scene again (its directory is named)";
+    StudySpec => "STUDY_SPEC":
+        "the study spec is refused (the key is named)";
+        "fix it; docs/study.md lists the keys";
+    StudyScene => "STUDY_SCENE":
+        "a scene of the study is refused";
+        "fix the base scene or the overrides named";
+    StudyIo => "STUDY_IO":
+        "a study file could not be written or a run process not started";
+        "check the path, the free space and the permissions";
+    StudyUnfinished => "STUDY_UNFINISHED":
+        "`--collect` found runs not measured yet";
+        "run the missing shards, then collect again";
+    StudyReference => "STUDY_REFERENCE":
+        "the study's reference run did not complete, so no error can be measured";
+        "make the reference run complete (its status is given), e.g. with a smaller step";
+    StudyFaults => "STUDY_FAULTS":
+        "runs of a study ended without a stated outcome (a panic, a time-out, a signal)";
+        "read the runs' `stderr.txt`; a panic is a bug, a time-out may need `study.timeout`";
+    PointInput => "POINT_INPUT":
+        "the material-point driver's material file or options are refused";
+        "fix the named parameter";
+    PointFailed => "POINT_FAILED":
+        "the material-point driver's stress update or mixed control did not converge";
+        "use more steps (`--steps`)";
+    PointWrite => "POINT_WRITE":
+        "the material-point driver's CSV could not be written";
+        "check the path and the free space";
+}
+
+/// An error type whose values each have an [`ErrorId`].
+pub trait Identified {
+    /// The identifier of this error.
+    fn error_id(&self) -> ErrorId;
+}
+
+impl Identified for SceneError {
+    fn error_id(&self) -> ErrorId {
+        match self {
+            SceneError::Io { .. } => ErrorId::SceneRead,
+            SceneError::Parse { .. } => ErrorId::SceneSyntax,
+            SceneError::Override { .. } => ErrorId::SceneOverride,
+            SceneError::Invalid { .. } => ErrorId::SceneInvalid,
+            SceneError::NonFinite { .. } => ErrorId::SceneNonFinite,
+            SceneError::MemoryLimit { .. } => ErrorId::SceneMemoryLimit,
+            SceneError::StepLimit { .. } => ErrorId::SceneStepLimit,
+        }
+    }
+}
+
+impl Identified for OutputDirError {
+    fn error_id(&self) -> ErrorId {
+        match self {
+            OutputDirError::Locked { .. } => ErrorId::OutputLocked,
+            OutputDirError::LockUnreadable { .. } => ErrorId::OutputLockUnreadable,
+            OutputDirError::InUse { .. } => ErrorId::OutputReused,
+            OutputDirError::Io { .. } => ErrorId::OutputDirectory,
+        }
+    }
+}
+
+impl Identified for RunError {
+    fn error_id(&self) -> ErrorId {
+        match self {
+            RunError::Step { cause, .. } => cause.error_id(),
+            RunError::Output { .. } => ErrorId::OutputWrite,
+        }
+    }
+}
+
+impl Identified for StepError {
+    fn error_id(&self) -> ErrorId {
+        match self {
+            StepError::ParticleLeftGrid { .. } => ErrorId::RunPointLeftGrid,
+            StepError::BoundaryPointLeftGrid { .. } => ErrorId::RunBoundaryPointLeftGrid,
+            StepError::NewtonFailed { .. } => ErrorId::RunNewtonFailed,
+            StepError::Constitutive { .. } => ErrorId::RunStressUpdate,
+            StepError::NonFiniteStress { .. }
+            | StepError::NonFinitePoint { .. }
+            | StepError::NonFiniteNode { .. }
+            | StepError::NonFiniteMonitor { .. } => ErrorId::RunNonFinite,
+            StepError::InvalidTimeStep { .. } | StepError::UnstableTimeStep { .. } => {
+                ErrorId::RunTimeStep
+            }
+            StepError::Solver(_) | StepError::DoubleMapping(_) => ErrorId::RunLinearSolver,
+            StepError::Nonlocal(_) => ErrorId::RunNonlocal,
+            StepError::NotAvailable(_) | StepError::WrongLength { .. } => ErrorId::RunInternal,
+        }
+    }
+}
+
+impl Identified for SolverError {
+    fn error_id(&self) -> ErrorId {
+        ErrorId::RunLinearSolver
+    }
+}
+
+impl Identified for CampaignError {
+    fn error_id(&self) -> ErrorId {
+        match self {
+            CampaignError::Directory(..) => ErrorId::CampaignDirectory,
+            CampaignError::Scene(_) => ErrorId::CampaignScene,
+            CampaignError::Output(..) => ErrorId::CampaignOutput,
+            CampaignError::Unfinished(_) => ErrorId::CampaignUnfinished,
+            CampaignError::Curve { .. } => ErrorId::CampaignCurve,
+        }
+    }
+}
+
+impl Identified for StudyError {
+    fn error_id(&self) -> ErrorId {
+        match self {
+            StudyError::Spec { .. } => ErrorId::StudySpec,
+            StudyError::Scene(_) => ErrorId::StudyScene,
+            StudyError::Io { .. } => ErrorId::StudyIo,
+            StudyError::Unfinished(_) => ErrorId::StudyUnfinished,
+            StudyError::Reference { .. } => ErrorId::StudyReference,
+        }
+    }
+}
+
+impl Identified for PointDriverError {
+    fn error_id(&self) -> ErrorId {
+        match self {
+            PointDriverError::ReadMaterial { .. }
+            | PointDriverError::ParseMaterial(_)
+            | PointDriverError::BadOverride(_)
+            | PointDriverError::InvalidParameters(_)
+            | PointDriverError::InvalidOption(_) => ErrorId::PointInput,
+            PointDriverError::Constitutive { .. } | PointDriverError::MixedControl { .. } => {
+                ErrorId::PointFailed
+            }
+            PointDriverError::Write { .. } => ErrorId::PointWrite,
+        }
+    }
+}
+
+/// The identifier of an error returned by the library (looked up through
+/// the error types that carry one); `None` for an error of another kind.
+pub fn identify(error: &(dyn std::error::Error + 'static)) -> Option<ErrorId> {
+    if let Some(e) = error.downcast_ref::<SceneError>() {
+        return Some(e.error_id());
+    }
+    if let Some(e) = error.downcast_ref::<OutputDirError>() {
+        return Some(e.error_id());
+    }
+    if let Some(e) = error.downcast_ref::<RunError>() {
+        return Some(e.error_id());
+    }
+    if let Some(e) = error.downcast_ref::<StepError>() {
+        return Some(e.error_id());
+    }
+    if let Some(e) = error.downcast_ref::<SolverError>() {
+        return Some(e.error_id());
+    }
+    if let Some(e) = error.downcast_ref::<CampaignError>() {
+        return Some(e.error_id());
+    }
+    if let Some(e) = error.downcast_ref::<StudyError>() {
+        return Some(e.error_id());
+    }
+    if let Some(e) = error.downcast_ref::<PointDriverError>() {
+        return Some(e.error_id());
+    }
+    None
+}
+
+/// The guide's error table (markdown): identifier, meaning, what to do.
+pub fn markdown_table() -> String {
+    let mut table = String::from("| identifier | meaning | what to do |\n|---|---|---|\n");
+    for id in ErrorId::ALL {
+        table.push_str(&format!(
+            "| `{}` | {} | {} |\n",
+            id.name(),
+            id.meaning().replace('|', "\\|"),
+            id.remedy().replace('|', "\\|")
+        ));
+    }
+    table
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn identifiers_are_unique_upper_snake_case() {
+        let mut seen = std::collections::HashSet::new();
+        for id in ErrorId::ALL {
+            let name = id.name();
+            assert!(seen.insert(name), "{name} twice");
+            assert!(
+                name.chars().all(|c| c.is_ascii_uppercase() || c == '_'),
+                "{name}"
+            );
+            assert!(!id.meaning().is_empty() && !id.remedy().is_empty());
+        }
+    }
+
+    #[test]
+    fn boxed_library_errors_are_identified() {
+        let step: Box<dyn std::error::Error> = Box::new(RunError::Step {
+            step: 3,
+            time: 0.1,
+            cause: StepError::ParticleLeftGrid {
+                particle: 7,
+                position: [1.0, 2.0],
+            },
+        });
+        assert_eq!(identify(step.as_ref()), Some(ErrorId::RunPointLeftGrid));
+        let campaign: Box<dyn std::error::Error> =
+            Box::new(CampaignError::Unfinished("a, b".into()));
+        assert_eq!(
+            identify(campaign.as_ref()),
+            Some(ErrorId::CampaignUnfinished)
+        );
+        let other: Box<dyn std::error::Error> = "plain".into();
+        assert_eq!(identify(other.as_ref()), None);
+    }
+}
