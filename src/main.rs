@@ -91,6 +91,10 @@ enum Command {
         /// Repeats per run instead of the spec's `study.repeats`.
         #[arg(long)]
         repeats: Option<usize>,
+        /// Override a value in every run's scene, after the spec's own
+        /// overrides (repeatable), e.g. `--set scene.steps=2` for a quick look.
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        overrides: Vec<String>,
         /// Run only the K-th of N disjoint parts of the study's runs (e.g.
         /// `--shard 2/3`), for a cluster job array; no report (see `--collect`).
         #[arg(long, value_name = "K/N", conflicts_with = "collect")]
@@ -202,6 +206,7 @@ fn main() -> ExitCode {
             spec,
             out,
             repeats,
+            overrides,
             shard,
             collect,
         } => {
@@ -228,6 +233,7 @@ fn main() -> ExitCode {
                 executable,
                 repeats,
                 verbose: true,
+                overrides,
                 part,
             };
             match mpm_geo::study::run_study(&spec, &out, &options) {

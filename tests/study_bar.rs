@@ -53,6 +53,7 @@ fn time_integrators_converge_at_their_orders() {
         executable: env!("CARGO_BIN_EXE_mpm-geo").into(),
         repeats: Some(1),
         verbose: false,
+        overrides: Vec::new(),
         part: mpm_geo::campaign::Part::Whole,
     };
     let spec = common::validation("studies/elastic_bar_order.toml");

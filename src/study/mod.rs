@@ -30,6 +30,7 @@ mod report;
 mod spec;
 
 use crate::campaign::Part;
+use crate::scene::Scene;
 use std::path::{Path, PathBuf};
 
 pub use closed_form::{BarVibration, ClosedForm, ClosedFormName, ColumnSettlement};
@@ -86,6 +87,9 @@ pub struct StudyOptions {
     pub repeats: Option<usize>,
     /// Print one line per finished run.
     pub verbose: bool,
+    /// `key=value` overrides applied last to every run's scene, after the
+    /// spec's own (e.g. `scene.steps=2` for a quick look at a study).
+    pub overrides: Vec<String>,
     /// The whole study, one shard of it, or the report from the shards
     /// (runs measured earlier with the same scene, repeats and time-out are
     /// not run again in any of them).
@@ -111,7 +115,14 @@ pub fn run_spec(
     out: &Path,
     options: &StudyOptions,
 ) -> Result<Vec<StudyRow>, StudyError> {
-    let plan = spec.plan()?;
+    let mut plan = spec.plan()?;
+    if !options.overrides.is_empty() {
+        for planned in plan.references.iter_mut().chain(plan.runs.iter_mut()) {
+            if planned.refused.is_none() {
+                planned.scene = with_overrides(&planned.scene, &options.overrides)?;
+            }
+        }
+    }
     let repeats = options.repeats.unwrap_or(spec.study.repeats).max(1);
     let timeout = spec.study.timeout;
     let say = |name: &str, m: &Measured| {
@@ -286,6 +297,13 @@ pub fn run_spec(
         report::write_case_report(&out.join("report.md"), spec, &rows)?;
     }
     Ok(rows)
+}
+
+/// `scene` with `overrides` applied (and validated again).
+fn with_overrides(scene: &Scene, overrides: &[String]) -> Result<Scene, StudyError> {
+    let text = toml::to_string(scene).map_err(|e| StudyError::Scene(e.to_string()))?;
+    Scene::from_str_with_overrides(&text, &scene.scene.name, overrides)
+        .map_err(|e| StudyError::Scene(e.to_string()))
 }
 
 #[cfg(test)]
