@@ -1,12 +1,13 @@
 //! `mpm-geo` command line: run, check and inspect scenes.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
 use mpm_geo::campaign::CampaignOptions;
-use mpm_geo::run::run_scene;
+use mpm_geo::checkpoint::{Resumable, ResumeOptions, SceneSource};
+use mpm_geo::run::{run_scene_with, RunOptions, RunOutcome};
 use mpm_geo::scene::{Formulation, Scene};
 
 /// 2D plane-strain material point method for brittle geomaterials.
@@ -32,6 +33,29 @@ enum Command {
         /// No progress bar.
         #[arg(long)]
         quiet: bool,
+        /// Write the whole state to OUT/checkpoint.bin every N steps, so
+        /// `mpm-geo resume OUT` can continue the run.
+        #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
+        checkpoint_every: Option<u64>,
+        /// Test hook: end the run after step M as a kill would (no last
+        /// row, no run.json), leaving the last periodic checkpoint.
+        #[arg(long, value_name = "M", hide = true)]
+        stop_after_step: Option<usize>,
+    },
+    /// Continue a run started with `--checkpoint-every` from its last
+    /// checkpoint; the outputs end as those of an uninterrupted run.
+    Resume {
+        /// The run's output directory.
+        dir: PathBuf,
+        /// No progress bar.
+        #[arg(long)]
+        quiet: bool,
+        /// Checkpoint interval instead of the run's own.
+        #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
+        checkpoint_every: Option<u64>,
+        /// Test hook: end the run after step M as a kill would.
+        #[arg(long, value_name = "M", hide = true)]
+        stop_after_step: Option<usize>,
     },
     /// Run every scene of a directory (in parallel) and write curves.csv,
     /// metrics.csv, report.md and plots (mesh-objectivity campaign).
@@ -212,8 +236,14 @@ fn main() -> ExitCode {
             out,
             overrides,
             quiet,
+            checkpoint_every,
+            stop_after_step,
         } => {
-            let loaded = match Scene::load(&scene, &overrides) {
+            let source = match SceneSource::read(&scene, &overrides) {
+                Ok(s) => s,
+                Err(e) => return fail(2, &e.to_string()),
+            };
+            let loaded = match source.scene() {
                 Ok(s) => s,
                 Err(e) => return fail(2, &e.to_string()),
             };
@@ -225,53 +255,94 @@ fn main() -> ExitCode {
                 .map(|s| s.to_string_lossy().into_owned())
                 .unwrap_or_else(|| "run".into());
             let out = out.unwrap_or_else(|| PathBuf::from("out").join(stem));
-            match run_scene(loaded, &out, !quiet) {
-                Err(e) => fail(2, &e.to_string()),
-                Ok(outcome) => {
-                    eprintln!("{}", outcome.simulation.profile.table(outcome.wall_seconds));
-                    eprintln!("{}", outcome.simulation.profile.work_line());
-                    let usage = outcome.simulation.integrator.usage();
-                    let sim = &outcome.simulation.model;
-                    eprintln!(
-                        "steps {}  time {:.6e} s  Newton iterations {}  factorisations: Cholesky {} LU {}  halvings {}  stagnated steps {}",
-                        sim.step,
-                        sim.time,
-                        usage.newton_iterations,
-                        usage.cholesky,
-                        usage.lu,
-                        usage.halvings,
-                        usage.stagnated_steps
-                    );
-                    if let (Some((lo, hi)), Some(by)) =
-                        (usage.explicit_time_step, &usage.time_step_limited_by)
-                    {
-                        eprintln!("explicit time step {lo:.3e} to {hi:.3e} s (limited by {by})");
-                    }
-                    if let Some(first) = sim.lost_points.first() {
-                        let mass: f64 = sim.lost_points.iter().map(|l| l.mass).sum();
-                        let total: f64 = sim.particles.mass.iter().sum::<f64>() + mass;
-                        eprintln!(
-                            "warning: {} material point(s) left the grid and were removed (first at step {}, {:.2e} of the mass; listed in run.json)",
-                            sim.lost_points.len(),
-                            first.step,
-                            mass / total
-                        );
-                    }
-                    match outcome.error {
-                        Some(e) => fail(
-                            1,
-                            &format!(
-                                "run stopped: {e}\noutputs up to the last completed step are in {}",
-                                out.display()
-                            ),
-                        ),
-                        None => {
-                            eprintln!("outputs in {}", out.display());
-                            ExitCode::SUCCESS
-                        }
-                    }
-                }
+            let options = RunOptions {
+                checkpoint: checkpoint_every.map(|n| (source, n as usize)),
+                stop_after: stop_after_step,
+            };
+            report(run_scene_with(loaded, &out, !quiet, options), &out)
+        }
+        Command::Resume {
+            dir,
+            quiet,
+            checkpoint_every,
+            stop_after_step,
+        } => {
+            let resumable = match Resumable::open(&dir) {
+                Ok(r) => r,
+                Err(e) => return fail(2, &e.to_string()),
+            };
+            for w in resumable.scene().warnings() {
+                eprintln!("warning: {w}");
             }
+            eprintln!(
+                "resuming {} from the checkpoint of step {}",
+                resumable.source().origin,
+                resumable.step()
+            );
+            let options = ResumeOptions {
+                checkpoint_every: checkpoint_every.map(|n| n as usize),
+                stop_after: stop_after_step,
+            };
+            report(resumable.run(!quiet, &options), &dir)
+        }
+    }
+}
+
+/// Print a run's summary and turn its outcome into the exit code.
+fn report(
+    outcome: Result<RunOutcome, Box<dyn std::error::Error + Send + Sync>>,
+    out: &Path,
+) -> ExitCode {
+    let outcome = match outcome {
+        Err(e) => return fail(2, &e.to_string()),
+        Ok(outcome) => outcome,
+    };
+    eprintln!("{}", outcome.simulation.profile.table(outcome.wall_seconds));
+    eprintln!("{}", outcome.simulation.profile.work_line());
+    let usage = outcome.simulation.integrator.usage();
+    let sim = &outcome.simulation.model;
+    eprintln!(
+        "steps {}  time {:.6e} s  Newton iterations {}  factorisations: Cholesky {} LU {}  halvings {}  stagnated steps {}",
+        sim.step,
+        sim.time,
+        usage.newton_iterations,
+        usage.cholesky,
+        usage.lu,
+        usage.halvings,
+        usage.stagnated_steps
+    );
+    if let (Some((lo, hi)), Some(by)) = (usage.explicit_time_step, &usage.time_step_limited_by) {
+        eprintln!("explicit time step {lo:.3e} to {hi:.3e} s (limited by {by})");
+    }
+    if let Some(first) = sim.lost_points.first() {
+        let mass: f64 = sim.lost_points.iter().map(|l| l.mass).sum();
+        let total: f64 = sim.particles.mass.iter().sum::<f64>() + mass;
+        eprintln!(
+            "warning: {} material point(s) left the grid and were removed (first at step {}, {:.2e} of the mass; listed in run.json)",
+            sim.lost_points.len(),
+            first.step,
+            mass / total
+        );
+    }
+    match outcome.error {
+        Some(e) => fail(
+            1,
+            &format!(
+                "run stopped: {e}\noutputs up to the last completed step are in {}",
+                out.display()
+            ),
+        ),
+        None if !outcome.simulation.finished() => {
+            eprintln!(
+                "stopped after step {} (--stop-after-step); continue with `mpm-geo resume {}`",
+                sim.step,
+                out.display()
+            );
+            ExitCode::SUCCESS
+        }
+        None => {
+            eprintln!("outputs in {}", out.display());
+            ExitCode::SUCCESS
         }
     }
 }

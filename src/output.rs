@@ -38,6 +38,29 @@ impl CurveWriter {
         })
     }
 
+    /// Open an existing file to append rows after its first `keep` bytes
+    /// (resuming a run: later rows are cut off). Errs when it is shorter.
+    pub fn reopen(path: &Path, keep: u64) -> Result<Self, RunError> {
+        let file = std::fs::OpenOptions::new()
+            .write(true)
+            .open(path)
+            .map_err(|e| io_error(path, e))?;
+        let len = file.metadata().map_err(|e| io_error(path, e))?.len();
+        if len < keep {
+            return Err(io_error(
+                path,
+                format!("{len} bytes, fewer than the {keep} to keep"),
+            ));
+        }
+        file.set_len(keep).map_err(|e| io_error(path, e))?;
+        let mut file = file;
+        std::io::Seek::seek(&mut file, std::io::SeekFrom::End(0)).map_err(|e| io_error(path, e))?;
+        Ok(Self {
+            writer: csv::Writer::from_writer(file),
+            path: path.to_path_buf(),
+        })
+    }
+
     /// Append one row (values written with full round-trip precision) and flush.
     pub fn row(&mut self, step: usize, time: f64, values: &[f64]) -> Result<(), RunError> {
         let mut record = vec![step.to_string(), format!("{time:e}")];

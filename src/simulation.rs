@@ -18,6 +18,11 @@ pub trait Observer {
     fn on_start(&mut self, sim: &Simulation) -> Result<(), RunError>;
     /// Called after every completed step.
     fn on_step(&mut self, sim: &Simulation, report: &StepReport) -> Result<(), RunError>;
+    /// True when the run should end after the step just reported, before its
+    /// end (checked after every step).
+    fn stop_requested(&self) -> bool {
+        false
+    }
 }
 
 /// An observer that does nothing (library use, tests).
@@ -96,11 +101,12 @@ impl Simulation {
         Ok(report)
     }
 
-    /// Run to the end, reporting every step to `observer`. On a failure the
-    /// error names step, time and cause; everything the observer wrote stays.
+    /// Run to the end (or until `observer` asks to stop), reporting every
+    /// step to `observer`. On a failure the error names step, time and
+    /// cause; everything the observer wrote stays.
     pub fn run(&mut self, observer: &mut dyn Observer) -> Result<(), RunError> {
         observer.on_start(self)?;
-        while !self.finished() {
+        while !self.finished() && !observer.stop_requested() {
             let report = self.step_once()?;
             observer.on_step(self, &report)?;
         }
