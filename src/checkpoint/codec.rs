@@ -22,7 +22,7 @@ impl Writer {
     }
 
     /// Append any encodable value.
-    pub fn put<T: Codec + ?Sized>(&mut self, value: &T) {
+    pub fn put<T: Codec>(&mut self, value: &T) {
         value.encode(self);
     }
 }
