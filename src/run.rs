@@ -159,7 +159,9 @@ impl OutputObserver {
     }
 
     /// Write a checkpoint of `sim` now, if the run writes checkpoints (the
-    /// step's outputs must be written already).
+    /// step's outputs must be written already). On an interruption call it
+    /// before [`Self::finish`]: the checkpoint must not see the extra last
+    /// row `finish` writes, which an uninterrupted run would not have.
     pub fn write_checkpoint(&mut self, sim: &Simulation) -> Result<(), RunError> {
         let cursor = self.cursor();
         match self.checkpoints.as_mut() {
@@ -366,7 +368,9 @@ pub fn run_scene(
 #[derive(Default)]
 pub struct RunOptions {
     /// Write a checkpoint every `every` steps, with the scene source
-    /// `mpm-geo resume` rebuilds the run from ([`crate::checkpoint`]).
+    /// `mpm-geo resume` rebuilds the run from ([`crate::checkpoint`]);
+    /// `every = 0` writes one only when asked
+    /// ([`OutputObserver::write_checkpoint`], e.g. on an interruption).
     pub checkpoint: Option<(crate::checkpoint::SceneSource, usize)>,
     /// Test hook: end the run after this step as a kill would (no last row,
     /// no `run.json`); the simulation in the outcome is then not finished.
