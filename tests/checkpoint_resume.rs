@@ -325,3 +325,46 @@ fn damaged_foreign_and_other_version_checkpoints_are_refused_and_nothing_changes
     );
     assert_eq!(status(&dir).0, "completed");
 }
+
+/// What an interruption (SIGINT/SIGTERM) does: the run ends after a step
+/// that is neither a checkpoint step nor a `curve.csv` row step, a checkpoint
+/// of that very step is written on request (`every = 0`: no periodic ones),
+/// and `resume` continues from it to the uninterrupted outputs.
+#[test]
+fn a_checkpoint_written_on_request_at_any_step_resumes_identically() {
+    use mpm_geo::checkpoint::{Checkpointer, SceneSource};
+    use mpm_geo::run::OutputObserver;
+    use mpm_geo::simulation::Simulation;
+
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = explicit_cut(tmp.path());
+    let mut overrides = COARSE.to_vec();
+    overrides.push("output.curve_every=4");
+    let (straight, stopped) = (tmp.path().join("straight"), tmp.path().join("stopped"));
+    run(&scene, &straight, &overrides, &[]);
+
+    let overrides: Vec<String> = overrides.iter().map(|s| s.to_string()).collect();
+    let source = SceneSource::read(&scene, &overrides).unwrap();
+    let mut sim = Simulation::new(source.scene().unwrap()).unwrap();
+    let checkpoints = Checkpointer::start(&stopped, &source, 0).unwrap_or_else(|e| panic!("{e}"));
+    let mut observer = OutputObserver::new(&stopped, &sim, false)
+        .unwrap()
+        .with_checkpoints(Some(checkpoints), Some(47));
+    sim.run(&mut observer).unwrap();
+    assert_eq!(sim.model.step, 47);
+    observer.write_checkpoint(&sim).unwrap();
+    observer.finish(&sim).unwrap(); // the interrupted run's last row (step 47)
+    assert_eq!(last_row_step(&stopped), 47);
+
+    let output = resume(&stopped, &[]);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("from the checkpoint of step 47"),
+        "{stderr}"
+    );
+    assert!(
+        outputs(&straight) == outputs(&stopped),
+        "outputs differ after the resume"
+    );
+}

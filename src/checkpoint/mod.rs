@@ -391,8 +391,9 @@ pub struct Checkpointer {
 }
 
 impl Checkpointer {
-    /// Checkpoints every `every` steps into `dir` (a new run): writes the
-    /// scene source beside them and removes a checkpoint an earlier run left.
+    /// Checkpoints every `every` steps into `dir` (a new run; `every = 0`:
+    /// only when asked): creates `dir`, writes the scene source there and
+    /// removes a checkpoint an earlier run left.
     pub fn start(dir: &Path, source: &SceneSource, every: usize) -> Result<Self, CheckpointError> {
         let record = SourceRecord {
             format_version: FORMAT_VERSION,
@@ -400,6 +401,7 @@ impl Checkpointer {
             scene: source.clone(),
         };
         let text = serde_json::to_string_pretty(&record).map_err(|e| io_error(dir, e))?;
+        std::fs::create_dir_all(dir).map_err(|e| io_error(dir, e))?;
         let stale = dir.join(CHECKPOINT_FILE);
         match std::fs::remove_file(&stale) {
             Err(e) if e.kind() != std::io::ErrorKind::NotFound => return Err(io_error(&stale, e)),
@@ -507,7 +509,12 @@ impl Resumable {
             bytes: 0,
             crc: crc32fast::Hasher::new(),
         };
-        curve.advance(&curve_path, Some(state.cursor.curve_bytes))?;
+        curve
+            .advance(&curve_path, Some(state.cursor.curve_bytes))
+            .map_err(|e| CheckpointError::Outputs {
+                path: curve_path.display().to_string(),
+                detail: format!("cannot be read ({e})"),
+            })?;
         if curve.bytes != state.cursor.curve_bytes
             || curve.crc.clone().finalize() != state.cursor.curve_checksum
         {
