@@ -24,9 +24,15 @@ pub enum RunError {
         #[source]
         cause: StepError,
     },
-    /// Writing an output failed.
-    #[error("output {path}: {message}")]
+    /// Writing an output failed (the first such error ends the run; every
+    /// file written before it is whole, the one being written is absent or
+    /// keeps its previous version, `curve.csv` ends with a whole row).
+    #[error("step {step} (t = {time:.6e} s): cannot write {path}: {message}")]
     Output {
+        /// Step whose outputs were being written (0: the initial state).
+        step: usize,
+        /// Time of that step, s.
+        time: f64,
         /// File that could not be written.
         path: String,
         /// Why.
@@ -210,6 +216,36 @@ pub enum StepError {
     NonFiniteStress {
         /// Particle index.
         particle: usize,
+    },
+    /// A material point variable other than the stress became NaN or
+    /// infinite (found by the one pass of the commit stage).
+    #[error("non-finite value: {quantity} of material point {particle} at ({:.6e}, {:.6e}) m", position[0], position[1])]
+    NonFinitePoint {
+        /// Particle index.
+        particle: usize,
+        /// Which variable (`position`, `velocity`, `volume`, …).
+        quantity: &'static str,
+        /// Its position, m (its initial position if the position itself is not finite).
+        position: [f64; 2],
+    },
+    /// A nodal result of the step (reaction, displacement increment) became
+    /// NaN or infinite.
+    #[error("non-finite value: {quantity} at grid node {node} ({:.6e}, {:.6e}) m", position[0], position[1])]
+    NonFiniteNode {
+        /// Node index.
+        node: usize,
+        /// Which nodal result.
+        quantity: &'static str,
+        /// Node position, m.
+        position: [f64; 2],
+    },
+    /// A monitor (a `curve.csv` column) became NaN or infinite after the step.
+    #[error("non-finite value: monitor `{name}` = {value}")]
+    NonFiniteMonitor {
+        /// Monitor name.
+        name: String,
+        /// Its value.
+        value: f64,
     },
     /// The explicit time step is not a positive finite number.
     #[error("non-finite value: explicit time step {dt}")]

@@ -20,12 +20,16 @@
 //!   [`run`] and [`profile`] (what a run writes and measures),
 //!   [`checkpoint`] (saving and resuming a run), [`scene`]
 //!   (TOML input and its validation), [`campaign`] and [`metrics`] (mesh
-//!   studies), [`study`] (error against run time), [`error`].
+//!   studies), [`study`] (error against run time), [`error`];
+//! - runs that survive: [`atomic_file`] (outputs whole or absent),
+//!   [`output_dir`] (the output directory's lock and reuse), [`interrupt`]
+//!   (SIGINT/SIGTERM end a run after its step).
 
 // Index loops over nodes, components and Voigt entries mirror the equations
 // (B_a, D_ij, N_a) more readably than iterator chains.
 #![allow(clippy::needless_range_loop)]
 
+pub mod atomic_file;
 pub mod bc;
 pub mod campaign;
 pub mod checkpoint;
@@ -34,11 +38,13 @@ pub mod dofs;
 pub mod error;
 pub mod grid;
 pub mod integrators;
+pub mod interrupt;
 pub mod metrics;
 pub mod model;
 pub mod monitor;
 pub mod nonlocal;
 pub mod output;
+pub mod output_dir;
 pub mod particles;
 pub mod plot;
 pub mod point_driver;

@@ -5,7 +5,7 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
-use mpm_geo::campaign::CampaignOptions;
+use mpm_geo::campaign::{CampaignOptions, Part};
 use mpm_geo::checkpoint::{Resumable, ResumeOptions, SceneSource};
 use mpm_geo::run::{run_scene_with, RunOptions, RunOutcome};
 use mpm_geo::scene::{Formulation, Scene};
@@ -33,12 +33,24 @@ enum Command {
         /// No progress bar.
         #[arg(long)]
         quiet: bool,
-        /// Write the whole state to OUT/checkpoint.bin every N steps, so
-        /// `mpm-geo resume OUT` can continue the run.
+        /// Remove an earlier run's files from the output directory
+        /// (run.json, curve.csv, particles_*.vtu, *.pvd, checkpoints) instead
+        /// of refusing it; other files there are kept.
+        #[arg(long)]
+        overwrite: bool,
+        /// Memory limit for the run's estimate, e.g. `8G`, `512M` (default:
+        /// half the available memory; scene key `limits.max_memory_gb`).
+        #[arg(long, value_name = "SIZE", value_parser = parse_memory_arg)]
+        max_memory: Option<f64>,
+        /// Step-count limit (default 1e7; scene key `limits.max_steps`).
+        #[arg(long, value_name = "N")]
+        max_steps: Option<u64>,
+        /// Write the whole state to OUT/checkpoint.bin every N steps (and on
+        /// SIGINT/SIGTERM), so `mpm-geo resume OUT` can continue the run.
         #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
         checkpoint_every: Option<u64>,
         /// Test hook: end the run after step M as a kill would (no last
-        /// row, no run.json), leaving the last periodic checkpoint.
+        /// row, run.json left `running`), leaving the last periodic checkpoint.
         #[arg(long, value_name = "M", hide = true)]
         stop_after_step: Option<usize>,
     },
@@ -81,6 +93,14 @@ enum Command {
         /// out/campaign-<dir name>-paper by default.
         #[arg(long, value_enum, default_value_t = FormulationArg::Ours)]
         formulation: FormulationArg,
+        /// Run only the K-th of N disjoint parts (e.g. `--shard 2/3`), for a
+        /// cluster job array; no report (see `--collect`).
+        #[arg(long, value_name = "K/N", conflicts_with = "collect")]
+        shard: Option<String>,
+        /// Run nothing: build the report from the runs every shard left in
+        /// the output directory.
+        #[arg(long)]
+        collect: bool,
     },
     /// Error against run time: run a study spec's sweep (each run a whole
     /// process, timed `repeats` times) and write study.csv,
@@ -94,6 +114,13 @@ enum Command {
         /// Repeats per run instead of the spec's `study.repeats`.
         #[arg(long)]
         repeats: Option<usize>,
+        /// Run only the K-th of N disjoint parts of the study's runs (e.g.
+        /// `--shard 2/3`), for a cluster job array; no report (see `--collect`).
+        #[arg(long, value_name = "K/N", conflicts_with = "collect")]
+        shard: Option<String>,
+        /// Run nothing: build the report from the runs every shard measured.
+        #[arg(long)]
+        collect: bool,
     },
     /// Homogeneous test on one material point (biaxial, triaxial, simple shear) → CSV.
     Point(mpm_geo::point_driver::PointArgs),
@@ -104,6 +131,13 @@ enum Command {
         /// Override a scene value (repeatable).
         #[arg(long = "set", value_name = "KEY=VALUE")]
         overrides: Vec<String>,
+        /// Memory limit for the run's estimate, e.g. `8G`, `512M` (default:
+        /// half the available memory; scene key `limits.max_memory_gb`).
+        #[arg(long, value_name = "SIZE", value_parser = parse_memory_arg)]
+        max_memory: Option<f64>,
+        /// Step-count limit (default 1e7; scene key `limits.max_steps`).
+        #[arg(long, value_name = "N")]
+        max_steps: Option<u64>,
     },
 }
 
@@ -116,6 +150,15 @@ enum FormulationArg {
     Paper,
 }
 
+/// `--shard K/N` / `--collect` of `campaign` and `study`.
+fn parse_part(shard: Option<String>, collect: bool) -> Result<Part, String> {
+    match (shard, collect) {
+        (Some(text), _) => Part::shard(&text),
+        (None, true) => Ok(Part::Collect),
+        (None, false) => Ok(Part::Whole),
+    }
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
@@ -126,7 +169,13 @@ fn main() -> ExitCode {
             overrides,
             step_refinement,
             formulation,
+            shard,
+            collect,
         } => {
+            let part = match parse_part(shard, collect) {
+                Ok(part) => part,
+                Err(e) => return fail(2, &e),
+            };
             let name = dir
                 .file_name()
                 .map(|s| s.to_string_lossy().into_owned())
@@ -142,16 +191,25 @@ fn main() -> ExitCode {
                 overrides,
                 step_refinement,
                 formulation,
+                part,
             };
             match mpm_geo::campaign::run_campaign(&dir, &out, &options) {
                 Ok(runs) => {
                     let stopped = runs.iter().filter(|r| r.error.is_some()).count();
-                    eprintln!(
-                        "campaign: {} runs ({} stopped early); report in {}",
-                        runs.len(),
-                        stopped,
-                        out.join("report.md").display()
-                    );
+                    if let Part::Shard { index, count } = part {
+                        eprintln!(
+                            "campaign: shard {index}/{count}: {} runs ({stopped} stopped early) in {}; build the report with --collect",
+                            runs.len(),
+                            out.display()
+                        );
+                    } else {
+                        eprintln!(
+                            "campaign: {} runs ({} stopped early); report in {}",
+                            runs.len(),
+                            stopped,
+                            out.join("report.md").display()
+                        );
+                    }
                     if stopped == 0 {
                         ExitCode::SUCCESS
                     } else {
@@ -161,7 +219,17 @@ fn main() -> ExitCode {
                 Err(e) => fail(2, &e.to_string()),
             }
         }
-        Command::Study { spec, out, repeats } => {
+        Command::Study {
+            spec,
+            out,
+            repeats,
+            shard,
+            collect,
+        } => {
+            let part = match parse_part(shard, collect) {
+                Ok(part) => part,
+                Err(e) => return fail(2, &e),
+            };
             let stem = spec
                 .file_stem()
                 .map(|s| s.to_string_lossy().into_owned())
@@ -175,14 +243,21 @@ fn main() -> ExitCode {
                 executable,
                 repeats,
                 verbose: true,
+                part,
             };
             match mpm_geo::study::run_study(&spec, &out, &options) {
                 Ok(rows) => {
                     let stopped = rows.iter().filter(|r| !r.measured.completed()).count();
+                    let report = match part {
+                        Part::Shard { index, count } => format!(
+                            "shard {index}/{count} in {}; build the report with --collect",
+                            out.display()
+                        ),
+                        _ => format!("report in {}", out.join("report.md").display()),
+                    };
                     eprintln!(
-                        "study: {} runs ({stopped} did not complete); report in {}",
-                        rows.len(),
-                        out.join("report.md").display()
+                        "study: {} runs ({stopped} did not complete); {report}",
+                        rows.len()
                     );
                     // a stopped or refused run is an outcome; a panic, a
                     // time-out or a signal is a fault of the engine
@@ -211,24 +286,34 @@ fn main() -> ExitCode {
             Ok(()) => ExitCode::SUCCESS,
             Err(e) => fail(1, &e.to_string()),
         },
-        Command::Check { scene, overrides } => match Scene::load(&scene, &overrides) {
-            Ok(s) => match mpm_geo::simulation::Simulation::new(s) {
-                Ok(sim) => {
-                    let sim = &sim.model;
-                    for w in sim.scene.warnings() {
-                        eprintln!("warning: {w}");
+        Command::Check {
+            scene,
+            overrides,
+            max_memory,
+            max_steps,
+        } => match Scene::load(&scene, &overrides) {
+            Ok(mut s) => {
+                set_limits(&mut s, max_memory, max_steps);
+                let estimate = s.estimate_resources();
+                match mpm_geo::simulation::Simulation::new(s) {
+                    Ok(sim) => {
+                        let sim = &sim.model;
+                        for w in sim.scene.warnings() {
+                            eprintln!("warning: {w}");
+                        }
+                        println!(
+                            "{}: valid ({} material points, {}×{} cells; {})",
+                            scene.display(),
+                            sim.particles.len(),
+                            sim.grid.cells[0],
+                            sim.grid.cells[1],
+                            estimate
+                        );
+                        ExitCode::SUCCESS
                     }
-                    println!(
-                        "{}: valid ({} material points, {}×{} cells)",
-                        scene.display(),
-                        sim.particles.len(),
-                        sim.grid.cells[0],
-                        sim.grid.cells[1]
-                    );
-                    ExitCode::SUCCESS
+                    Err(e) => fail(2, &e.to_string()),
                 }
-                Err(e) => fail(2, &e.to_string()),
-            },
+            }
             Err(e) => fail(2, &e.to_string()),
         },
         Command::Run {
@@ -236,6 +321,9 @@ fn main() -> ExitCode {
             out,
             overrides,
             quiet,
+            overwrite,
+            max_memory,
+            max_steps,
             checkpoint_every,
             stop_after_step,
         } => {
@@ -243,10 +331,11 @@ fn main() -> ExitCode {
                 Ok(s) => s,
                 Err(e) => return fail(2, &e.to_string()),
             };
-            let loaded = match source.scene() {
+            let mut loaded = match source.scene() {
                 Ok(s) => s,
                 Err(e) => return fail(2, &e.to_string()),
             };
+            set_limits(&mut loaded, max_memory, max_steps);
             for w in loaded.warnings() {
                 eprintln!("warning: {w}");
             }
@@ -255,11 +344,14 @@ fn main() -> ExitCode {
                 .map(|s| s.to_string_lossy().into_owned())
                 .unwrap_or_else(|| "run".into());
             let out = out.unwrap_or_else(|| PathBuf::from("out").join(stem));
+            install_interrupt();
             let options = RunOptions {
+                show_progress: !quiet,
+                overwrite,
                 checkpoint: checkpoint_every.map(|n| (source, n as usize)),
                 stop_after: stop_after_step,
             };
-            report(run_scene_with(loaded, &out, !quiet, options), &out)
+            report(run_scene_with(loaded, &out, &options), &out)
         }
         Command::Resume {
             dir,
@@ -279,12 +371,19 @@ fn main() -> ExitCode {
                 resumable.source().origin,
                 resumable.step()
             );
+            install_interrupt();
             let options = ResumeOptions {
                 checkpoint_every: checkpoint_every.map(|n| n as usize),
                 stop_after: stop_after_step,
             };
             report(resumable.run(!quiet, &options), &dir)
         }
+    }
+}
+
+fn install_interrupt() {
+    if let Err(e) = mpm_geo::interrupt::install() {
+        eprintln!("warning: SIGINT/SIGTERM will end the run without run.json: {e}");
     }
 }
 
@@ -324,15 +423,25 @@ fn report(
             mass / total
         );
     }
-    match outcome.error {
-        Some(e) => fail(
+    match (outcome.error, outcome.interrupted) {
+        (Some(e), _) => fail(
             1,
             &format!(
                 "run stopped: {e}\noutputs up to the last completed step are in {}",
                 out.display()
             ),
         ),
-        None if !outcome.simulation.finished() => {
+        (None, Some(signal)) => {
+            eprintln!(
+                "interrupted by {} after step {} (t = {:.6e} s); outputs up to it are in {}",
+                signal.name(),
+                sim.step,
+                sim.time,
+                out.display()
+            );
+            ExitCode::from(signal.exit_code())
+        }
+        (None, None) if !outcome.simulation.finished() => {
             eprintln!(
                 "stopped after step {} (--stop-after-step); continue with `mpm-geo resume {}`",
                 sim.step,
@@ -340,11 +449,25 @@ fn report(
             );
             ExitCode::SUCCESS
         }
-        None => {
+        (None, None) => {
             eprintln!("outputs in {}", out.display());
             ExitCode::SUCCESS
         }
     }
+}
+
+/// `--max-memory` (bytes) and `--max-steps` replace the scene's `[limits]`.
+fn set_limits(scene: &mut Scene, max_memory: Option<f64>, max_steps: Option<u64>) {
+    if let Some(bytes) = max_memory {
+        scene.limits.max_memory_gb = Some(bytes / 1e9);
+    }
+    if let Some(n) = max_steps {
+        scene.limits.max_steps = Some(n);
+    }
+}
+
+fn parse_memory_arg(text: &str) -> Result<f64, String> {
+    mpm_geo::scene::parse_memory(text)
 }
 
 fn fail(code: u8, message: &str) -> ExitCode {

@@ -115,6 +115,55 @@ pub fn build_material(
     })
 }
 
+/// Share of |σ₀| by which an initial stress may lie outside the yield
+/// surface (measured by its projection onto the surface, DESIGN D39).
+const INITIAL_STRESS_TOLERANCE: f64 = 0.1;
+
+/// An initial stress (`stress0`, `k0`) far outside the yield surface at the
+/// start is refused, naming the body's key and the first such point: the
+/// first step would return it to the surface in one jump.
+fn check_initial_stresses(
+    scene: &Scene,
+    materials: &[Arc<dyn ConstitutiveModel>],
+    particles: &Particles,
+    errors: &mut Vec<FieldError>,
+) {
+    let norm = |s: &[f64; 4]| s.iter().map(|v| v * v).sum::<f64>().sqrt();
+    let mut reported = vec![false; scene.body.len()];
+    for i in 0..particles.len() {
+        let b = particles.body[i] as usize;
+        let Some(body) = scene.body.get(b) else {
+            continue;
+        };
+        if reported[b] || (body.stress0.is_none() && body.k0.is_none()) {
+            continue;
+        }
+        let Some(material) = materials.get(particles.material[i] as usize) else {
+            continue;
+        };
+        let stress = &particles.stress[i];
+        let projected = material.project_to_surface(stress, &particles.state[i], None);
+        let distance = norm(&[
+            stress[0] - projected[0],
+            stress[1] - projected[1],
+            stress[2] - projected[2],
+            stress[3] - projected[3],
+        ]);
+        if distance > INITIAL_STRESS_TOLERANCE * norm(stress) || !distance.is_finite() {
+            reported[b] = true;
+            let key = if body.k0.is_some() { "k0" } else { "stress0" };
+            let x = particles.position[i];
+            errors.push(FieldError {
+                field: format!("body[{b}].{key}"),
+                message: format!(
+                    "the initial stress {stress:?} kPa at ({:.4}, {:.4}) m lies far outside the yield surface of material `{}` (its projection onto the surface is {:.3e} kPa away, more than {INITIAL_STRESS_TOLERANCE} of |σ|)",
+                    x[0], x[1], body.material, distance
+                ),
+            });
+        }
+    }
+}
+
 impl Model {
     /// Build the model of a validated scene: seed material points, place
     /// traction and driven points. Geometry problems that only show once
@@ -136,6 +185,7 @@ impl Model {
         }
         let particles = seed_particles(&scene, &grid, &material_names, &mut errors);
         let driven = build_driven_points(&scene, &particles, &mut errors);
+        check_initial_stresses(&scene, &materials, &particles, &mut errors);
         if !errors.is_empty() {
             return Err(SceneError::Invalid {
                 path: scene.scene.name.clone(),

@@ -1,74 +1,137 @@
-//! Run outputs: `curve.csv` (one row per step, flushed as the run goes),
-//! particle snapshots as VTK `.vtu` (ParaView), and `run.json`.
+//! Run outputs: `curve.csv` (one row per step, each row written whole and
+//! flushed as the run goes), particle snapshots as VTK `.vtu` (ParaView) with
+//! their `.pvd` collection, and `run.json`. Every file but `curve.csv` is
+//! written under a temporary name and renamed ([`crate::atomic_file`]).
 
 use std::fs::File;
-use std::io::{BufWriter, Write};
+use std::io::{Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 
+use crate::atomic_file::{write_atomic, AtomicFile};
 use crate::constitutive::{deviatoric_stress, mean_stress};
 use crate::error::RunError;
 use crate::particles::Particles;
 
-fn io_error(path: &Path, e: impl std::fmt::Display) -> RunError {
-    RunError::Output {
-        path: path.display().to_string(),
-        message: e.to_string(),
+/// An output file that could not be written; [`OutputError::at`] adds the
+/// step and time of the run.
+#[derive(Debug, thiserror::Error)]
+#[error("cannot write {}: {source}", path.display())]
+pub struct OutputError {
+    /// The file (its final name).
+    pub path: PathBuf,
+    /// Why.
+    #[source]
+    pub source: std::io::Error,
+}
+
+impl OutputError {
+    fn new(path: &Path, source: impl Into<std::io::Error>) -> Self {
+        Self {
+            path: path.to_path_buf(),
+            source: source.into(),
+        }
+    }
+
+    /// The run error of this failure while writing the outputs of `step` at `time`.
+    pub fn at(self, step: usize, time: f64) -> RunError {
+        RunError::Output {
+            step,
+            time,
+            path: self.path.display().to_string(),
+            message: self.source.to_string(),
+        }
     }
 }
 
-/// `curve.csv`: columns `step, time` and one per monitor; every row is flushed.
+/// `curve.csv`: columns `step, time` and one per monitor. Each row is
+/// formatted first and written with one write, then flushed; if that write
+/// fails (a full disk) the file is cut back to its last whole row and the
+/// writer refuses further rows, so the file never ends in a partial row.
 pub struct CurveWriter {
-    writer: csv::Writer<File>,
+    file: File,
     path: PathBuf,
+    /// Length of the file up to its last whole row, bytes.
+    whole: u64,
+    /// A failed row could not be cut back: write nothing more.
+    broken: bool,
 }
 
 impl CurveWriter {
-    /// Create the file and write the header.
-    pub fn create(path: &Path, monitor_names: &[String]) -> Result<Self, RunError> {
-        let mut writer = csv::Writer::from_path(path).map_err(|e| io_error(path, e))?;
+    /// Create the file and write the header (on failure the file is removed).
+    pub fn create(path: &Path, monitor_names: &[String]) -> Result<Self, OutputError> {
+        let file = File::create(path).map_err(|e| OutputError::new(path, e))?;
+        let mut writer = Self {
+            file,
+            path: path.to_path_buf(),
+            whole: 0,
+            broken: false,
+        };
         let mut header = vec!["step".to_string(), "time".to_string()];
         header.extend(monitor_names.iter().cloned());
-        writer
-            .write_record(&header)
-            .map_err(|e| io_error(path, e))?;
-        writer.flush().map_err(|e| io_error(path, e))?;
-        Ok(Self {
-            writer,
-            path: path.to_path_buf(),
-        })
+        if let Err(e) = writer.write_record(&header) {
+            let _ = std::fs::remove_file(path);
+            return Err(e);
+        }
+        Ok(writer)
     }
 
     /// Open an existing file to append rows after its first `keep` bytes
     /// (resuming a run: later rows are cut off). Errs when it is shorter.
-    pub fn reopen(path: &Path, keep: u64) -> Result<Self, RunError> {
-        let file = std::fs::OpenOptions::new()
+    pub fn reopen(path: &Path, keep: u64) -> Result<Self, OutputError> {
+        let error = |e: std::io::Error| OutputError::new(path, e);
+        let mut file = std::fs::OpenOptions::new()
             .write(true)
             .open(path)
-            .map_err(|e| io_error(path, e))?;
-        let len = file.metadata().map_err(|e| io_error(path, e))?.len();
+            .map_err(error)?;
+        let len = file.metadata().map_err(error)?.len();
         if len < keep {
-            return Err(io_error(
-                path,
-                format!("{len} bytes, fewer than the {keep} to keep"),
-            ));
+            return Err(error(std::io::Error::other(format!(
+                "{len} bytes, fewer than the {keep} to keep"
+            ))));
         }
-        file.set_len(keep).map_err(|e| io_error(path, e))?;
-        let mut file = file;
-        std::io::Seek::seek(&mut file, std::io::SeekFrom::End(0)).map_err(|e| io_error(path, e))?;
+        file.set_len(keep).map_err(error)?;
+        file.seek(SeekFrom::Start(keep)).map_err(error)?;
         Ok(Self {
-            writer: csv::Writer::from_writer(file),
+            file,
             path: path.to_path_buf(),
+            whole: keep,
+            broken: false,
         })
     }
 
     /// Append one row (values written with full round-trip precision) and flush.
-    pub fn row(&mut self, step: usize, time: f64, values: &[f64]) -> Result<(), RunError> {
+    pub fn row(&mut self, step: usize, time: f64, values: &[f64]) -> Result<(), OutputError> {
         let mut record = vec![step.to_string(), format!("{time:e}")];
         record.extend(values.iter().map(|v| format!("{v:e}")));
-        self.writer
-            .write_record(&record)
-            .map_err(|e| io_error(&self.path, e))?;
-        self.writer.flush().map_err(|e| io_error(&self.path, e))
+        self.write_record(&record)
+    }
+
+    fn write_record(&mut self, record: &[String]) -> Result<(), OutputError> {
+        let path = self.path.clone();
+        let error = |e: std::io::Error| OutputError::new(&path, e);
+        if self.broken {
+            return Err(error(std::io::Error::other(
+                "an earlier row could not be written",
+            )));
+        }
+        let mut line = csv::Writer::from_writer(Vec::new());
+        line.write_record(record)
+            .map_err(|e| error(std::io::Error::other(e)))?;
+        let line = line
+            .into_inner()
+            .map_err(|e| error(std::io::Error::other(e.to_string())))?;
+        let written = self.file.write_all(&line).and_then(|()| self.file.flush());
+        if let Err(e) = written {
+            // cut a partial row off again
+            let cut = self
+                .file
+                .set_len(self.whole)
+                .and_then(|()| self.file.seek(SeekFrom::Start(self.whole)));
+            self.broken = cut.is_err();
+            return Err(error(e));
+        }
+        self.whole += line.len() as u64;
+        Ok(())
     }
 }
 
@@ -91,11 +154,36 @@ pub fn deviatoric_hencky_strain(f: &[f64; 4]) -> f64 {
 
 /// Write the material points as a VTK XML unstructured grid of vertices with
 /// displacement, velocity, stress, strain, plastic strain, κ, κ̄, p, q and εq.
-pub fn write_vtu(path: &Path, particles: &Particles) -> Result<(), RunError> {
-    let file = File::create(path).map_err(|e| io_error(path, e))?;
-    let mut w = BufWriter::new(file);
-    write_vtu_body(&mut w, particles).map_err(|e| io_error(path, e))?;
-    w.flush().map_err(|e| io_error(path, e))
+/// Written under a temporary name and renamed: the file is whole or absent.
+pub fn write_vtu(path: &Path, particles: &Particles) -> Result<(), OutputError> {
+    let error = |e| OutputError::new(path, e);
+    let mut w = AtomicFile::create(path).map_err(error)?;
+    write_vtu_body(&mut w, particles).map_err(error)?;
+    w.commit().map_err(error)
+}
+
+/// The ParaView collection `path` (`particles.pvd`) of the snapshots written
+/// so far, `(time, file name)` in order, so a series opens as an animation
+/// with its times; rewritten whole (temporary name, rename).
+pub fn write_pvd(path: &Path, snapshots: &[(f64, String)]) -> Result<(), OutputError> {
+    let mut text = String::from(
+        "<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\" byte_order=\"LittleEndian\">\n<Collection>\n",
+    );
+    for (time, file) in snapshots {
+        text += &format!(
+            "<DataSet timestep=\"{time:e}\" group=\"\" part=\"0\" file=\"{}\"/>\n",
+            xml_escape(file)
+        );
+    }
+    text += "</Collection>\n</VTKFile>\n";
+    write_atomic(path, text).map_err(|e| OutputError::new(path, e))
+}
+
+fn xml_escape(text: &str) -> String {
+    text.replace('&', "&amp;")
+        .replace('"', "&quot;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
 }
 
 fn write_vtu_body(w: &mut impl Write, p: &Particles) -> std::io::Result<()> {
@@ -207,10 +295,10 @@ fn write_int_array(
     writeln!(w, "\n</DataArray>")
 }
 
-/// Write `value` as pretty JSON to `path`.
-pub fn write_json(path: &Path, value: &serde_json::Value) -> Result<(), RunError> {
-    let text = serde_json::to_string_pretty(value).map_err(|e| io_error(path, e))?;
-    std::fs::write(path, text).map_err(|e| io_error(path, e))
+/// Write `value` as pretty JSON to `path`, whole (temporary name, rename).
+pub fn write_json(path: &Path, value: &serde_json::Value) -> Result<(), OutputError> {
+    let text = serde_json::to_string_pretty(value).map_err(|e| OutputError::new(path, e))?;
+    write_atomic(path, text).map_err(|e| OutputError::new(path, e))
 }
 
 #[cfg(test)]

@@ -11,6 +11,7 @@
 //! plotters' pure-Rust `ab_glyph` backend, so no system font (fontconfig,
 //! freetype) is needed on any machine.
 
+use crate::atomic_file::AtomicPath;
 use plotters::coord::Shift;
 use plotters::element::DashedPathElement;
 use plotters::prelude::*;
@@ -224,7 +225,10 @@ pub fn plot_curves_sized(
     let (xs, ys) = (x1 - x0, y1 - y0);
 
     prepare_path(path)?;
-    let root = BitMapBackend::new(path, size).into_drawing_area();
+    // drawn under a temporary name, renamed once presented: whole or absent
+    let target = AtomicPath::new(path);
+    let temp = target.temp().to_path_buf();
+    let root = BitMapBackend::new(&temp, size).into_drawing_area();
     root.fill(&WHITE).map_err(de)?;
     let mut chart = ChartBuilder::on(&root)
         .caption(title, ("sans-serif", 26))
@@ -276,7 +280,8 @@ pub fn plot_curves_sized(
         .draw()
         .map_err(de)?;
     root.present().map_err(de)?;
-    Ok(())
+    drop(root);
+    target.commit().map_err(de)
 }
 
 /// Tick label of a logarithmic axis: plain decimals from 1e-3 to 1e4, else
@@ -321,7 +326,10 @@ pub fn plot_work_precision(
     };
     let ((x0, x1), (y0, y1)) = (bounds(|p| p.0), bounds(|p| p.1));
     prepare_path(path)?;
-    let root = BitMapBackend::new(path, CURVE_SIZE).into_drawing_area();
+    // drawn under a temporary name, renamed once presented: whole or absent
+    let target = AtomicPath::new(path);
+    let temp = target.temp().to_path_buf();
+    let root = BitMapBackend::new(&temp, CURVE_SIZE).into_drawing_area();
     root.fill(&WHITE).map_err(de)?;
     let mut chart = ChartBuilder::on(&root)
         .caption(title, ("sans-serif", 24))
@@ -388,7 +396,8 @@ pub fn plot_work_precision(
         .draw()
         .map_err(de)?;
     root.present().map_err(de)?;
-    Ok(())
+    drop(root);
+    target.commit().map_err(de)
 }
 
 // ---------------------------------------------------------------------------
@@ -559,7 +568,10 @@ pub fn plot_field_panels_sized(
     }
 
     prepare_path(path)?;
-    let root = BitMapBackend::new(path, size).into_drawing_area();
+    // drawn under a temporary name, renamed once presented: whole or absent
+    let target = AtomicPath::new(path);
+    let temp = target.temp().to_path_buf();
+    let root = BitMapBackend::new(&temp, size).into_drawing_area();
     root.fill(&WHITE).map_err(de)?;
     let (head, body) = root.split_vertically(FIG_TITLE_H);
     if !title.is_empty() {
@@ -596,7 +608,8 @@ pub fn plot_field_panels_sized(
     }
     draw_colorbar(&bar, range, colorbar_label)?;
     root.present().map_err(de)?;
-    Ok(())
+    drop(root);
+    target.commit().map_err(de)
 }
 
 fn text_center() -> plotters::style::text_anchor::Pos {

@@ -354,7 +354,13 @@ pub fn write_csv(path: &Path, records: &[PointRecord]) -> Result<(), PointDriver
         path: path.to_path_buf(),
         message: e.to_string(),
     };
-    let mut writer = csv::Writer::from_path(path).map_err(err)?;
+    let io = |e: std::io::Error| PointDriverError::Write {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    };
+    // whole or absent: renamed to its name once every row is written
+    let file = crate::atomic_file::AtomicFile::create(path).map_err(io)?;
+    let mut writer = csv::Writer::from_writer(file);
     writer
         .write_record([
             "step",
@@ -388,10 +394,8 @@ pub fn write_csv(path: &Path, records: &[PointRecord]) -> Result<(), PointDriver
         row.push(u8::from(r.yielded).to_string());
         writer.write_record(&row).map_err(err)?;
     }
-    writer.flush().map_err(|e| PointDriverError::Write {
-        path: path.to_path_buf(),
-        message: e.to_string(),
-    })
+    let file = writer.into_inner().map_err(|e| io(e.into_error()))?;
+    file.commit().map_err(io)
 }
 
 /// Run the test selected by `args` and write the CSV (`mpm-geo point ...`).

@@ -1,5 +1,8 @@
-//! Running a scene to an output directory: the observer that writes
-//! `curve.csv`, snapshots and `run.json`, and drives the progress bar.
+//! Running a scene to an output directory: the directory is locked and
+//! checked ([`crate::output_dir`]), `run.json` says `running` before the first
+//! step, and the observer writes `curve.csv`, snapshots and their `.pvd`
+//! collection and drives the progress bar; at the end `run.json` says
+//! `completed`, `failed` or `interrupted`.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -10,10 +13,22 @@ use serde_json::json;
 use crate::checkpoint::Checkpointer;
 use crate::error::RunError;
 use crate::integrators::StepReport;
-use crate::output::{deviatoric_hencky_strain, write_json, write_vtu, CurveWriter};
+use crate::interrupt::Interruption;
+use crate::output::{
+    deviatoric_hencky_strain, write_json, write_pvd, write_vtu, CurveWriter, OutputError,
+};
+use crate::output_dir;
 use crate::profile::Stage;
 use crate::scene::{AnalysisKind, Scene};
-use crate::simulation::{Observer, Simulation};
+use crate::simulation::{Observer, RunEnd, Simulation};
+
+/// Name of the snapshots' ParaView collection in the output directory.
+pub const PVD_FILE: &str = "particles.pvd";
+
+/// The run error of an output failure at `sim`'s current step and time.
+fn at(sim: &Simulation) -> impl Fn(OutputError) -> RunError + '_ {
+    |e| e.at(sim.model.step, sim.model.time)
+}
 
 /// Writes a run's outputs as it goes.
 pub struct OutputObserver {
@@ -25,12 +40,14 @@ pub struct OutputObserver {
     pending_times: Vec<f64>,
     /// The fields at the snapshot times reached so far.
     fields: Vec<FieldSnapshot>,
-    /// Writes a checkpoint every N steps (`--checkpoint-every`).
+    /// The snapshots written so far, (time, file name), for the `.pvd`.
+    snapshots: Vec<(f64, String)>,
+    /// Writes a checkpoint every N steps (`--checkpoint-every`) and on an interruption.
     checkpoints: Option<Checkpointer>,
     /// Continuing a run from a checkpoint: the start is already written.
     resumed: bool,
     /// Test hook: end the run after this step as a kill would (no last
-    /// row, no `run.json`, no checkpoint at that step).
+    /// row, `run.json` left `running`, no checkpoint at that step).
     stop_after: Option<usize>,
     /// Set once the step `stop_after` is done.
     stop: bool,
@@ -46,6 +63,8 @@ pub struct OutputCursor {
     pub pending_times: Vec<f64>,
     /// The fields at the snapshot times reached so far.
     pub fields: Vec<FieldSnapshot>,
+    /// The snapshots written so far, (time, file name), as in the `.pvd`.
+    pub snapshots: Vec<(f64, String)>,
     /// Length of `curve.csv` then, bytes.
     pub curve_bytes: u64,
     /// CRC-32 of those bytes.
@@ -54,7 +73,7 @@ pub struct OutputCursor {
 
 /// The material points' positions and strains at one snapshot time (what the
 /// campaigns plot as the paper's Fig. 10).
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct FieldSnapshot {
     /// The snapshot time asked for in `[output] snapshot_times`, s.
     pub requested_time: f64,
@@ -85,21 +104,26 @@ impl FieldSnapshot {
 impl OutputObserver {
     /// Create `dir` and `curve.csv` in it.
     pub fn new(dir: &Path, sim: &Simulation, show_progress: bool) -> Result<Self, RunError> {
-        std::fs::create_dir_all(dir).map_err(|e| RunError::Output {
-            path: dir.display().to_string(),
-            message: e.to_string(),
+        std::fs::create_dir_all(dir).map_err(|e| {
+            OutputError {
+                path: dir.to_path_buf(),
+                source: e,
+            }
+            .at(sim.model.step, sim.model.time)
         })?;
         let names: Vec<String> = sim.monitors.iter().map(|m| m.name.clone()).collect();
-        let curve = CurveWriter::create(&dir.join("curve.csv"), &names)?;
+        let curve = CurveWriter::create(&dir.join("curve.csv"), &names).map_err(at(sim))?;
+        let progress = progress_bar(sim, show_progress);
         let mut pending_times = sim.model.scene.output.snapshot_times.clone();
         pending_times.sort_by(|a, b| b.total_cmp(a));
         Ok(Self {
             dir: dir.to_path_buf(),
             curve,
-            progress: progress_bar(sim, show_progress),
+            progress,
             last_row_step: usize::MAX,
             pending_times,
             fields: Vec::new(),
+            snapshots: Vec::new(),
             checkpoints: None,
             resumed: false,
             stop_after: None,
@@ -109,15 +133,20 @@ impl OutputObserver {
 
     /// Continue the outputs of `dir` from `cursor` (`sim` restored from the
     /// same checkpoint): `curve.csv` cut back to the cursor's length, the
-    /// snapshots of later steps removed (the run writes them again).
+    /// snapshots of later steps removed (the run writes them again) and the
+    /// `.pvd` rewritten with the earlier ones.
     pub fn resume(
         dir: &Path,
         sim: &Simulation,
         cursor: OutputCursor,
         show_progress: bool,
     ) -> Result<Self, RunError> {
-        let curve = CurveWriter::reopen(&dir.join("curve.csv"), cursor.curve_bytes)?;
-        remove_snapshots_after(dir, sim.model.step)?;
+        let curve =
+            CurveWriter::reopen(&dir.join("curve.csv"), cursor.curve_bytes).map_err(at(sim))?;
+        remove_snapshots_after(dir, sim.model.step).map_err(at(sim))?;
+        if !cursor.snapshots.is_empty() {
+            write_pvd(&dir.join(PVD_FILE), &cursor.snapshots).map_err(at(sim))?;
+        }
         let progress = progress_bar(sim, show_progress);
         progress.set_position(progress_position(sim));
         Ok(Self {
@@ -127,6 +156,7 @@ impl OutputObserver {
             last_row_step: cursor.last_row_step.unwrap_or(usize::MAX),
             pending_times: cursor.pending_times,
             fields: cursor.fields,
+            snapshots: cursor.snapshots,
             checkpoints: None,
             resumed: true,
             stop_after: None,
@@ -134,8 +164,9 @@ impl OutputObserver {
         })
     }
 
-    /// Write a checkpoint with `checkpoints` (every N steps, see
-    /// [`Checkpointer`]) and end the run after step `stop_after` (test hook).
+    /// Write a checkpoint with `checkpoints` (every N steps and on an
+    /// interruption, see [`Checkpointer`]) and end the run after step
+    /// `stop_after` (test hook).
     pub fn with_checkpoints(
         mut self,
         checkpoints: Option<Checkpointer>,
@@ -153,19 +184,22 @@ impl OutputObserver {
             last_row_step: (self.last_row_step != usize::MAX).then_some(self.last_row_step),
             pending_times: self.pending_times.clone(),
             fields: self.fields.clone(),
+            snapshots: self.snapshots.clone(),
             curve_bytes: 0,
             curve_checksum: 0,
         }
     }
 
     /// Write a checkpoint of `sim` now, if the run writes checkpoints (the
-    /// step's outputs must be written already). On an interruption call it
-    /// before [`Self::finish`]: the checkpoint must not see the extra last
-    /// row `finish` writes, which an uninterrupted run would not have.
+    /// step's outputs must be written already). On an interruption it is
+    /// written before the extra last row, which an uninterrupted run would
+    /// not have (the resume cuts it off).
     pub fn write_checkpoint(&mut self, sim: &Simulation) -> Result<(), RunError> {
         let cursor = self.cursor();
         match self.checkpoints.as_mut() {
-            Some(checkpoints) => checkpoints.write(sim, cursor).map_err(RunError::from),
+            Some(checkpoints) => checkpoints
+                .write(sim, cursor)
+                .map_err(|e| e.at(sim.model.step, sim.model.time)),
             None => Ok(()),
         }
     }
@@ -198,19 +232,24 @@ impl OutputObserver {
             || (o.snapshot_every > 0 && step.is_multiple_of(o.snapshot_every))
     }
 
-    fn write_snapshot(&self, sim: &Simulation) -> Result<(), RunError> {
-        write_vtu(
-            &self
-                .dir
-                .join(format!("particles_{:06}.vtu", sim.model.step)),
-            &sim.model.particles,
-        )
+    /// Write `particles_<step>.vtu` and rewrite the `.pvd` collection.
+    fn write_snapshot(&mut self, sim: &Simulation) -> Result<(), RunError> {
+        let name = format!("particles_{:06}.vtu", sim.model.step);
+        write_vtu(&self.dir.join(&name), &sim.model.particles).map_err(at(sim))?;
+        self.snapshots.push((sim.model.time, name));
+        write_pvd(&self.dir.join(PVD_FILE), &self.snapshots).map_err(at(sim))
+    }
+
+    /// The snapshots written so far: (time, file name), as in the `.pvd`.
+    pub fn snapshots(&self) -> &[(f64, String)] {
+        &self.snapshots
     }
 
     fn write_row(&mut self, sim: &Simulation) -> Result<(), RunError> {
         let model = &sim.model;
         self.curve
-            .row(model.step, model.time, &sim.monitor_values())?;
+            .row(model.step, model.time, &sim.monitor_values())
+            .map_err(at(sim))?;
         self.last_row_step = model.step;
         Ok(())
     }
@@ -227,15 +266,18 @@ impl OutputObserver {
     }
 
     fn show_progress(&self, sim: &Simulation, report: &StepReport) {
-        self.progress.set_position(progress_position(sim));
         match sim.model.analysis() {
             AnalysisKind::Explicit => {
+                let end = sim.model.scene.scene.end_time.unwrap_or(1.0);
+                self.progress
+                    .set_position((1000.0 * sim.model.time / end) as u64);
                 self.progress.set_message(format!(
                     "step {} t={:.4e} s dt={:.2e} s",
                     report.step, report.time, report.dt
                 ));
             }
             _ => {
+                self.progress.set_position(sim.model.step as u64);
                 self.progress.set_message(format!(
                     "t={:.4e} Newton {} it{}",
                     report.time,
@@ -280,10 +322,10 @@ fn progress_position(sim: &Simulation) -> u64 {
 }
 
 /// Remove the snapshots `particles_NNNNNN.vtu` of steps after `step`.
-fn remove_snapshots_after(dir: &Path, step: usize) -> Result<(), RunError> {
-    let io = |path: &Path, e: std::io::Error| RunError::Output {
-        path: path.display().to_string(),
-        message: e.to_string(),
+fn remove_snapshots_after(dir: &Path, step: usize) -> Result<(), OutputError> {
+    let io = |path: &Path, e: std::io::Error| OutputError {
+        path: path.to_path_buf(),
+        source: e,
     };
     for entry in std::fs::read_dir(dir).map_err(|e| io(dir, e))? {
         let path = entry.map_err(|e| io(dir, e))?.path();
@@ -339,6 +381,23 @@ impl Observer for OutputObserver {
     fn stop_requested(&self) -> bool {
         self.stop
     }
+
+    fn on_interrupt(
+        &mut self,
+        sim: &Simulation,
+        _interruption: Interruption,
+    ) -> Result<(), RunError> {
+        sim.profile.time(Stage::Output, || {
+            // a checkpoint of this step to resume from, taken before the
+            // row below (which an uninterrupted run would not have)
+            self.write_checkpoint(sim)?;
+            // the interrupted step's row, even if `curve_every` skips it
+            if self.last_row_step != sim.model.step {
+                self.write_row(sim)?;
+            }
+            Ok(())
+        })
+    }
 }
 
 /// Outcome of a run started by [`run_scene`].
@@ -347,92 +406,192 @@ pub struct RunOutcome {
     pub simulation: Simulation,
     /// Wall time, s.
     pub wall_seconds: f64,
-    /// The error that stopped the run, if any (outputs up to it are kept).
+    /// The first error that stopped the run, if any: a failed step or an
+    /// output that could not be written (outputs up to it are kept, whole).
     pub error: Option<RunError>,
+    /// The signal that stopped the run after a completed step, if any.
+    pub interrupted: Option<Interruption>,
     /// The fields at the `[output] snapshot_times` the run reached.
     pub fields: Vec<FieldSnapshot>,
 }
 
-/// Run a validated scene, writing `curve.csv`, snapshots and `run.json` into `out`.
-/// Setup errors (the scene's geometry) are returned as `Err`; a failure during
-/// the run is returned in [`RunOutcome::error`] after `run.json` is written.
+/// How a run writes its output directory.
+#[derive(Clone, Debug, Default)]
+pub struct RunOptions {
+    /// Draw a progress bar on stderr.
+    pub show_progress: bool,
+    /// Remove an earlier run's files from the directory instead of refusing
+    /// it ([`output_dir::prepare`]).
+    pub overwrite: bool,
+    /// Write a checkpoint every `every` steps and on an interruption, with
+    /// the scene source `mpm-geo resume` rebuilds the run from
+    /// ([`crate::checkpoint`]); `every = 0`: only on an interruption or
+    /// when asked ([`OutputObserver::write_checkpoint`]).
+    pub checkpoint: Option<(crate::checkpoint::SceneSource, usize)>,
+    /// Test hook: end the run after this step as a kill would (no last row,
+    /// `run.json` left `running`); the simulation in the outcome is then
+    /// not finished.
+    pub stop_after: Option<usize>,
+}
+
+/// Run a validated scene, writing `curve.csv`, snapshots and `run.json` into
+/// `out`, which must not hold an earlier run's files (see [`run_scene_with`]).
 pub fn run_scene(
     scene: Scene,
     out: &Path,
     show_progress: bool,
 ) -> Result<RunOutcome, Box<dyn std::error::Error + Send + Sync>> {
-    run_scene_with(scene, out, show_progress, RunOptions::default())
+    let options = RunOptions {
+        show_progress,
+        ..RunOptions::default()
+    };
+    run_scene_with(scene, out, &options)
 }
 
-/// What a run does besides its outputs.
-#[derive(Default)]
-pub struct RunOptions {
-    /// Write a checkpoint every `every` steps, with the scene source
-    /// `mpm-geo resume` rebuilds the run from ([`crate::checkpoint`]);
-    /// `every = 0` writes one only when asked
-    /// ([`OutputObserver::write_checkpoint`], e.g. on an interruption).
-    pub checkpoint: Option<(crate::checkpoint::SceneSource, usize)>,
-    /// Test hook: end the run after this step as a kill would (no last row,
-    /// no `run.json`); the simulation in the outcome is then not finished.
-    pub stop_after: Option<usize>,
-}
-
-/// [`run_scene`] with checkpoints and the stop hook of `options`.
+/// Run a validated scene into `out`: lock the directory (refused if another
+/// run holds it, or if it holds an earlier run's files and not
+/// `options.overwrite`), write `run.json` with status `running`, run, and
+/// rewrite `run.json` with the end status. Setup errors (the scene's
+/// geometry, the directory) are returned as `Err` and write nothing; a
+/// failure during the run (a step, or the first output that could not be
+/// written) is returned in [`RunOutcome::error`], a signal in
+/// [`RunOutcome::interrupted`].
 pub fn run_scene_with(
     scene: Scene,
     out: &Path,
-    show_progress: bool,
-    options: RunOptions,
+    options: &RunOptions,
 ) -> Result<RunOutcome, Box<dyn std::error::Error + Send + Sync>> {
     let start = Instant::now();
-    let sim = Simulation::new(scene)?;
-    let observer = sim.profile.time(Stage::Output, || {
-        OutputObserver::new(out, &sim, show_progress)
-    })?;
-    let checkpoints = match options.checkpoint {
-        Some((source, every)) => Some(Checkpointer::start(out, &source, every)?),
+    let mut sim = Simulation::new(scene)?;
+    let _lock = output_dir::prepare(out, options.overwrite)?;
+    let systems = sim.model.scene.output.systems.clone();
+    let max_mb = sim.model.scene.output.systems_max_mb;
+    if let Some(implicit) = sim.integrator.implicit_mut() {
+        implicit.export_systems(out.join("systems"), systems, max_mb);
+    }
+    let checkpoints = match &options.checkpoint {
+        Some((source, every)) => Some(Checkpointer::start(out, source, *every)?),
         None => None,
     };
-    let observer = observer.with_checkpoints(checkpoints, options.stop_after);
-    drive(sim, observer, out, start)
+    let (show, stop_after) = (options.show_progress, options.stop_after);
+    drive(sim, out, start, move |sim| {
+        let observer = sim
+            .profile
+            .time(Stage::Output, || OutputObserver::new(out, sim, show))?;
+        Ok(observer.with_checkpoints(checkpoints, stop_after))
+    })
 }
 
-/// Run `sim` to its end with `observer` (a new run or one resumed from a
-/// checkpoint), then write the last row and `run.json`.
+/// Run `sim` in `out` (locked by the caller) with the observer `make`
+/// gives (a new run's or a resumed one's): `run.json` says `running`, the
+/// time loop, the last row, `run.json` with the end status.
 pub(crate) fn drive(
     mut sim: Simulation,
-    mut observer: OutputObserver,
     out: &Path,
     start: Instant,
+    make: impl FnOnce(&Simulation) -> Result<OutputObserver, RunError>,
 ) -> Result<RunOutcome, Box<dyn std::error::Error + Send + Sync>> {
-    let result = sim.run(&mut observer);
-    if observer.stopped() && result.is_ok() {
-        observer.progress.finish_and_clear();
-    } else {
-        observer.finish(&sim)?;
+    let mut observer = None;
+    let result = start_and_run(&mut sim, out, make, &mut observer);
+    if let (Ok(_), Some(o)) = (&result, observer.as_mut()) {
+        if o.stopped() {
+            // the stop hook leaves what a kill leaves
+            o.progress.finish_and_clear();
+            return Ok(RunOutcome {
+                wall_seconds: start.elapsed().as_secs_f64(),
+                simulation: sim,
+                error: None,
+                interrupted: None,
+                fields: observer.map(|o| o.fields).unwrap_or_default(),
+            });
+        }
+    }
+    let (mut error, interrupted) = match result {
+        Ok(RunEnd::Completed) => (None, None),
+        Ok(RunEnd::Interrupted(signal)) => (None, Some(signal)),
+        Err(e) => (Some(e), None),
+    };
+    if let Some(observer) = observer.as_mut() {
+        if let Err(e) = observer.finish(&sim) {
+            error.get_or_insert(e);
+        }
     }
     let wall_seconds = start.elapsed().as_secs_f64();
-    let error = result.err();
-    if !observer.stopped() || error.is_some() {
-        write_run_json(&out.join("run.json"), &sim, wall_seconds, error.as_ref())?;
+    let status = match (&error, interrupted) {
+        (Some(e), _) => RunStatus::Failed(e),
+        (None, Some(signal)) => RunStatus::Interrupted(signal),
+        (None, None) => RunStatus::Completed,
+    };
+    if let Err(e) = write_run_json(&out.join("run.json"), &sim, wall_seconds, status) {
+        // the first error is the one reported; run.json keeps its last
+        // whole version (`running`) if even this fails
+        error.get_or_insert(e.at(sim.model.step, sim.model.time));
     }
     Ok(RunOutcome {
         simulation: sim,
         wall_seconds,
+        interrupted: interrupted.filter(|_| error.is_none()),
         error,
-        fields: observer.fields,
+        fields: observer.map(|o| o.fields).unwrap_or_default(),
     })
+}
+
+/// `run.json` saying `running`, the observer (its `curve.csv`), the time loop.
+fn start_and_run(
+    sim: &mut Simulation,
+    out: &Path,
+    make: impl FnOnce(&Simulation) -> Result<OutputObserver, RunError>,
+    observer: &mut Option<OutputObserver>,
+) -> Result<RunEnd, RunError> {
+    write_run_json(&out.join("run.json"), sim, 0.0, RunStatus::Running).map_err(at(sim))?;
+    let new = make(sim)?;
+    sim.run(observer.insert(new))
+}
+
+/// The status a `run.json` records.
+#[derive(Clone, Copy, Debug)]
+pub enum RunStatus<'a> {
+    /// Written before the first step; a `run.json` that still says so after
+    /// the process ended belongs to a run that was killed.
+    Running,
+    /// The run reached its end.
+    Completed,
+    /// A step failed or an output could not be written.
+    Failed(&'a RunError),
+    /// A signal stopped the run after a completed step.
+    Interrupted(Interruption),
+}
+
+impl RunStatus<'_> {
+    /// `running`, `completed`, `failed` or `interrupted`.
+    pub fn name(&self) -> &'static str {
+        match self {
+            RunStatus::Running => "running",
+            RunStatus::Completed => "completed",
+            RunStatus::Failed(_) => "failed",
+            RunStatus::Interrupted(_) => "interrupted",
+        }
+    }
 }
 
 /// `run.json`: resolved scene, crate version, solver choices and the tangent
 /// solver's factorisation counts, per-stage profile, work counters
-/// ([`crate::profile::Work`], every counter, zeros too), status.
+/// ([`crate::profile::Work`], every counter, zeros too), status (with the
+/// error, or the signal of an interrupted run), written whole.
 pub fn write_run_json(
     path: &Path,
     sim: &Simulation,
     wall_seconds: f64,
-    error: Option<&RunError>,
-) -> Result<(), RunError> {
+    status: RunStatus<'_>,
+) -> Result<(), OutputError> {
+    let error = match status {
+        RunStatus::Failed(e) => Some(e.to_string()),
+        _ => None,
+    };
+    let interrupted = match status {
+        RunStatus::Interrupted(i) => Some(json!({"signal": i.name(), "exit_code": i.exit_code()})),
+        _ => None,
+    };
     let model = &sim.model;
     let materials: Vec<_> = model
         .material_names
@@ -441,6 +600,14 @@ pub fn write_run_json(
         .map(|(name, m)| json!({"name": name, "model": m.name(), "symmetric_tangent": m.has_symmetric_tangent()}))
         .collect();
     let factorisation = sim.integrator.factorisation_stats();
+    let implicit = sim.integrator.implicit();
+    let solver_warnings = implicit.map_or_else(Vec::new, |i| i.solver_warnings());
+    let all_warnings = [model.scene.warnings(), solver_warnings.clone()].concat();
+    let newton_iterations = sim.integrator.usage().newton_iterations;
+    let linear_seconds = factorisation.symbolic_seconds
+        + factorisation.numeric_seconds
+        + factorisation.solve_seconds
+        + factorisation.probe_seconds;
     let work: serde_json::Map<String, serde_json::Value> = sim
         .profile
         .work()
@@ -449,9 +616,10 @@ pub fn write_run_json(
         .collect();
     let value = json!({
         "mpm_geo_version": env!("CARGO_PKG_VERSION"),
-        "status": if error.is_some() { "failed" } else { "completed" },
-        "warnings": model.scene.warnings(),
-        "error": error.map(|e| e.to_string()),
+        "status": status.name(),
+        "warnings": all_warnings,
+        "error": error,
+        "interrupted": interrupted,
         "steps_completed": model.step,
         "time": model.time,
         "particles": model.particles.len(),
@@ -476,6 +644,29 @@ pub fn write_run_json(
                 "numeric_seconds": factorisation.numeric_seconds,
                 "solve_seconds": factorisation.solve_seconds,
                 "probe_seconds": factorisation.probe_seconds,
+            },
+            "linear": {
+                "options": {
+                    "linear_solver": model.scene.solver.linear_solver,
+                    "factorization": model.scene.solver.factorization,
+                    "ordering": model.scene.solver.ordering,
+                    "pcg_preconditioner": model.scene.solver.pcg_preconditioner,
+                    "pcg_tolerance": model.scene.solver.pcg_tolerance,
+                },
+                "symbolic_seconds": factorisation.symbolic_seconds,
+                "numeric_seconds": factorisation.numeric_seconds,
+                "solve_seconds": factorisation.solve_seconds,
+                "probe_seconds": factorisation.probe_seconds,
+                "seconds_per_newton_iteration": if newton_iterations > 0 { linear_seconds / newton_iterations as f64 } else { 0.0 },
+                "factor_nnz": factorisation.factor_nnz,
+                "factor_variant": factorisation.last_variant,
+                "pcg_iterations": factorisation.pcg_iterations,
+                "pcg_last_iterations": factorisation.last_pcg_iterations,
+                "pcg_final_residual": factorisation.last_pcg_residual,
+                "pcg_max_final_residual": factorisation.max_pcg_residual,
+                "fallbacks_to_lu": factorisation.fallbacks,
+                "warnings": solver_warnings,
+                "systems_exported": implicit.map_or(0, |i| i.systems_written()),
             },
         },
         "profile": sim.profile.totals(wall_seconds),

@@ -7,10 +7,11 @@ use mpm_solvers::SparseMatrix;
 
 use crate::error::{RunError, StepError};
 use crate::integrators::{ImplicitIntegrator, Integrator, StepReport};
+use crate::interrupt::{self, Interruption};
 use crate::model::Model;
 use crate::monitor::Monitor;
 use crate::profile::{Profile, Stage};
-use crate::scene::{Scene, SceneError};
+use crate::scene::{ResourceLimits, Scene, SceneError};
 
 /// Receives the run's progress; the CLI writes outputs and a progress bar here.
 pub trait Observer {
@@ -19,10 +20,29 @@ pub trait Observer {
     /// Called after every completed step.
     fn on_step(&mut self, sim: &Simulation, report: &StepReport) -> Result<(), RunError>;
     /// True when the run should end after the step just reported, before its
-    /// end (checked after every step).
+    /// end (checked after every step; a test hook that stops as a kill would).
     fn stop_requested(&self) -> bool {
         false
     }
+    /// Called once when a signal stops the run, after the `on_step` of the
+    /// last completed step: the place to finish that step's outputs and to
+    /// leave a checkpoint to resume from. The default does nothing.
+    fn on_interrupt(
+        &mut self,
+        _sim: &Simulation,
+        _interruption: Interruption,
+    ) -> Result<(), RunError> {
+        Ok(())
+    }
+}
+
+/// How [`Simulation::run`] ended without an error.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RunEnd {
+    /// The last step / end time was reached.
+    Completed,
+    /// A signal stopped the run after a completed step ([`crate::interrupt`]).
+    Interrupted(Interruption),
 }
 
 /// An observer that does nothing (library use, tests).
@@ -51,9 +71,12 @@ pub struct Simulation {
 
 impl Simulation {
     /// Build a run from a validated scene: the model (seeded points, boundary
-    /// devices), its integrator and the monitors. Problems that only show
-    /// once points are seeded are reported as field errors.
+    /// devices), its integrator and the monitors. The scene's estimated
+    /// memory and step count are checked first against its `[limits]`
+    /// ([`Scene::check_resources`]); problems that only show once points are
+    /// seeded are reported as field errors.
     pub fn new(scene: Scene) -> Result<Self, SceneError> {
+        scene.check_resources(&ResourceLimits::for_scene(&scene))?;
         let profile = Profile::default();
         let (model, integrator, monitors) = profile.time(Stage::Build, || {
             let mut model = Model::new(scene)?;
@@ -93,6 +116,7 @@ impl Simulation {
                 cause,
             })?;
         self.model.account_rigid_work(start);
+        self.check_monitors()?;
         for remap in &report.removed_points {
             for monitor in &mut self.monitors {
                 monitor.remap_particle(remap);
@@ -101,14 +125,38 @@ impl Simulation {
         Ok(report)
     }
 
-    /// Run to the end (or until `observer` asks to stop), reporting every
-    /// step to `observer`. On a failure the error names step, time and
-    /// cause; everything the observer wrote stays.
-    pub fn run(&mut self, observer: &mut dyn Observer) -> Result<(), RunError> {
+    /// Run to the end, reporting every step to `observer`. On a failure the
+    /// error names step, time and cause; everything the observer wrote stays.
+    /// A signal caught by [`crate::interrupt`] stops the run after the step
+    /// in progress and its outputs ([`Observer::on_interrupt`]).
+    pub fn run(&mut self, observer: &mut dyn Observer) -> Result<RunEnd, RunError> {
         observer.on_start(self)?;
         while !self.finished() && !observer.stop_requested() {
             let report = self.step_once()?;
             observer.on_step(self, &report)?;
+            if let Some(interruption) = interrupt::requested().filter(|_| !self.finished()) {
+                observer.on_interrupt(self, interruption)?;
+                return Ok(RunEnd::Interrupted(interruption));
+            }
+        }
+        Ok(RunEnd::Completed)
+    }
+
+    /// A NaN or infinite monitor stops the run after the step that made it
+    /// so, naming the monitor (no row of `curve.csv` is written for it).
+    fn check_monitors(&self) -> Result<(), RunError> {
+        for m in &self.monitors {
+            let value = m.value(&self.model);
+            if !value.is_finite() {
+                return Err(RunError::Step {
+                    step: self.model.step,
+                    time: self.model.time,
+                    cause: StepError::NonFiniteMonitor {
+                        name: m.name.clone(),
+                        value,
+                    },
+                });
+            }
         }
         Ok(())
     }

@@ -225,3 +225,244 @@ fn out_of_range_over_nonlocal_factor_and_unknown_lost_point_policy_are_refused()
         assert!(!text.contains("panicked"), "{text}");
     }
 }
+
+/// `check` on a validation scene with extra arguments: (exit code, messages).
+fn check_scene(scene: &str, extra: &[&str]) -> (i32, String) {
+    let scene = common::validation(scene);
+    let mut args = vec!["check", scene.to_str().unwrap()];
+    args.extend_from_slice(extra);
+    mpm_geo(&args)
+}
+
+fn assert_refused(code: i32, text: &str, needles: &[&str]) {
+    assert_eq!(code, 2, "not refused: {text}");
+    for n in needles {
+        assert!(text.contains(n), "message lacks `{n}`: {text}");
+    }
+    assert!(!text.contains("panicked"), "{text}");
+}
+
+/// A scene of 8e7 material points (the oedometer at h = 0.1 mm) is refused by
+/// `check` before anything is seeded, naming the keys that drive the estimate
+/// and the estimate; a grid of 3.9e7 cells around a small body is refused
+/// under a 2 GB limit naming `grid.size`, and passes with a larger one.
+#[test]
+fn oversize_scenes_are_refused_by_check_naming_the_fields() {
+    let (code, text) = check_scene(
+        "elastic/oedometer.toml",
+        &["--set", "grid.cell_size=0.0001"],
+    );
+    assert_refused(
+        code,
+        &text,
+        &[
+            "too large",
+            "estimated memory",
+            "material points",
+            "grid.cell_size",
+            "grid.points_per_cell",
+            "body[0].box",
+            "--max-memory",
+        ],
+    );
+    let cells = ["--set", "grid.size=[624.0, 625.0]"];
+    let (code, text) = check_scene(
+        "elastic/oedometer.toml",
+        &[cells[0], cells[1], "--max-memory", "2G"],
+    );
+    assert_refused(
+        code,
+        &text,
+        &["3.900e7 grid cells", "grid.size", "2.000 GB"],
+    );
+    // the same limit as a scene key
+    let (code, text) = check_scene(
+        "elastic/oedometer.toml",
+        &[cells[0], cells[1], "--set", "limits.max_memory_gb=2.0"],
+    );
+    assert_refused(code, &text, &["grid.size", "limits.max_memory_gb"]);
+    // a valid scene reports its estimate; a limit below it refuses it
+    let (code, text) = check_scene("elastic/oedometer.toml", &[]);
+    assert_eq!(code, 0, "{text}");
+    assert!(text.contains("estimated memory"), "{text}");
+    let (code, text) = check_scene("elastic/oedometer.toml", &["--max-memory", "1M"]);
+    assert_refused(code, &text, &["too large", "1.000 MB"]);
+}
+
+/// An explicit scene whose stable step is absurdly small (E = 1e300, or a
+/// density, CFL or dt of 1e-300) would write rows forever: refused for its
+/// step count naming the keys; a step limit set by `--max-steps` applies too.
+#[test]
+fn explicit_scene_with_absurd_step_count_is_refused() {
+    for (set, key) in [
+        ("materials.bar.E=1e300", "materials.bar.E"),
+        ("materials.bar.density=1e-300", "materials.bar.density"),
+        ("solver.cfl=1e-300", "solver.cfl"),
+        ("scene.dt=1e-300", "scene.dt"),
+    ] {
+        let (code, text) = check_scene("elastic/bar_explicit.toml", &["--set", set]);
+        assert_refused(code, &text, &["steps", "more than the limit", key]);
+    }
+    // the scene as written takes 0.4 s / (0.5 · h / c_p = 2.5e-4 s) = 1600 steps
+    let (code, text) = check_scene("elastic/bar_explicit.toml", &["--max-steps", "1599"]);
+    assert_refused(code, &text, &["1.600e3 steps", "scene.end_time", "1599"]);
+    let (code, text) = check_scene("elastic/bar_explicit.toml", &["--max-steps", "1601"]);
+    assert_eq!(code, 0, "{text}");
+}
+
+/// Non-finite input anywhere is refused naming the key.
+#[test]
+fn infinite_velocity_and_other_non_finite_values_are_refused_naming_the_key() {
+    let (code, text) = check_scene(
+        "elastic/bar_explicit.toml",
+        &["--set", "body.0.velocity0=[-inf, 0.01]"],
+    );
+    assert_refused(code, &text, &["non-finite", "body[0].velocity0[0]"]);
+    let (code, text) = check_scene(
+        "elastic/platen.toml",
+        &["--set", "bc.rigid.0.footprint=[0.0, nan]"],
+    );
+    assert_refused(code, &text, &["non-finite", "bc.rigid[0].footprint[1]"]);
+}
+
+/// Two conditions on one dof: fixed and a prescribed rate on the same line,
+/// or two different rates, are refused naming both entries.
+#[test]
+fn contradictory_conditions_on_one_dof_are_refused_naming_both() {
+    let (code, text) = check_scene(
+        "elastic/oedometer.toml",
+        &[
+            "--set",
+            "bc.prescribed=[{ line = \"y=0\", dof = \"y\", rate = -0.001 }]",
+        ],
+    );
+    assert_refused(
+        code,
+        &text,
+        &["bc.prescribed[0]", "bc.fixed[2]", "contradicts"],
+    );
+    // two rates on the top of the element path (the last used to win)
+    let (code, text) = check_scene(
+        "hmc/element_path.toml",
+        &[
+            "--set",
+            "bc.prescribed=[{ line = \"y=0.05\", dof = \"y\", rate = -1e-5 }, { line = \"y=0.05\", dof = \"y\", rate = -2e-5 }]",
+        ],
+    );
+    assert_refused(
+        code,
+        &text,
+        &["bc.prescribed[1]", "bc.prescribed[0]", "contradicts"],
+    );
+    // crossing lines that agree at their node are accepted (the patch test)
+    let (code, text) = check_scene("elastic/patch.toml", &[]);
+    assert_eq!(code, 0, "{text}");
+}
+
+/// A bow-tie outline is refused naming the polygon and the crossing edges.
+#[test]
+fn self_intersecting_polygon_is_refused() {
+    let (code, text) = check_scene(
+        "elastic/lame_cylinder.toml",
+        &[
+            "--set",
+            "body.0.polygon=[[0.1, 0.1], [1.0, 1.0], [1.0, 0.1], [0.1, 1.0]]",
+        ],
+    );
+    assert_refused(
+        code,
+        &text,
+        &["body[0].polygon", "edge 0", "edge 2", "crosses itself"],
+    );
+}
+
+/// A value of the wrong type inside a material names the key, not only the table.
+#[test]
+fn type_error_inside_a_material_names_the_key() {
+    let (code, text) = check_scene(
+        "biaxial/local_h300.toml",
+        &["--set", "materials.soil.phi_res=\"steep\""],
+    );
+    assert_refused(
+        code,
+        &text,
+        &["`phi_res`", "materials.soil", "expected f64"],
+    );
+}
+
+/// An initial stress far outside the yield surface is refused naming the body's key.
+#[test]
+fn initial_stress_far_outside_the_yield_surface_is_refused() {
+    let (code, text) = check_scene(
+        "biaxial/local_h300.toml",
+        &["--set", "body.0.stress0=[1000.0, 1000.0, 1000.0, 0.0]"],
+    );
+    assert_refused(
+        code,
+        &text,
+        &["body[0].stress0", "outside the yield surface"],
+    );
+}
+
+/// A value that becomes NaN during a run stops it with the step, the point
+/// and the variable (the one pass of the commit stage); an infinite monitor
+/// stops it naming the monitor.
+#[test]
+fn non_finite_state_during_a_run_stops_it_with_point_and_step() {
+    use mpm_geo::error::{RunError, StepError};
+    // a NaN in a variable only the outputs read (the deformation gradient)
+    let mut sim = common::simulation("elastic/bar_explicit.toml", &[]);
+    sim.step_once().unwrap();
+    sim.model.particles.def_grad[40][0] = f64::NAN;
+    match sim.step_once() {
+        Err(
+            e @ RunError::Step {
+                step: 2,
+                cause:
+                    StepError::NonFinitePoint {
+                        particle: 40,
+                        quantity: "deformation gradient",
+                        ..
+                    },
+                ..
+            },
+        ) => assert!(e.to_string().contains("material point 40"), "{e}"),
+        other => panic!(
+            "expected a non-finite F at point 40, step 2, got {:?}",
+            other.err()
+        ),
+    }
+    // a NaN velocity spreads through the grid: the run stops at that step
+    // naming a material point and the non-finite value
+    let mut sim = common::simulation("elastic/bar_explicit.toml", &[]);
+    sim.step_once().unwrap();
+    sim.model.particles.velocity[40][1] = f64::NAN;
+    let text = sim
+        .step_once()
+        .expect_err("the NaN stops the run")
+        .to_string();
+    assert!(
+        text.starts_with("step 2 ")
+            && text.contains("material point")
+            && (text.contains("NaN") || text.contains("non-finite")),
+        "{text}"
+    );
+    // a finite state whose monitor overflows: ½ m v² · scale with scale 1e308
+    let mut sim = common::simulation("elastic/bar_explicit.toml", &["monitor.1.scale=1e308"]);
+    for v in &mut sim.model.particles.velocity {
+        v[1] = 1e10;
+    }
+    match sim.step_once() {
+        Err(
+            e @ RunError::Step {
+                step: 1,
+                cause: StepError::NonFiniteMonitor { .. },
+                ..
+            },
+        ) => assert!(e.to_string().contains("kinetic_energy"), "{e}"),
+        other => panic!(
+            "expected a non-finite monitor at step 1, got {:?}",
+            other.err()
+        ),
+    }
+}

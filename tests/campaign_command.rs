@@ -68,6 +68,23 @@ fn campaign_writes_curves_metrics_report_and_plots() {
     for run in ["local_h300", "nonlocal_h300"] {
         assert!(out.join(run).join("run.json").exists());
     }
+    // run again into the same directory: the campaign replaces its own
+    // runs' files (the `run` command would refuse them without --overwrite)
+    let status = Command::new(env!("CARGO_BIN_EXE_mpm-geo"))
+        .args(["campaign", scenes.to_str().unwrap(), "--out"])
+        .arg(&out)
+        .args(["--set", "scene.steps=20"])
+        .args(["--set", "grid.shape_functions=bilinear"])
+        .args(["--set", "grid.point_layout=gauss"])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let curves = std::fs::read_to_string(out.join("curves.csv")).unwrap();
+    assert_eq!(curves.lines().count(), 1 + 2 * 21);
+    for run in ["local_h300", "nonlocal_h300"] {
+        let curve = std::fs::read_to_string(out.join(run).join("curve.csv")).unwrap();
+        assert_eq!(curve.lines().count(), 1 + 21, "{run}: old rows kept");
+    }
 }
 
 /// `--step-refinement 2` runs each scene again with twice the steps at half
@@ -141,4 +158,182 @@ fn step_refinement_reports_the_time_step_discrepancy() {
     let message = String::from_utf8_lossy(&refused.stderr);
     assert!(message.contains("--step-refinement"), "{message}");
     assert!(!dir.path().join("out2").join("local_h300").exists());
+}
+
+/// `metrics.csv` without its wall-time column (the one value that differs
+/// between processes).
+fn metrics_without_wall_time(out: &std::path::Path) -> Vec<Vec<String>> {
+    let text = std::fs::read_to_string(out.join("metrics.csv")).unwrap();
+    let mut reader = csv::Reader::from_reader(text.as_bytes());
+    let wall = reader
+        .headers()
+        .unwrap()
+        .iter()
+        .position(|h| h == "wall_seconds")
+        .unwrap();
+    reader
+        .records()
+        .map(|r| {
+            r.unwrap()
+                .iter()
+                .enumerate()
+                .filter(|(i, _)| *i != wall)
+                .map(|(_, v)| v.to_string())
+                .collect()
+        })
+        .collect()
+}
+
+/// Issue 14, check 5: three biaxial scenes (20 steps) run as one campaign,
+/// and as three shards in separate processes followed by `--collect`, give
+/// the same `metrics.csv` (wall times aside) and the same `curves.csv`; a
+/// collect before every shard has run is refused naming the missing runs; a
+/// re-run campaign runs nothing again (the curves keep their modification
+/// times and the report is identical, wall times included).
+#[test]
+fn sharded_campaign_collects_to_the_same_report_and_a_rerun_runs_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let scenes = dir.path().join("scenes");
+    std::fs::create_dir_all(&scenes).unwrap();
+    for name in [
+        "local_h300.toml",
+        "nonlocal_h300.toml",
+        "local_h500.toml",
+        "campaign.toml",
+    ] {
+        std::fs::copy(
+            common::validation(&format!("biaxial/{name}")),
+            scenes.join(name),
+        )
+        .unwrap();
+    }
+    let campaign = |out: &std::path::Path, extra: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_mpm-geo"))
+            .args(["campaign", scenes.to_str().unwrap(), "--out"])
+            .arg(out)
+            .args(["--set", "scene.steps=20", "--jobs", "1"])
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let single = dir.path().join("single");
+    assert!(campaign(&single, &[]).status.success());
+    let sharded = dir.path().join("sharded");
+    for k in 1..=3 {
+        let shard = format!("{k}/3");
+        let output = campaign(&sharded, &["--shard", &shard]);
+        assert!(output.status.success(), "shard {shard}");
+        assert!(
+            !sharded.join("metrics.csv").exists(),
+            "a shard writes no report"
+        );
+        if k == 1 {
+            let early = campaign(&sharded, &["--collect"]);
+            assert_eq!(early.status.code(), Some(2));
+            let stderr = String::from_utf8_lossy(&early.stderr);
+            assert!(stderr.contains("not finished"), "{stderr}");
+        }
+    }
+    assert!(campaign(&sharded, &["--collect"]).status.success());
+    assert_eq!(
+        metrics_without_wall_time(&single),
+        metrics_without_wall_time(&sharded)
+    );
+    assert_eq!(metrics_without_wall_time(&single).len(), 3);
+    assert_eq!(
+        std::fs::read(single.join("curves.csv")).unwrap(),
+        std::fs::read(sharded.join("curves.csv")).unwrap()
+    );
+    let modified = |run: &str| {
+        std::fs::metadata(single.join(run).join("curve.csv"))
+            .unwrap()
+            .modified()
+            .unwrap()
+    };
+    let runs = ["local_h300", "nonlocal_h300", "local_h500"];
+    let before: Vec<_> = runs.iter().map(|r| modified(r)).collect();
+    let metrics_before = std::fs::read(single.join("metrics.csv")).unwrap();
+    let rerun = campaign(&single, &[]);
+    assert!(rerun.status.success());
+    let stderr = String::from_utf8_lossy(&rerun.stderr);
+    assert_eq!(stderr.matches("not run again").count(), 3, "{stderr}");
+    let after: Vec<_> = runs.iter().map(|r| modified(r)).collect();
+    assert_eq!(before, after);
+    assert_eq!(
+        metrics_before,
+        std::fs::read(single.join("metrics.csv")).unwrap()
+    );
+}
+
+/// `scripts/slurm_campaign.sh` submits a job array of N shards and a collect
+/// job; with a stand-in `sbatch` that runs each job's command at once (the
+/// array's tasks in turn, then the collect job), it produces the same
+/// `metrics.csv` as the single-process campaign (wall times aside).
+#[test]
+fn slurm_script_runs_the_shards_and_collects() {
+    let dir = tempfile::tempdir().unwrap();
+    let scenes = dir.path().join("scenes");
+    std::fs::create_dir_all(&scenes).unwrap();
+    for name in ["local_h300.toml", "nonlocal_h300.toml", "campaign.toml"] {
+        std::fs::copy(
+            common::validation(&format!("biaxial/{name}")),
+            scenes.join(name),
+        )
+        .unwrap();
+    }
+    // stand-in sbatch: --array=1-N runs --wrap N times with SLURM_ARRAY_TASK_ID
+    let bin = dir.path().join("bin");
+    std::fs::create_dir_all(&bin).unwrap();
+    let sbatch = bin.join("sbatch");
+    std::fs::write(
+        &sbatch,
+        r#"#!/usr/bin/env bash
+tasks=1; wrap=""
+for a in "$@"; do
+  case "$a" in
+    --array=*) r=${a#--array=}; tasks=${r#*-} ;;
+    --wrap=*) wrap=${a#--wrap=} ;;
+  esac
+done
+echo "$@" >> "$(dirname "$0")/submitted"
+for k in $(seq 1 "$tasks"); do SLURM_ARRAY_TASK_ID=$k bash -c "$wrap" || exit 1; done
+echo $RANDOM
+"#,
+    )
+    .unwrap();
+    std::process::Command::new("chmod")
+        .arg("+x")
+        .arg(&sbatch)
+        .status()
+        .unwrap();
+    let script = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/slurm_campaign.sh");
+    let sharded = dir.path().join("sharded");
+    let path = format!("{}:{}", bin.display(), std::env::var("PATH").unwrap());
+    let scenes_arg = scenes.to_str().unwrap();
+    let status = Command::new("bash")
+        .arg(&script)
+        .args(["campaign", scenes_arg, "2"])
+        .arg(&sharded)
+        .env("PATH", &path)
+        .env("MPM_GEO", env!("CARGO_BIN_EXE_mpm-geo"))
+        .env("SBATCH_ARGS", "--time=00:10:00")
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let submitted = std::fs::read_to_string(bin.join("submitted")).unwrap();
+    assert_eq!(submitted.lines().count(), 2, "{submitted}");
+    assert!(submitted.contains("--array=1-2") && submitted.contains("--time=00:10:00"));
+    assert!(submitted.contains("--dependency=afterany:"));
+    assert!(sharded.join("slurm").is_dir());
+    let single = dir.path().join("single");
+    let status = Command::new(env!("CARGO_BIN_EXE_mpm-geo"))
+        .args(["campaign", scenes_arg, "--out"])
+        .arg(&single)
+        .status()
+        .unwrap();
+    assert!(status.success());
+    assert_eq!(
+        metrics_without_wall_time(&single),
+        metrics_without_wall_time(&sharded)
+    );
 }

@@ -127,9 +127,10 @@ fn assert_resume_is_seamless(
         stderr.contains(&format!("stopped after step {stop}")),
         "{stderr}"
     );
-    assert!(
-        !resumed.join("run.json").exists(),
-        "a killed run writes no run.json"
+    assert_eq!(
+        status(&resumed).0,
+        "running",
+        "a killed run leaves run.json running"
     );
     // the stopped run wrote rows past its last checkpoint: the resume must cut them
     let checkpoint = stop / every * every;

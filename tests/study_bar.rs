@@ -53,6 +53,7 @@ fn time_integrators_converge_at_their_orders() {
         executable: env!("CARGO_BIN_EXE_mpm-geo").into(),
         repeats: Some(1),
         verbose: false,
+        part: mpm_geo::campaign::Part::Whole,
     };
     let spec = common::validation("studies/elastic_bar_order.toml");
     let rows = run_study(&spec, out.path(), &options).expect("study runs");
@@ -93,4 +94,78 @@ fn time_integrators_converge_at_their_orders() {
         (1.0..=1.55).contains(&finest),
         "finest local order {finest}"
     );
+}
+
+/// `study.csv` without its timing columns (wall and stage seconds: the
+/// values that differ between processes).
+fn study_without_timings(out: &Path) -> Vec<Vec<String>> {
+    let mut reader = csv::Reader::from_path(out.join("study.csv")).expect("study.csv");
+    let keep: Vec<bool> = reader
+        .headers()
+        .unwrap()
+        .iter()
+        .map(|h| !(h.contains("seconds") || h.contains("wall")))
+        .collect();
+    reader
+        .records()
+        .map(|r| {
+            r.unwrap()
+                .iter()
+                .zip(&keep)
+                .filter(|(_, k)| **k)
+                .map(|(v, _)| v.to_string())
+                .collect()
+        })
+        .collect()
+}
+
+/// Issue 14, check 5 for studies: a small bar study run whole, and as two
+/// shards in separate processes followed by `--collect`, gives the same
+/// `study.csv` (timings aside); a re-run measures nothing again.
+#[test]
+fn sharded_study_collects_to_the_same_table_and_a_rerun_measures_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let spec = dir.path().join("bar.toml");
+    let scene = common::validation("elastic/bar_implicit.toml");
+    std::fs::write(
+        &spec,
+        format!(
+            "[study]\nname = \"bar\"\nscene = {scene:?}\nrepeats = 1\nset = [\"scene.steps=20\"]\n\n\
+             [reference]\nkind = \"series\"\n\n[[quantity]]\nmonitor = \"top_uy\"\nmeasure = \"l2\"\n\n\
+             [[series]]\nlabel = \"Newmark\"\nrefine = \"dt\"\nvalues = [8e-4, 4e-4]\nreference_value = 1e-4\n\n\
+             [[series]]\nlabel = \"explicit\"\nintegrator = \"explicit\"\nrefine = \"solver.cfl\"\nvalues = [0.8, 0.4]\nreference_value = 0.1\n"
+        ),
+    )
+    .unwrap();
+    let study = |out: &Path, extra: &[&str]| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_mpm-geo"))
+            .arg("study")
+            .arg(&spec)
+            .arg("--out")
+            .arg(out)
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let whole = dir.path().join("whole");
+    assert!(study(&whole, &[]).status.success());
+    let sharded = dir.path().join("sharded");
+    for shard in ["1/2", "2/2"] {
+        let output = study(&sharded, &["--shard", shard]);
+        assert!(output.status.success(), "shard {shard}");
+    }
+    assert!(
+        !sharded.join("study.csv").exists(),
+        "a shard writes no report"
+    );
+    assert!(study(&sharded, &["--collect"]).status.success());
+    let table = study_without_timings(&whole);
+    assert_eq!(table.len(), 4);
+    assert_eq!(table, study_without_timings(&sharded));
+    let rerun = study(&whole, &[]);
+    assert!(rerun.status.success());
+    let stderr = String::from_utf8_lossy(&rerun.stderr);
+    // four compared runs and their two series references
+    assert_eq!(stderr.matches("not run again").count(), 6, "{stderr}");
+    assert_eq!(table, study_without_timings(&whole));
 }

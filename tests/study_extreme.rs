@@ -65,6 +65,7 @@ fn every_extreme_case_has_a_stated_outcome() {
         executable: env!("CARGO_BIN_EXE_mpm-geo").into(),
         repeats: Some(1),
         verbose: true,
+        part: mpm_geo::campaign::Part::Whole,
     };
     let rows = run_spec(&spec, out.path(), &options).expect("the study runs to the end");
     assert_eq!(

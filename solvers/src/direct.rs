@@ -4,12 +4,15 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::perm::PermRef;
 use faer::sparse::linalg::cholesky::{
     factorize_symbolic_cholesky, simplicial::SimplicialLltRef, supernodal::SupernodalLltRef,
-    SymbolicCholesky, SymbolicCholeskyRaw,
+    CholeskySymbolicParams, SymbolicCholesky, SymbolicCholeskyRaw, SymmetricOrdering,
 };
-use faer::sparse::linalg::lu::{factorize_symbolic_lu, LuRef, NumericLu, SymbolicLu};
-use faer::sparse::linalg::LuError;
+use faer::sparse::linalg::lu::{
+    factorize_symbolic_lu, simplicial::SimplicialLu, LuRef, LuSymbolicParams, NumericLu, SymbolicLu,
+};
+use faer::sparse::linalg::{LuError, SupernodalThreshold};
 use faer::{Conj, MatMut, Par, Side};
 
 use crate::matrix::{Pattern, SparseMatrix};
@@ -38,7 +41,49 @@ pub enum FactorKind {
     Lu,
 }
 
-/// Tolerances of the singularity checks of [`DirectSolver::factorize`].
+/// Supernodal or simplicial factorisation (faer chooses by a flop-per-non-zero ratio unless
+/// told).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Factorization {
+    /// faer's automatic choice (supernodal when the factor is dense enough to pay off).
+    #[default]
+    Auto,
+    /// Always supernodal (dense blocks of columns, BLAS-3 kernels).
+    Supernodal,
+    /// Always simplicial (column by column, no dense blocks).
+    Simplicial,
+}
+
+impl Factorization {
+    fn threshold(self) -> SupernodalThreshold {
+        match self {
+            Factorization::Auto => SupernodalThreshold::AUTO,
+            Factorization::Supernodal => SupernodalThreshold::FORCE_SUPERNODAL,
+            Factorization::Simplicial => SupernodalThreshold::FORCE_SIMPLICIAL,
+        }
+    }
+}
+
+/// Fill-reducing ordering of the factorisation.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Ordering {
+    /// faer's default: AMD for Cholesky, COLAMD for LU.
+    #[default]
+    Default,
+    /// Approximate minimum degree on the pattern of K + Kᵀ (faer's `amd`). For LU only with
+    /// [`Factorization::Simplicial`] (faer's supernodal LU always orders by COLAMD; a
+    /// Cholesky's LU fallback then uses COLAMD).
+    Amd,
+    /// Column approximate minimum degree (faer's `colamd`); for Cholesky applied as a
+    /// symmetric permutation.
+    Colamd,
+    /// No reordering (the engine's dof numbering). For LU only with
+    /// [`Factorization::Simplicial`].
+    Identity,
+}
+
+/// Tolerances of the singularity checks of [`DirectSolver::factorize`], and the factorisation
+/// variant and ordering.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SolverOptions {
     /// Cholesky: K is reported singular when `min_i d_i / max_i d_i < pivot_ratio_tol`, with
@@ -52,6 +97,26 @@ pub struct SolverOptions {
     pub lu_probe: bool,
     /// Forward-error threshold of the LU probe. Default `1e-4`.
     pub probe_tol: f64,
+    /// Supernodal or simplicial. Default [`Factorization::Auto`].
+    pub factorization: Factorization,
+    /// Fill-reducing ordering. Default [`Ordering::Default`].
+    pub ordering: Ordering,
+}
+
+impl SolverOptions {
+    /// `Err` with a reason if the LU of these options is not available (AMD or identity
+    /// ordering need the simplicial LU: faer's supernodal LU orders by COLAMD only).
+    pub fn check_lu(&self) -> Result<(), String> {
+        match (self.ordering, self.factorization) {
+            (Ordering::Amd | Ordering::Identity, Factorization::Auto | Factorization::Supernodal) => {
+                Err(format!(
+                    "LU with ordering {:?} needs factorization = simplicial (faer's supernodal LU orders by COLAMD only)",
+                    self.ordering
+                ))
+            }
+            _ => Ok(()),
+        }
+    }
 }
 
 impl Default for SolverOptions {
@@ -60,6 +125,8 @@ impl Default for SolverOptions {
             pivot_ratio_tol: 1e-14,
             lu_probe: true,
             probe_tol: 1e-4,
+            factorization: Factorization::Auto,
+            ordering: Ordering::Default,
         }
     }
 }
@@ -94,6 +161,22 @@ pub struct SolverStats {
     pub last_pivot_ratio: Option<f64>,
     /// Relative forward error of the last LU probe (a cheap conditioning indicator).
     pub last_probe_error: Option<f64>,
+    /// Stored entries of the last factor: L for Cholesky (supernodal blocks in full), L + U for
+    /// a simplicial LU; `None` for faer's supernodal LU, whose storage faer does not expose.
+    pub factor_nnz: Option<usize>,
+    /// Total conjugate-gradient iterations ([`crate::LinearSolver`] with PCG).
+    pub pcg_iterations: usize,
+    /// Iterations of the last PCG solve.
+    pub last_pcg_iterations: Option<usize>,
+    /// True relative residual `‖b − Kx‖/‖b‖` of the last PCG solve.
+    pub last_pcg_residual: Option<f64>,
+    /// Largest final relative residual of the PCG solves.
+    pub max_pcg_residual: Option<f64>,
+    /// Systems for which the method asked for did not apply and faer LU was used instead
+    /// ([`crate::LinearSolver`]: PCG or LDLᵀ on an unsymmetric or indefinite K).
+    pub fallbacks: usize,
+    /// `"supernodal"`, `"simplicial"`, or `"auto"` (faer's own choice for its LU, not exposed).
+    pub last_variant: Option<&'static str>,
 }
 
 /// Sparse direct solver (faer, sequential: `Par::Seq`) that caches the symbolic factorisation
@@ -109,8 +192,21 @@ pub struct DirectSolver {
     lu_symbolic: Option<SymbolicLu<usize>>,
     lu_numeric: NumericLu<usize, f64>,
     lu_scratch: Option<MemBuffer>,
+    /// LU with an ordering of our own (simplicial only): column permutation and factors.
+    custom_lu: Option<CustomLu>,
     current: Option<FactorKind>,
     stats: SolverStats,
+}
+
+/// A simplicial LU with a column ordering chosen here (AMD or identity), through faer's
+/// low-level simplicial API.
+struct CustomLu {
+    col_fwd: Vec<usize>,
+    col_inv: Vec<usize>,
+    row_fwd: Vec<usize>,
+    row_inv: Vec<usize>,
+    lu: SimplicialLu<usize, f64>,
+    scratch: MemBuffer,
 }
 
 impl std::fmt::Debug for DirectSolver {
@@ -152,6 +248,7 @@ impl DirectSolver {
             lu_symbolic: None,
             lu_numeric: NumericLu::new(),
             lu_scratch: None,
+            custom_lu: None,
             current: None,
             stats: SolverStats::default(),
         }
@@ -185,6 +282,7 @@ impl DirectSolver {
         self.lu_symbolic = None;
         self.lu_scratch = None;
         self.lu_numeric = NumericLu::new();
+        self.custom_lu = None;
         self.current = None;
     }
 
@@ -246,11 +344,28 @@ impl DirectSolver {
     fn factorize_llt(&mut self, k: &SparseMatrix) -> Result<bool, SolverError> {
         if self.llt_symbolic.is_none() {
             let t = Instant::now();
+            let params = CholeskySymbolicParams {
+                supernodal_flop_ratio_threshold: self.options.factorization.threshold(),
+                ..Default::default()
+            };
+            // faer's `SymmetricOrdering::Identity` skips the conversion of the full-storage
+            // input to one triangle, so the identity is passed as a custom permutation
+            let custom = match self.options.ordering {
+                Ordering::Colamd => Some(colamd_order(k)?),
+                Ordering::Identity => Some(((0..k.n()).collect(), (0..k.n()).collect())),
+                _ => None,
+            };
+            let ordering = match &custom {
+                Some((fwd, inv)) => {
+                    SymmetricOrdering::Custom(PermRef::new_checked(fwd, inv, k.n()))
+                }
+                None => SymmetricOrdering::Amd,
+            };
             let sym = factorize_symbolic_cholesky(
                 k.pattern.symbolic.as_ref(),
                 Side::Lower,
-                Default::default(),
-                Default::default(),
+                ordering,
+                params,
             )
             .map_err(faer_err)?;
             let req = sym.factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default());
@@ -278,6 +393,11 @@ impl DirectSolver {
         );
         let out = match res {
             Ok(_) => {
+                self.stats.factor_nnz = Some(sym.len_val());
+                self.stats.last_variant = Some(match sym.raw() {
+                    SymbolicCholeskyRaw::Simplicial(_) => "simplicial",
+                    SymbolicCholeskyRaw::Supernodal(_) => "supernodal",
+                });
                 let ratio = llt_pivot_ratio(sym, &self.llt_values);
                 self.stats.last_pivot_ratio = Some(ratio);
                 if ratio.is_nan() || ratio < self.options.pivot_ratio_tol {
@@ -301,10 +421,80 @@ impl DirectSolver {
     }
 
     fn factorize_lu(&mut self, k: &SparseMatrix) -> Result<(), SolverError> {
+        // the simplicial LU goes through faer's low-level API, which takes any column
+        // ordering and exposes the factors' size
+        // (a Cholesky fallback whose ordering the supernodal LU cannot use gets faer's COLAMD)
+        match self.options.factorization {
+            Factorization::Simplicial => self.factorize_custom_lu(k)?,
+            _ => self.factorize_faer_lu(k)?,
+        }
+        self.lu_probe(k)
+    }
+
+    /// Simplicial LU with a COLAMD, AMD (on K + Kᵀ) or identity column ordering.
+    fn factorize_custom_lu(&mut self, k: &SparseMatrix) -> Result<(), SolverError> {
+        let n = k.n();
+        if self.custom_lu.is_none() {
+            let t = Instant::now();
+            let (col_fwd, col_inv) = match self.options.ordering {
+                Ordering::Amd => amd_order(k)?,
+                Ordering::Identity => ((0..n).collect(), (0..n).collect()),
+                Ordering::Default | Ordering::Colamd => colamd_order(k)?,
+            };
+            let req =
+                faer::sparse::linalg::lu::simplicial::factorize_simplicial_numeric_lu_scratch::<
+                    usize,
+                    f64,
+                >(n, n)
+                .or(
+                    faer::sparse::linalg::lu::simplicial::solve_in_place_scratch::<usize, f64>(
+                        n,
+                        1,
+                        Par::Seq,
+                    ),
+                );
+            self.custom_lu = Some(CustomLu {
+                col_fwd,
+                col_inv,
+                row_fwd: vec![0; n],
+                row_inv: vec![0; n],
+                lu: SimplicialLu::new(),
+                scratch: MemBuffer::try_new(req).map_err(faer_err)?,
+            });
+            self.stats.symbolic += 1;
+            self.stats.symbolic_seconds += t.elapsed().as_secs_f64();
+        }
+        let Some(c) = self.custom_lu.as_mut() else {
+            unreachable!("custom LU prepared above");
+        };
+        let t = Instant::now();
+        self.stats.numeric += 1;
+        self.stats.numeric_lu += 1;
+        let res = faer::sparse::linalg::lu::simplicial::factorize_simplicial_numeric_lu(
+            &mut c.row_fwd,
+            &mut c.row_inv,
+            &mut c.lu,
+            k.as_faer(),
+            PermRef::new_checked(&c.col_fwd, &c.col_inv, n),
+            MemStack::new(&mut c.scratch),
+        );
+        self.stats.numeric_seconds += t.elapsed().as_secs_f64();
+        lu_result(res)?;
+        self.stats.factor_nnz =
+            Some(c.lu.l_factor_unsorted().compute_nnz() + c.lu.u_factor_unsorted().compute_nnz());
+        self.stats.last_variant = Some("simplicial");
+        Ok(())
+    }
+
+    fn factorize_faer_lu(&mut self, k: &SparseMatrix) -> Result<(), SolverError> {
         if self.lu_symbolic.is_none() {
             let t = Instant::now();
-            let sym = factorize_symbolic_lu(k.pattern.symbolic.as_ref(), Default::default())
-                .map_err(faer_err)?;
+            let params = LuSymbolicParams {
+                supernodal_flop_ratio_threshold: self.options.factorization.threshold(),
+                ..Default::default()
+            };
+            let sym =
+                factorize_symbolic_lu(k.pattern.symbolic.as_ref(), params).map_err(faer_err)?;
             let req = sym.factorize_numeric_lu_scratch::<f64>(Par::Seq, Default::default());
             self.lu_scratch = Some(MemBuffer::try_new(req).map_err(faer_err)?);
             self.lu_symbolic = Some(sym);
@@ -325,16 +515,18 @@ impl DirectSolver {
             Default::default(),
         );
         self.stats.numeric_seconds += t.elapsed().as_secs_f64();
-        match res {
-            Ok(_) => {}
-            Err(LuError::SymbolicSingular { index }) => {
-                return Err(SolverError::Singular {
-                    factor: FactorKind::Lu,
-                    detail: format!("no pivot available at elimination step {index}"),
-                })
-            }
-            Err(LuError::Generic(e)) => return Err(faer_err(e)),
-        }
+        lu_result(res.map(|_| ()))?;
+        // faer keeps the symbolic LU's variant and the factors' storage private
+        self.stats.last_variant = Some(match self.options.factorization {
+            Factorization::Supernodal => "supernodal",
+            _ => "auto",
+        });
+        self.stats.factor_nnz = None;
+        Ok(())
+    }
+
+    /// The LU singularity probe of [`SolverOptions::lu_probe`].
+    fn lu_probe(&mut self, k: &SparseMatrix) -> Result<(), SolverError> {
         if self.options.lu_probe {
             let t = Instant::now();
             let n = k.n();
@@ -366,8 +558,26 @@ impl DirectSolver {
     }
 
     fn lu_solve(&self, rhs: &mut [f64]) {
-        let sym = self.lu_symbolic.as_ref().expect("LU symbolic present");
         let n = rhs.len();
+        if let Some(c) = &self.custom_lu {
+            let mut buf = MemBuffer::new(
+                faer::sparse::linalg::lu::simplicial::solve_in_place_scratch::<usize, f64>(
+                    n,
+                    1,
+                    Par::Seq,
+                ),
+            );
+            c.lu.solve_in_place_with_conj(
+                PermRef::new_checked(&c.row_fwd, &c.row_inv, n),
+                PermRef::new_checked(&c.col_fwd, &c.col_inv, n),
+                Conj::No,
+                MatMut::from_column_major_slice_mut(rhs, n, 1),
+                Par::Seq,
+                MemStack::new(&mut buf),
+            );
+            return;
+        }
+        let sym = self.lu_symbolic.as_ref().expect("LU symbolic present");
         let mut buf = MemBuffer::new(sym.solve_in_place_scratch::<f64>(1, Par::Seq));
         LuRef::new_unchecked(sym, &self.lu_numeric).solve_in_place_with_conj(
             Conj::No,
@@ -441,6 +651,54 @@ impl DirectSolver {
         self.solve_in_place(&mut x)?;
         Ok(x)
     }
+}
+
+/// Maps faer's LU errors to [`SolverError`].
+fn lu_result(res: Result<(), LuError>) -> Result<(), SolverError> {
+    match res {
+        Ok(()) => Ok(()),
+        Err(LuError::SymbolicSingular { index }) => Err(SolverError::Singular {
+            factor: FactorKind::Lu,
+            detail: format!("no pivot available at elimination step {index}"),
+        }),
+        Err(LuError::Generic(e)) => Err(faer_err(e)),
+    }
+}
+
+/// AMD ordering of the pattern of K + Kᵀ: (forward, inverse) permutation.
+pub(crate) fn amd_order(k: &SparseMatrix) -> Result<(Vec<usize>, Vec<usize>), SolverError> {
+    use faer::sparse::linalg::amd;
+    let n = k.n();
+    let (mut fwd, mut inv) = (vec![0usize; n], vec![0usize; n]);
+    let req = amd::order_maybe_unsorted_scratch::<usize>(n, k.nnz());
+    let mut buf = MemBuffer::try_new(req).map_err(faer_err)?;
+    amd::order_maybe_unsorted(
+        &mut fwd,
+        &mut inv,
+        k.pattern.symbolic.as_ref(),
+        Default::default(),
+        MemStack::new(&mut buf),
+    )
+    .map_err(faer_err)?;
+    Ok((fwd, inv))
+}
+
+/// COLAMD column ordering of K: (forward, inverse) permutation.
+pub(crate) fn colamd_order(k: &SparseMatrix) -> Result<(Vec<usize>, Vec<usize>), SolverError> {
+    use faer::sparse::linalg::colamd;
+    let n = k.n();
+    let (mut fwd, mut inv) = (vec![0usize; n], vec![0usize; n]);
+    let req = colamd::order_scratch::<usize>(n, n, k.nnz());
+    let mut buf = MemBuffer::try_new(req).map_err(faer_err)?;
+    colamd::order(
+        &mut fwd,
+        &mut inv,
+        k.pattern.symbolic.as_ref(),
+        Default::default(),
+        MemStack::new(&mut buf),
+    )
+    .map_err(faer_err)?;
+    Ok((fwd, inv))
 }
 
 /// `min_i L_ii^2 / max_i L_ii^2` of a Cholesky factor (0 if a pivot is not finite).

@@ -87,6 +87,43 @@ pub enum SolverError {
         found: usize,
     },
 
+    /// The matrix is not symmetric positive definite where the method needs it (a conjugate
+    /// gradient breakdown `pᵀKp ≤ 0`, a non-positive pivot of the incomplete Cholesky or a
+    /// non-positive diagonal for Jacobi).
+    #[error("not positive definite ({method}): {detail}")]
+    NotPositiveDefinite {
+        /// Which method found it.
+        method: &'static str,
+        /// What was found.
+        detail: String,
+    },
+
+    /// An iterative solve did not reach its tolerance.
+    #[error("{method} did not converge: relative residual {residual:.3e} > {tolerance:.1e} after {iterations} iterations")]
+    NotConverged {
+        /// Which method.
+        method: &'static str,
+        /// Iterations done.
+        iterations: usize,
+        /// Relative residual reached, ‖b − Kx‖ / ‖b‖.
+        residual: f64,
+        /// Tolerance asked for.
+        tolerance: f64,
+    },
+
+    /// The combination of options is not available (named in the message).
+    #[error("unsupported solver options: {0}")]
+    Unsupported(String),
+
+    /// Reading or writing an exported system failed.
+    #[error("{path}: {message}")]
+    Io {
+        /// The file.
+        path: String,
+        /// Why.
+        message: String,
+    },
+
     /// A non-numerical failure inside faer (allocation failure, index overflow).
     #[error("faer failure: {0}")]
     Faer(String),

@@ -9,17 +9,35 @@
 //! * [`SparseMatrix`] holds the values and shares the pattern through an `Arc`;
 //! * [`DirectSolver`] factorises with `Par::Seq`, caching the symbolic factorisation while the
 //!   pattern is unchanged, falling back from Cholesky to LU when K is not positive definite,
-//!   and reporting singular systems as [`SolverError::Singular`].
+//!   and reporting singular systems as [`SolverError::Singular`];
+//! * [`LinearSolver`] puts faer's Cholesky/LU (supernodal or simplicial, AMD/COLAMD/identity
+//!   orderings), preconditioned conjugate gradients ([`Pcg`]: Jacobi or IC(0)) and, with the
+//!   `ldl` feature, sprs_ldl's LDLᵀ behind one front, falling back to LU (recorded) where a
+//!   method does not apply;
+//! * [`mm`] writes and reads systems in Matrix Market format, and [`bench`] runs every solver
+//!   on a directory of them (`mpm-solvers bench`).
 
 mod assembly;
+pub mod bench;
 mod direct;
 mod error;
+#[cfg(feature = "ldl")]
+mod ldl;
+mod linear;
 mod matrix;
+pub mod mm;
+mod pcg;
 
 pub use assembly::Assembler;
-pub use direct::{DirectSolver, FactorKind, SolverOptions, SolverPolicy, SolverStats};
+pub use direct::{
+    DirectSolver, FactorKind, Factorization, Ordering, SolverOptions, SolverPolicy, SolverStats,
+};
 pub use error::SolverError;
+#[cfg(feature = "ldl")]
+pub use ldl::LdlSolver;
+pub use linear::{LinearOptions, LinearSolver, Method, Used};
 pub use matrix::SparseMatrix;
+pub use pcg::{Pcg, PcgOptions, PcgOutcome, Preconditioner};
 
 /// Marker in an element dof list for an eliminated (constrained) dof: its rows and columns of
 /// the element block are skipped (DESIGN §3 "Linear system").

@@ -540,3 +540,293 @@ fn coupling_filter_shrinks_the_pattern() {
     assert_eq!(k.get(1, 2), 7.0);
     assert_eq!(k.get(3, 3), 16.0);
 }
+
+// ---- LinearSolver: every method, fallbacks, Matrix Market round trip (issue 16) ----
+
+use crate::bench::{solver_configs, BenchOptions};
+
+/// Unsymmetric perturbation of the elastic grid system (as a softening tangent is).
+fn unsymmetric_system(nx: usize, ny: usize) -> SparseMatrix {
+    let (asm, mut blocks, _) = elastic_system(nx, ny);
+    let mut rng = Rng(7);
+    let scale = blocks[0][0];
+    for blk in blocks.iter_mut() {
+        for a in 0..8 {
+            for b in (a + 1)..8 {
+                blk[8 * a + b] += 0.2 * scale * rng.uniform();
+            }
+        }
+    }
+    asm.assemble(&blocks).unwrap()
+}
+
+fn lu_reference(k: &SparseMatrix, b: &[f64]) -> Vec<f64> {
+    let mut s = DirectSolver::new(SolverPolicy::Lu);
+    s.solve(k, false, b).unwrap()
+}
+
+/// Every configuration the bench runs (all orderings and variants, PCG, LDLᵀ with the
+/// feature) agrees with faer LU to 1e-8 relative on an SPD elastic system; PCG to its
+/// tolerance (error ≤ cond-bounded: checked through its true residual ≤ tol and the
+/// solution difference ≤ 1e-6).
+#[test]
+fn every_solver_agrees_with_lu_on_spd_system() {
+    let (_, _, k) = elastic_system(24, 16);
+    let b = random_rhs(k.n(), 5);
+    let x_lu = lu_reference(&k, &b);
+    let bench = BenchOptions {
+        pcg_tolerance: 1e-12,
+        ..Default::default()
+    };
+    let configs = solver_configs(true, k.n(), &bench);
+    assert!(configs.len() >= 11, "{} configurations", configs.len());
+    for (label, options) in configs {
+        let mut s = LinearSolver::new(options).unwrap();
+        s.factorize(&k, true).unwrap();
+        let mut x = b.clone();
+        let used = s.solve_in_place(&mut x).unwrap();
+        let d = rel_diff(&x, &x_lu);
+        let r = rel_residual(&k, &x, &b);
+        assert!(s.warnings().is_empty(), "{label}: {:?}", s.warnings());
+        assert_eq!(s.stats().fallbacks, 0, "{label}");
+        if options.method == Method::Pcg {
+            assert_eq!(used, Used::Pcg);
+            assert!(r <= 1e-12, "{label}: residual {r:e}");
+            assert!(d <= 1e-6, "{label}: difference to LU {d:e}");
+            assert!(s.stats().pcg_iterations > 0);
+        } else {
+            assert!(d <= 1e-8, "{label}: difference to LU {d:e}");
+            assert!(r <= 1e-10, "{label}: residual {r:e}");
+        }
+    }
+}
+
+/// Fill of the orderings: no reordering of a grid numbered row by row fills the band, AMD
+/// and COLAMD much less; IC(0) keeps exactly the lower triangle of K; the simplicial
+/// LU's L + U is at least the Cholesky factor's size (L + Lᵀ minus the diagonal).
+#[test]
+fn orderings_change_fill_not_the_answer() {
+    let (_, _, k) = elastic_system(30, 30);
+    let fill = |method, factorization, ordering| {
+        let mut s = LinearSolver::new(LinearOptions {
+            method,
+            direct: SolverOptions {
+                factorization,
+                ordering,
+                ..Default::default()
+            },
+            ..Default::default()
+        })
+        .unwrap();
+        s.factorize(&k, true).unwrap();
+        s.stats().factor_nnz.unwrap()
+    };
+    let amd = fill(Method::Cholesky, Factorization::Simplicial, Ordering::Amd);
+    let identity = fill(
+        Method::Cholesky,
+        Factorization::Simplicial,
+        Ordering::Identity,
+    );
+    let colamd = fill(
+        Method::Cholesky,
+        Factorization::Simplicial,
+        Ordering::Colamd,
+    );
+    assert!(2 * identity > 3 * amd, "identity {identity} vs AMD {amd}");
+    assert!(colamd < identity, "COLAMD {colamd} vs identity {identity}");
+    let lu = fill(Method::Lu, Factorization::Simplicial, Ordering::Amd);
+    assert!(lu >= 2 * amd - k.n(), "LU {lu} vs Cholesky {amd}");
+    let lower = (k.nnz() + k.n()) / 2;
+    let mut s = LinearSolver::new(LinearOptions {
+        method: Method::Pcg,
+        pcg: PcgOptions {
+            preconditioner: Preconditioner::IncompleteCholesky,
+            ..Default::default()
+        },
+        ..Default::default()
+    })
+    .unwrap();
+    s.factorize(&k, true).unwrap();
+    assert_eq!(s.stats().factor_nnz, Some(lower));
+}
+
+/// IC(0) of a tridiagonal SPD matrix is its exact Cholesky factor (no fill is dropped), so
+/// PCG converges in one iteration.
+#[test]
+fn ic0_is_exact_without_fill() {
+    let n = 50;
+    let mut t = Vec::new();
+    for i in 0..n {
+        t.push((i, i, 4.0 + i as f64 * 0.01));
+        if i + 1 < n {
+            t.push((i, i + 1, -1.0));
+            t.push((i + 1, i, -1.0));
+        }
+    }
+    let k = SparseMatrix::from_triplets(n, &t).unwrap();
+    let b = random_rhs(n, 3);
+    let pcg = Pcg::new(
+        &k,
+        PcgOptions {
+            preconditioner: Preconditioner::IncompleteCholesky,
+            tolerance: 1e-12,
+            max_iterations: 100,
+        },
+    )
+    .unwrap();
+    let out = pcg.solve(&k, &b).unwrap();
+    assert_eq!(out.iterations, 1);
+    assert!(out.residual <= 1e-12);
+}
+
+/// Check 3 at the solver level: PCG on a symmetric indefinite K breaks down (pᵀKp ≤ 0 or a
+/// non-positive IC(0) pivot) with an error, and `LinearSolver` falls back to LU, counts it and
+/// says so; Cholesky, PCG and LDLᵀ on an unsymmetric K are never applied (LU instead,
+/// recorded), so every answer solves the system.
+#[test]
+fn inapplicable_methods_fall_back_with_a_warning() {
+    let (asm, blocks, k0) = elastic_system(20, 12);
+    let sigma = 0.37 * k0.get(0, 0);
+    let k_indef = asm
+        .assemble_with_diagonal(&blocks, Some(&vec![-sigma; asm.n_dofs()]))
+        .unwrap();
+    let b = random_rhs(k_indef.n(), 9);
+    for preconditioner in [Preconditioner::Jacobi, Preconditioner::IncompleteCholesky] {
+        let options = PcgOptions {
+            preconditioner,
+            tolerance: 1e-10,
+            max_iterations: 5000,
+        };
+        let direct = Pcg::new(&k_indef, options).and_then(|p| p.solve(&k_indef, &b));
+        assert!(
+            matches!(direct, Err(SolverError::NotPositiveDefinite { .. })),
+            "{preconditioner:?}: {direct:?}"
+        );
+        let mut s = LinearSolver::new(LinearOptions {
+            method: Method::Pcg,
+            pcg: options,
+            ..Default::default()
+        })
+        .unwrap();
+        s.factorize(&k_indef, true).unwrap();
+        let mut x = b.clone();
+        assert_eq!(s.solve_in_place(&mut x).unwrap(), Used::Lu);
+        assert!(rel_residual(&k_indef, &x, &b) <= 1e-10);
+        assert_eq!(s.stats().fallbacks, 1);
+        assert!(
+            s.warnings()[0].contains("not positive definite"),
+            "{:?}",
+            s.warnings()
+        );
+    }
+    let k_unsym = unsymmetric_system(20, 12);
+    let b = random_rhs(k_unsym.n(), 4);
+    let mut methods = vec![Method::Cholesky, Method::Pcg];
+    if Method::Ldl.available() {
+        methods.push(Method::Ldl);
+    }
+    for method in methods {
+        let mut s = LinearSolver::new(LinearOptions {
+            method,
+            ..Default::default()
+        })
+        .unwrap();
+        assert_eq!(
+            s.factorize(&k_unsym, false).unwrap(),
+            Used::Lu,
+            "{method:?}"
+        );
+        let mut x = b.clone();
+        s.solve_in_place(&mut x).unwrap();
+        assert!(rel_residual(&k_unsym, &x, &b) <= 1e-10, "{method:?}");
+        assert_eq!(s.stats().fallbacks, 1, "{method:?}");
+        assert!(
+            s.warnings()[0].contains("unsymmetric"),
+            "{:?}",
+            s.warnings()
+        );
+    }
+    // the unsymmetric system by every LU variant: agreement with faer LU
+    let x_lu = lu_reference(&k_unsym, &b);
+    for (label, options) in solver_configs(false, k_unsym.n(), &BenchOptions::default()) {
+        assert_eq!(options.method, Method::Lu, "{label}");
+        let mut s = LinearSolver::new(options).unwrap();
+        s.factorize(&k_unsym, false).unwrap();
+        let mut x = b.clone();
+        s.solve_in_place(&mut x).unwrap();
+        let d = rel_diff(&x, &x_lu);
+        assert!(d <= 1e-8, "{label}: difference to LU {d:e}");
+    }
+}
+
+/// Unsupported combinations are refused up front, naming the reason.
+#[test]
+fn lu_with_amd_needs_the_simplicial_variant() {
+    let err = LinearSolver::new(LinearOptions {
+        method: Method::Lu,
+        direct: SolverOptions {
+            ordering: Ordering::Amd,
+            factorization: Factorization::Supernodal,
+            ..Default::default()
+        },
+        ..Default::default()
+    })
+    .unwrap_err();
+    assert!(matches!(err, SolverError::Unsupported(m) if m.contains("simplicial")));
+    if !Method::Ldl.available() {
+        assert!(LinearSolver::new(LinearOptions {
+            method: Method::Ldl,
+            ..Default::default()
+        })
+        .is_err());
+    }
+}
+
+/// A system written in Matrix Market format reads back bit-identical (pattern, explicit
+/// zeros, values, right-hand side, solution) with its JSON description.
+#[test]
+fn matrix_market_round_trip_is_exact() {
+    let (_, _, mut k) = elastic_system(6, 5);
+    // awkward values: an explicit zero, a subnormal, a long mantissa, a huge one
+    let v = k.values_mut();
+    v[3] = 0.0;
+    v[5] = 1e-310;
+    v[7] = std::f64::consts::PI * 1e17;
+    v[9] = -1.0 / 3.0;
+    let b = random_rhs(k.n(), 1);
+    let x = lu_reference(&k, &b);
+    let dir = std::env::temp_dir().join(format!("mpm-solvers-mm-{}", std::process::id()));
+    let json = crate::mm::write_system(
+        &dir,
+        "sys",
+        &k,
+        &b,
+        Some(&x),
+        serde_json::json!({"symmetric": false, "step": 3}),
+    )
+    .unwrap();
+    let back = crate::mm::read_system(&json).unwrap();
+    assert_eq!(back.k.col_ptr(), k.col_ptr());
+    assert_eq!(back.k.row_idx(), k.row_idx());
+    let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    assert_eq!(bits(back.k.values()), bits(k.values()));
+    assert_eq!(bits(&back.rhs), bits(&b));
+    assert_eq!(bits(back.x.as_deref().unwrap()), bits(&x));
+    assert_eq!(back.meta["step"], 3);
+    assert_eq!(crate::mm::list_systems(&dir).unwrap(), vec![json]);
+    let rows = crate::bench::run_bench(
+        &dir,
+        &BenchOptions {
+            repeats: 1,
+            ..Default::default()
+        },
+        |_| {},
+    )
+    .unwrap();
+    assert!(
+        rows.iter().all(|r| !r.symmetric && r.status == "ok"),
+        "{rows:?}"
+    );
+    assert!(rows.iter().all(|r| r.diff_to_lu <= 1e-8), "{rows:?}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

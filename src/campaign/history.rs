@@ -257,7 +257,7 @@ pub(super) fn write_history_outputs(
     let m = compute_history_metrics(runs);
     let write = |name: &str, text: String| {
         let path = out.join(name);
-        std::fs::write(&path, text).map_err(|e| io(&path, &e))
+        crate::atomic_file::write_atomic(&path, text).map_err(|e| io(&path, &e))
     };
     write("histories.csv", histories_csv(runs))?;
     write("metrics.csv", metrics_csv(runs, &m))?;

@@ -16,12 +16,14 @@
 
 mod footing;
 mod history;
+mod record;
 mod report;
 mod run;
 mod spec;
 
 pub use footing::{corner_band_share, soil_inside_outline, FootingGeometry};
 pub use history::{compute_history_metrics, History, HistoryColumns, HistoryMetrics};
+pub use record::{fingerprint_text, Part, RunRecord, RECORD_FILE};
 pub use report::{compute_metrics, step_convergence, CurveColumns, RunMetrics, StepConvergence};
 pub use run::{run_campaign, CampaignOptions};
 pub use spec::{Benchmark, CampaignSpec, IntegratorChoice, SPEC_FILE};
@@ -41,6 +43,10 @@ pub enum CampaignError {
     /// An output could not be written.
     #[error("campaign output {0}: {1}")]
     Output(String, String),
+    /// `--collect` (or a shard's own report) found runs without a finished
+    /// record: their shards have not run yet, or stopped.
+    #[error("campaign runs not finished (run their shards first): {0}")]
+    Unfinished(String),
     /// A run's `curve.csv` cannot be read as its load curve.
     #[error("campaign curve {path}: {problem}")]
     Curve {
@@ -133,7 +139,7 @@ pub struct CampaignRun {
 }
 
 /// What a run cost in steps and iterations.
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Copy, Debug, Default, serde::Serialize, serde::Deserialize)]
 pub struct Effort {
     /// Steps completed.
     pub steps: usize,

@@ -2,6 +2,7 @@
 //! the time-step convergence, `curves.csv`, `metrics.csv`, `report.md` and the
 //! plots.
 
+use crate::atomic_file::write_atomic;
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -214,11 +215,11 @@ pub(super) fn write_step_convergence(
         );
     }
     let path = out.join("step_convergence.csv");
-    std::fs::write(&path, csv).map_err(|e| io(&path, &e))?;
+    write_atomic(&path, csv).map_err(|e| io(&path, &e))?;
     let report = out.join("report.md");
     let mut text = std::fs::read_to_string(&report).map_err(|e| io(&report, &e))?;
     text.push_str(&md);
-    std::fs::write(&report, text).map_err(|e| io(&report, &e))?;
+    write_atomic(&report, text).map_err(|e| io(&report, &e))?;
     Ok(())
 }
 
@@ -435,7 +436,7 @@ pub(super) fn write_outputs(
             );
         }
     }
-    std::fs::write(&combined, text).map_err(|e| io(&combined, &e))?;
+    write_atomic(&combined, text).map_err(|e| io(&combined, &e))?;
     // metrics
     let m = compute_metrics(runs, benchmark);
     let metrics_path = out.join("metrics.csv");
@@ -530,9 +531,9 @@ pub(super) fn write_outputs(
     }
     md.push_str(&stopped_notes(runs));
     md.push_str(&profiles_section(runs));
-    std::fs::write(&metrics_path, csv).map_err(|e| io(&metrics_path, &e))?;
+    write_atomic(&metrics_path, csv).map_err(|e| io(&metrics_path, &e))?;
     let report = out.join("report.md");
-    std::fs::write(&report, md).map_err(|e| io(&report, &e))?;
+    write_atomic(&report, md).map_err(|e| io(&report, &e))?;
     // plots
     // one colour per cell size (local dashed, nonlocal solid), coarse to fine
     let mut sizes: Vec<f64> = runs.iter().map(|r| r.cell_size).collect();

@@ -7,11 +7,12 @@ use std::time::Instant;
 
 use super::footing::FootingGeometry;
 use super::history::{write_history_outputs, History, HistoryColumns};
+use super::record::{fingerprint, Part, RunRecord};
 use super::report::{last_value, read_curve, write_outputs, write_step_convergence};
 use super::spec::{Benchmark, CampaignSpec, SPEC_FILE};
 use super::{CampaignError, CampaignRun, CurveColumns, Effort, EnergyBalance};
 use crate::output::deviatoric_hencky_strain;
-use crate::run::run_scene;
+use crate::run::{run_scene_with, RunOptions};
 use crate::scene::{Formulation, Scene};
 
 /// How a campaign is run.
@@ -25,6 +26,8 @@ pub struct CampaignOptions {
     pub step_refinement: Option<usize>,
     /// The scenes as written or the paper's literal formulation.
     pub formulation: Formulation,
+    /// The whole campaign, one shard of it, or the report from the shards.
+    pub part: Part,
 }
 
 fn scenes_in(dir: &Path) -> Result<Vec<PathBuf>, CampaignError> {
@@ -78,12 +81,12 @@ pub fn run_campaign(
     let mut variants: Vec<Planned> = Vec::new();
     if let Some(k) = options.step_refinement {
         for (name, stem, scene) in &scenes {
-            variants.push(Planned {
-                name: format!("{name}_dt{k}"),
-                scene_file: stem.clone(),
-                scene: refine_steps(name, scene, k)?,
-                step_factor: k,
-            });
+            variants.push(Planned::new(
+                format!("{name}_dt{k}"),
+                stem.clone(),
+                refine_steps(name, scene, k)?,
+                k,
+            ));
         }
     }
     let window = scenes
@@ -91,51 +94,81 @@ pub fn run_campaign(
         .map(|(_, _, scene)| spec.benchmark.field_window(scene));
     let all: Vec<Planned> = scenes
         .into_iter()
-        .map(|(name, scene_file, scene)| Planned {
-            name,
-            scene_file,
-            scene,
-            step_factor: 1,
-        })
+        .map(|(name, scene_file, scene)| Planned::new(name, scene_file, scene, 1))
         .chain(variants)
         .collect();
-    // popped from the back: the longest runs (finest meshes, refinements) start
-    // first, estimated as step factor / h²
-    let mut queue: Vec<(usize, Planned)> = all.into_iter().enumerate().collect();
-    let cost = |p: &Planned| p.step_factor as f64 / p.scene.grid.cell_size.powi(2);
-    queue.sort_by(|a, b| cost(&a.1).total_cmp(&cost(&b.1)));
+    let costs: Vec<f64> = all.iter().map(Planned::cost).collect();
+    let selected = options.part.selects(&costs);
+    // runs finished earlier (same scene, record and curve present) are not run again
+    let mut records: Vec<Option<RunRecord>> = all
+        .iter()
+        .map(|p| RunRecord::load_matching(&out.join(&p.name), &p.fingerprint))
+        .collect();
+    for ((planned, record), selected) in all.iter().zip(&records).zip(&selected) {
+        if record.is_some() && *selected {
+            eprintln!("campaign: {} finished earlier, not run again", planned.name);
+        }
+    }
+    // popped from the back: the longest runs (finest meshes, refinements) start first
+    let mut queue: Vec<usize> = (0..all.len())
+        .filter(|&i| selected[i] && records[i].is_none())
+        .collect();
+    queue.sort_by(|&a, &b| costs[a].total_cmp(&costs[b]));
     let queue = Mutex::new(queue);
     let results = Mutex::new(Vec::new());
     std::thread::scope(|scope| {
         for _ in 0..options.jobs.max(1) {
             scope.spawn(|| loop {
                 let next = queue.lock().map(|mut q| q.pop()).unwrap_or(None);
-                let Some((index, planned)) = next else {
+                let Some(index) = next else {
                     break;
                 };
-                let name = planned.name.clone();
-                let run = run_one(planned, &out.join(&name));
-                match &run {
-                    Ok(run) => eprintln!(
-                        "campaign: {name} finished in {:.1} s{}",
-                        run.wall_seconds,
-                        run.error
+                let planned = &all[index];
+                let record = execute(planned, &out.join(&planned.name));
+                match &record {
+                    Ok(record) => eprintln!(
+                        "campaign: {} finished in {:.1} s{}",
+                        planned.name,
+                        record.wall_seconds,
+                        record
+                            .error
                             .as_ref()
                             .map(|e| format!(" (stopped: {e})"))
                             .unwrap_or_default()
                     ),
-                    Err(e) => eprintln!("campaign: {name}: {e}"),
+                    Err(e) => eprintln!("campaign: {}: {e}", planned.name),
                 }
                 if let Ok(mut r) = results.lock() {
-                    r.push((index, run));
+                    r.push((index, record));
                 }
             });
         }
     });
-    let mut runs: Vec<(usize, Result<CampaignRun, CampaignError>)> =
-        results.into_inner().unwrap_or_default();
-    runs.sort_by_key(|(i, _)| *i);
-    let runs: Vec<CampaignRun> = runs.into_iter().map(|(_, r)| r).collect::<Result<_, _>>()?;
+    for (index, record) in results.into_inner().unwrap_or_default() {
+        records[index] = Some(record?);
+    }
+    let in_scope: Vec<usize> = match options.part {
+        Part::Shard { .. } => (0..all.len()).filter(|&i| selected[i]).collect(),
+        Part::Whole | Part::Collect => (0..all.len()).collect(),
+    };
+    let missing: Vec<&str> = in_scope
+        .iter()
+        .filter(|&&i| records[i].is_none())
+        .map(|&i| all[i].name.as_str())
+        .collect();
+    if !missing.is_empty() {
+        return Err(CampaignError::Unfinished(missing.join(", ")));
+    }
+    let mut runs = Vec::with_capacity(in_scope.len());
+    for i in in_scope {
+        let record = records[i]
+            .take()
+            .unwrap_or_else(|| RunRecord::new(String::new()));
+        runs.push(gather(&all[i], record, &out.join(&all[i].name))?);
+    }
+    if let Part::Shard { .. } = options.part {
+        return Ok(runs);
+    }
     let scenes_as_written: Vec<CampaignRun> = runs
         .iter()
         .filter(|r| r.step_factor == 1)
@@ -158,6 +191,26 @@ struct Planned {
     scene_file: String,
     scene: Scene,
     step_factor: usize,
+    /// [`fingerprint`] of the scene and step factor.
+    fingerprint: String,
+}
+
+impl Planned {
+    fn new(name: String, scene_file: String, scene: Scene, step_factor: usize) -> Self {
+        let fingerprint = fingerprint(&scene, step_factor);
+        Self {
+            name,
+            scene_file,
+            scene,
+            step_factor,
+            fingerprint,
+        }
+    }
+
+    /// Estimated cost: step factor / h².
+    fn cost(&self) -> f64 {
+        self.step_factor as f64 / self.scene.grid.cell_size.powi(2)
+    }
 }
 
 /// The scene with K times the steps at Δt / K (loads are functions of time, so
@@ -181,85 +234,89 @@ fn refine_steps(name: &str, scene: &Scene, k: usize) -> Result<Scene, CampaignEr
     Ok(refined)
 }
 
-/// Run one scene into `out` and gather what the report needs; an unreadable
-/// curve is an error.
-fn run_one(planned: Planned, out: &Path) -> Result<CampaignRun, CampaignError> {
-    let Planned {
-        name,
-        scene_file,
-        scene,
-        step_factor,
-    } = planned;
-    let cell_size = scene.grid.cell_size;
-    let length_scale = scene.nonlocal.as_ref().map(|n| n.length_scale);
-    let curve_columns = CurveColumns::of_scene(&scene);
-    let history_columns = HistoryColumns::of_scene(&scene);
+/// Run one planned scene into `out` and leave its [`RunRecord`] there.
+fn execute(planned: &Planned, out: &Path) -> Result<RunRecord, CampaignError> {
+    let mut record = RunRecord::new(planned.fingerprint.clone());
     let start = Instant::now();
-    let mut run = CampaignRun {
-        scene: scene_file,
-        analysis: scene.scene.analysis,
-        history: None,
-        fields: Vec::new(),
-        volumes: Vec::new(),
-        footing: FootingGeometry::of_scene(&scene),
-        effort: Effort::default(),
-        name,
-        cell_size,
-        length_scale,
-        curve: Vec::new(),
-        curve_columns,
-        positions: Vec::new(),
-        eps_q: Vec::new(),
-        kappa_bar: Vec::new(),
-        error: None,
-        lost_points: (0, 0.0),
-        dissipation: None,
-        energy: None,
-        wall_seconds: 0.0,
-        profile: String::new(),
-        step_factor,
+    // the campaign owns its runs' directories: an earlier campaign's files
+    // there (of another scene: a finished run of this one is not run again)
+    // are replaced
+    let options = RunOptions {
+        show_progress: false,
+        overwrite: true,
+        ..RunOptions::default()
     };
-    let set_up = match run_scene(scene, out, false) {
-        Err(e) => {
-            run.error = Some(e.to_string());
-            false
-        }
+    match run_scene_with(planned.scene.clone(), out, &options) {
+        Err(e) => record.error = Some(e.to_string()),
         Ok(outcome) => {
-            let p = &outcome.simulation.model.particles;
-            run.positions = p.position.clone();
-            run.volumes = p.volume.clone();
+            let model = &outcome.simulation.model;
+            let p = &model.particles;
+            record.positions = p.position.clone();
+            record.volumes = p.volume.clone();
             let usage = outcome.simulation.integrator.usage();
-            run.effort = Effort {
-                steps: outcome.simulation.model.step,
+            record.effort = Effort {
+                steps: model.step,
                 newton_iterations: usage.newton_iterations,
                 halvings: usage.halvings,
             };
-            run.fields = outcome.fields;
-            run.eps_q = p.def_grad.iter().map(deviatoric_hencky_strain).collect();
-            if run.length_scale.is_some() {
-                run.kappa_bar = p
+            record.eps_q = p.def_grad.iter().map(deviatoric_hencky_strain).collect();
+            if planned.scene.nonlocal.is_some() {
+                record.kappa_bar = p
                     .state
                     .iter()
                     .map(|s| s.plastic_strain_eq_nonlocal)
                     .collect();
             }
-            run.error = outcome.error.map(|e| e.to_string());
-            let sim = &outcome.simulation.model;
-            let lost_mass: f64 = sim.lost_points.iter().map(|l| l.mass).sum();
-            let total_mass = sim.particles.mass.iter().sum::<f64>() + lost_mass;
-            run.lost_points = (sim.lost_points.len(), lost_mass / total_mass);
-            run.profile = outcome.simulation.profile.table(outcome.wall_seconds);
-            true
+            record.error = outcome.error.as_ref().map(|e| e.to_string());
+            let lost_mass: f64 = model.lost_points.iter().map(|l| l.mass).sum();
+            let total_mass = p.mass.iter().sum::<f64>() + lost_mass;
+            record.lost_points = (model.lost_points.len(), lost_mass / total_mass);
+            record.profile = outcome.simulation.profile.table(outcome.wall_seconds);
+            record.fields = outcome.fields;
         }
+    }
+    record.wall_seconds = start.elapsed().as_secs_f64();
+    if out.is_dir() {
+        record.save(out)?;
+    }
+    Ok(record)
+}
+
+/// The campaign run of `planned` from its record and the `curve.csv` in
+/// `out`; an unreadable curve is an error.
+fn gather(planned: &Planned, record: RunRecord, out: &Path) -> Result<CampaignRun, CampaignError> {
+    let scene = &planned.scene;
+    let mut run = CampaignRun {
+        scene: planned.scene_file.clone(),
+        analysis: scene.scene.analysis,
+        history: None,
+        fields: record.fields,
+        volumes: record.volumes,
+        footing: FootingGeometry::of_scene(scene),
+        effort: record.effort,
+        name: planned.name.clone(),
+        cell_size: scene.grid.cell_size,
+        length_scale: scene.nonlocal.as_ref().map(|n| n.length_scale),
+        curve: Vec::new(),
+        curve_columns: CurveColumns::of_scene(scene),
+        positions: record.positions,
+        eps_q: record.eps_q,
+        kappa_bar: record.kappa_bar,
+        error: record.error,
+        lost_points: record.lost_points,
+        dissipation: None,
+        energy: None,
+        wall_seconds: record.wall_seconds,
+        profile: record.profile,
+        step_factor: planned.step_factor,
     };
     let curve = out.join("curve.csv");
     // a run whose setup failed may have written no curve: it then has none
-    let curve_written = set_up || curve.exists();
-    if curve_written {
+    if curve.exists() {
         if let Some(columns) = &run.curve_columns {
             run.curve = read_curve(&curve, columns)?;
         }
-        if let Some(columns) = &history_columns {
+        if let Some(columns) = &HistoryColumns::of_scene(scene) {
             run.history = Some(History::read(&curve, columns)?);
         }
     }
@@ -276,6 +333,5 @@ fn run_one(planned: Planned, out: &Path) -> Result<CampaignRun, CampaignError> {
         }),
         _ => None,
     };
-    run.wall_seconds = start.elapsed().as_secs_f64();
     Ok(run)
 }

@@ -159,22 +159,25 @@ impl CheckpointError {
     }
 }
 
-impl From<CheckpointError> for RunError {
-    fn from(e: CheckpointError) -> Self {
-        let path = match &e {
-            CheckpointError::Missing { path, .. }
-            | CheckpointError::NotACheckpoint { path }
-            | CheckpointError::Version { path, .. }
-            | CheckpointError::Truncated { path, .. }
-            | CheckpointError::Corrupt { path, .. }
-            | CheckpointError::Foreign { path, .. }
-            | CheckpointError::Outputs { path, .. }
-            | CheckpointError::Scene { path, .. }
-            | CheckpointError::Io { path, .. } => path.clone(),
+impl CheckpointError {
+    /// The run error of this failure while checkpointing `step` at `time`.
+    pub fn at(self, step: usize, time: f64) -> RunError {
+        let path = match &self {
+            Self::Missing { path, .. }
+            | Self::NotACheckpoint { path }
+            | Self::Version { path, .. }
+            | Self::Truncated { path, .. }
+            | Self::Corrupt { path, .. }
+            | Self::Foreign { path, .. }
+            | Self::Outputs { path, .. }
+            | Self::Scene { path, .. }
+            | Self::Io { path, .. } => path.clone(),
         };
         RunError::Output {
+            step,
+            time,
             path,
-            message: e.to_string(),
+            message: self.to_string(),
         }
     }
 }
@@ -242,7 +245,7 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), CheckpointError
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
-    let temporary = dir.join(format!(".{name}.partial"));
+    let temporary = dir.join(format!("{}{name}", crate::atomic_file::TEMP_PREFIX));
     let written = (|| {
         let mut file = std::fs::File::create(&temporary)?;
         file.write_all(bytes)?;
@@ -450,8 +453,9 @@ pub struct ResumeOptions {
     pub stop_after: Option<usize>,
 }
 
-/// A checkpointed run directory, checked and ready to continue.
+/// A checkpointed run directory, locked, checked and ready to continue.
 pub struct Resumable {
+    _lock: crate::output_dir::DirLock,
     dir: PathBuf,
     source: SceneSource,
     every: usize,
@@ -461,10 +465,25 @@ pub struct Resumable {
 }
 
 impl Resumable {
-    /// Read and check everything in `dir` without changing anything: the
-    /// scene source, the checkpoint (version, length, checksum, scene), the
-    /// fit of its state to the rebuilt run and the `curve.csv` it continues.
-    pub fn open(dir: &Path) -> Result<Self, CheckpointError> {
+    /// Lock `dir` and read and check everything in it without changing
+    /// anything: the scene source, the checkpoint (version, length,
+    /// checksum, scene), the fit of its state to the rebuilt run and the
+    /// `curve.csv` it continues. The lock is held until the resumed run ends.
+    pub fn open(dir: &Path) -> Result<Self, Box<dyn std::error::Error + Send + Sync>> {
+        if !dir.join(SOURCE_FILE).is_file() {
+            // nothing to resume: refuse before the lock creates anything
+            let path = dir.join(SOURCE_FILE);
+            return Err(CheckpointError::Missing {
+                path: path.display().to_string(),
+                message: "no such file".into(),
+            }
+            .into());
+        }
+        let lock = crate::output_dir::DirLock::acquire(dir)?;
+        Ok(Self::check(dir, lock)?)
+    }
+
+    fn check(dir: &Path, lock: crate::output_dir::DirLock) -> Result<Self, CheckpointError> {
         let read = |name: &str| {
             let path = dir.join(name);
             std::fs::read(&path).map_err(|e| match e.kind() {
@@ -527,6 +546,7 @@ impl Resumable {
             });
         }
         Ok(Self {
+            _lock: lock,
             dir: dir.to_path_buf(),
             every: record.checkpoint_every,
             source,
@@ -561,6 +581,7 @@ impl Resumable {
     ) -> Result<RunOutcome, Box<dyn std::error::Error + Send + Sync>> {
         let start = Instant::now();
         let Self {
+            _lock,
             dir,
             source,
             every,
@@ -569,15 +590,17 @@ impl Resumable {
             curve,
         } = self;
         let cursor = state.restore(&mut simulation);
-        let observer = OutputObserver::resume(&dir, &simulation, cursor, show_progress)?;
         let checkpoints = Checkpointer {
             dir: dir.clone(),
             every: options.checkpoint_every.unwrap_or(every),
             fingerprint: source.fingerprint(),
             curve,
         };
-        let observer = observer.with_checkpoints(Some(checkpoints), options.stop_after);
-        crate::run::drive(simulation, observer, &dir, start)
+        let stop_after = options.stop_after;
+        crate::run::drive(simulation, &dir, start, |sim| {
+            let observer = OutputObserver::resume(&dir, sim, cursor, show_progress)?;
+            Ok(observer.with_checkpoints(Some(checkpoints), stop_after))
+        })
     }
 }
 

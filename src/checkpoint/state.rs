@@ -422,10 +422,12 @@ impl Codec for TimeStepLimit {
 }
 
 impl Codec for SolverUsage {
-    const MIN_SIZE: usize = 6 * 8 + 2;
+    const MIN_SIZE: usize = 8 * 8 + 2;
     fn encode(&self, w: &mut Writer) {
         w.put(&self.cholesky);
         w.put(&self.lu);
+        w.put(&self.pcg);
+        w.put(&self.ldl);
         w.put(&self.max_unknowns);
         w.put(&self.newton_iterations);
         w.put(&self.halvings);
@@ -437,6 +439,8 @@ impl Codec for SolverUsage {
         Ok(Self {
             cholesky: r.get()?,
             lu: r.get()?,
+            pcg: r.get()?,
+            ldl: r.get()?,
             max_unknowns: r.get()?,
             newton_iterations: r.get()?,
             halvings: r.get()?,
@@ -473,6 +477,7 @@ impl Codec for OutputCursor {
         w.put(&self.last_row_step);
         w.put(&self.pending_times);
         w.put(&self.fields);
+        w.put(&self.snapshots);
         w.put(&self.curve_bytes);
         w.put(&self.curve_checksum);
     }
@@ -481,6 +486,7 @@ impl Codec for OutputCursor {
             last_row_step: r.get()?,
             pending_times: r.get()?,
             fields: r.get()?,
+            snapshots: r.get()?,
             curve_bytes: r.get()?,
             curve_checksum: r.get()?,
         })

@@ -27,6 +27,7 @@ fn cursor() -> OutputCursor {
         last_row_step: Some(3),
         pending_times: vec![0.5, 0.25],
         fields: Vec::new(),
+        snapshots: vec![(0.0, "particles_000000.vtu".into())],
         curve_bytes: 1234,
         curve_checksum: 0xdead_beef,
     }

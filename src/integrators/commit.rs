@@ -40,6 +40,8 @@ pub fn commit(
     }
     p.stress = converged.stress;
     p.state = converged.state;
+    check_finite_points(p)?;
+    check_finite_nodes(&model.grid, &nodal)?;
     if model.scene.grid.lost_points == LostPointPolicy::Stop {
         if let Some(i) = (0..p.len()).find(|&i| !model.grid.contains(p.position[i])) {
             return Err(StepError::ParticleLeftGrid {
@@ -48,9 +50,7 @@ pub fn commit(
             });
         }
     }
-    if let Some(i) = (0..p.len()).find(|&i| p.stress[i].iter().any(|s| !s.is_finite())) {
-        return Err(StepError::NonFiniteStress { particle: i });
-    }
+
     model.external_work += model
         .traction
         .advect(&setup.traction_shapes, nodal.increment);
@@ -60,6 +60,68 @@ pub fn commit(
     model.reaction = nodal.reaction.to_vec();
     model.last_increment = nodal.increment.to_vec();
     model.drop_lost_points()
+}
+
+/// The one pass over the committed point state: the first point with a NaN
+/// or infinite variable stops the run, naming it.
+fn check_finite_points(p: &Particles) -> Result<(), StepError> {
+    let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
+    for i in 0..p.len() {
+        if !finite(&p.stress[i]) {
+            return Err(StepError::NonFiniteStress { particle: i });
+        }
+        let quantity = if !finite(&p.position[i]) {
+            "position"
+        } else if !finite(&p.velocity[i]) {
+            "velocity"
+        } else if !finite(&p.acceleration[i]) {
+            "acceleration"
+        } else if !(p.volume[i].is_finite() && p.volume[i] > 0.0) {
+            "volume (non-finite or not positive)"
+        } else if !finite(&p.def_grad[i]) {
+            "deformation gradient"
+        } else if !finite(&p.strain[i]) {
+            "strain"
+        } else if !(p.state[i].plastic_strain_eq.is_finite()
+            && p.state[i].plastic_strain_eq_nonlocal.is_finite()
+            && finite(&p.state[i].plastic_strain))
+        {
+            "plastic strain"
+        } else {
+            continue;
+        };
+        let position = if finite(&p.position[i]) {
+            p.position[i]
+        } else {
+            p.position0[i]
+        };
+        return Err(StepError::NonFinitePoint {
+            particle: i,
+            quantity,
+            position,
+        });
+    }
+    Ok(())
+}
+
+/// The nodal results the model keeps must be finite.
+fn check_finite_nodes(grid: &crate::grid::Grid, nodal: &NodalResults) -> Result<(), StepError> {
+    for (quantity, values) in [
+        ("reaction", nodal.reaction),
+        ("displacement increment", nodal.increment),
+    ] {
+        if let Some(node) = values
+            .iter()
+            .position(|v| !(v[0].is_finite() && v[1].is_finite()))
+        {
+            return Err(StepError::NonFiniteNode {
+                node,
+                quantity,
+                position: grid.node_position(node),
+            });
+        }
+    }
+    Ok(())
 }
 
 /// F_p ← (I + L) F_p; V_p ← det(I + L) V_p; accumulate Δε (DESIGN D14).

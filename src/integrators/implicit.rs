@@ -40,16 +40,16 @@ pub struct ImplicitIntegrator {
 
 impl ImplicitIntegrator {
     /// The integrator for `model`'s scene.
-    pub fn new(model: &Model) -> Self {
+    pub fn new(model: &Model) -> Result<Self, crate::scene::SceneError> {
         let dynamic = model.analysis() == AnalysisKind::ImplicitDynamic;
-        Self {
+        Ok(Self {
             dt: model.scene.scene.dt.unwrap_or(1.0),
             newmark: dynamic.then(|| Newmark::with_gamma(model.scene.solver.newmark_gamma)),
-            tangent: Tangent::new(model),
+            tangent: Tangent::new(model)?,
             background_block: background_block(&model.scene, &model.grid),
             usage: SolverUsage::default(),
             last_residuals: (Vec::new(), 0.0),
-        }
+        })
     }
 
     /// The time step, s.
@@ -57,9 +57,24 @@ impl ImplicitIntegrator {
         self.dt
     }
 
-    /// Counters and timings of the tangent's sparse direct solver.
-    pub fn solver_stats(&self) -> &SolverStats {
+    /// Counters and timings of the tangent's linear solver.
+    pub fn solver_stats(&self) -> SolverStats {
         self.tangent.solver_stats()
+    }
+
+    /// Fallbacks of the linear solver and skipped system exports.
+    pub fn solver_warnings(&self) -> Vec<String> {
+        self.tangent.warnings()
+    }
+
+    /// Write the systems of `[output] systems` (if any) into `dir`.
+    pub fn export_systems(&mut self, dir: std::path::PathBuf, steps: Vec<usize>, max_mb: f64) {
+        self.tangent.export_systems(dir, steps, max_mb);
+    }
+
+    /// Systems exported so far.
+    pub fn systems_written(&self) -> usize {
+        self.tangent.systems_written()
     }
 
     /// One implicit step of Δt, halved on Newton failure (DESIGN §3).

@@ -17,6 +17,7 @@
 
 pub mod commit;
 pub mod explicit;
+mod export;
 pub mod g2p;
 pub mod implicit;
 pub mod newton;
@@ -66,6 +67,10 @@ pub struct SolverUsage {
     pub cholesky: usize,
     /// Factorisations done with sparse LU.
     pub lu: usize,
+    /// Systems solved by preconditioned conjugate gradients.
+    pub pcg: usize,
+    /// Systems solved by sprs_ldl's LDLᵀ.
+    pub ldl: usize,
     /// Largest system size, unknowns.
     pub max_unknowns: usize,
     /// Total Newton iterations.
@@ -96,7 +101,7 @@ impl Integrator {
     pub fn for_model(model: &Model) -> Result<Self, SceneError> {
         Ok(match model.analysis() {
             AnalysisKind::QuasiStatic | AnalysisKind::ImplicitDynamic => {
-                Integrator::Implicit(Box::new(ImplicitIntegrator::new(model)))
+                Integrator::Implicit(Box::new(ImplicitIntegrator::new(model)?))
             }
             AnalysisKind::Explicit => Integrator::Explicit(ExplicitIntegrator::new(model)?),
         })
@@ -122,7 +127,7 @@ impl Integrator {
     /// (all zero for an explicit run, which factorises nothing).
     pub fn factorisation_stats(&self) -> SolverStats {
         match self {
-            Integrator::Implicit(implicit) => implicit.solver_stats().clone(),
+            Integrator::Implicit(implicit) => implicit.solver_stats(),
             Integrator::Explicit(_) => SolverStats::default(),
         }
     }

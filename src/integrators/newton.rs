@@ -484,7 +484,7 @@ pub fn solve(
 ) -> Result<Solution, NewtonError> {
     let model = system.model;
     let mut convergence = Convergence::new(&model.scene.solver, model.scene.max_iterations());
-    tangent.begin_step();
+    tangent.begin_newton(system);
     let mut du = system.initial_increment(&vec![0.0; system.dofs.n_free]);
     let mut trial = TrialStresses::default();
     let mut res = system.evaluate(&du, nonlocal.as_deref(), &mut trial, profile)?;

@@ -3,8 +3,9 @@
 //! cell blocks, and the sparse direct factorisation and solve (faer
 //! Cholesky or LU).
 
-use mpm_solvers::{Assembler, DirectSolver, FactorKind, SolverPolicy, SolverStats, SparseMatrix};
+use mpm_solvers::{Assembler, LinearSolver, SolverStats, SparseMatrix, Used};
 
+use super::export::SystemExport;
 use super::newton::StepSystem;
 use super::{SolverUsage, TrialStresses};
 use crate::constitutive::LinearElastic;
@@ -12,15 +13,17 @@ use crate::error::StepError;
 use crate::grid::Grid;
 use crate::model::Model;
 use crate::profile::{Profile, Stage, Work};
-use crate::scene::{LinearSolverChoice, Scene};
+use crate::scene::{FieldError, Scene, SceneError};
 use crate::stiffness;
 use crate::transfer::NONE;
 use crate::volumetric::CellMeanGradients;
 
 /// The tangent of the implicit integrator and its caches.
 pub struct Tangent {
-    /// Sparse direct solver (keeps the symbolic factorisation while the pattern holds).
-    solver: DirectSolver,
+    /// Linear solver (a direct one keeps its symbolic factorisation while the pattern holds).
+    solver: LinearSolver,
+    /// `[output] systems`: the systems to write, once the output directory is known.
+    export: Option<SystemExport>,
     /// The elements' system dofs and the assembler of the pattern they make.
     pattern: Option<(Vec<Vec<u32>>, Assembler)>,
     /// Whether `pattern` belongs to the current step.
@@ -30,30 +33,81 @@ pub struct Tangent {
 }
 
 impl Tangent {
-    /// The tangent of `model`'s scene, with its solver policy.
-    pub fn new(model: &Model) -> Self {
-        let policy = match model.scene.solver.linear_solver {
-            LinearSolverChoice::Auto => SolverPolicy::Auto,
-            LinearSolverChoice::Cholesky => SolverPolicy::Cholesky,
-            LinearSolverChoice::Lu => SolverPolicy::Lu,
+    /// The tangent of `model`'s scene, with its linear solver. A solver that
+    /// needs a symmetric tangent (`cholesky`, `pcg`, `ldl`) is refused for a
+    /// scene with a material whose tangent is unsymmetric (the choice `auto`
+    /// makes for it).
+    pub fn new(model: &Model) -> Result<Self, SceneError> {
+        let symmetric = model.symmetric_tangent();
+        let options = model.scene.solver.linear_options();
+        let refuse = |message: String| SceneError::Invalid {
+            path: model.scene.scene.name.clone(),
+            errors: vec![FieldError {
+                field: "solver.linear_solver".into(),
+                message,
+            }],
         };
-        Self {
-            solver: DirectSolver::new(policy),
+        if options.method.needs_symmetry() && !symmetric {
+            let unsymmetric: Vec<&str> = model
+                .material_names
+                .iter()
+                .zip(&model.materials)
+                .filter(|(_, m)| !m.has_symmetric_tangent())
+                .map(|(n, _)| n.as_str())
+                .collect();
+            return Err(refuse(format!(
+                "{:?} needs a symmetric tangent, but material(s) {} have an unsymmetric one (softening or non-associated plasticity): use `lu` or `auto`",
+                model.scene.solver.linear_solver,
+                unsymmetric.join(", ")
+            )));
+        }
+        let solver = LinearSolver::new(options).map_err(|e| refuse(e.to_string()))?;
+        Ok(Self {
+            solver,
+            export: None,
             pattern: None,
             pattern_current: false,
-            symmetric: model.symmetric_tangent(),
-        }
+            symmetric,
+        })
     }
 
-    /// Counters and timings of the sparse direct solver (symbolic and numeric
-    /// factorisations, Cholesky fallbacks, seconds).
-    pub fn solver_stats(&self) -> &SolverStats {
+    /// Counters and timings of the linear solver (symbolic and numeric
+    /// factorisations, Cholesky fallbacks, PCG iterations, seconds).
+    pub fn solver_stats(&self) -> SolverStats {
         self.solver.stats()
+    }
+
+    /// Fallbacks of the linear solver and skipped system exports.
+    pub fn warnings(&self) -> Vec<String> {
+        let mut w = self.solver.warnings();
+        if let Some(export) = &self.export {
+            w.extend(export.warnings.iter().cloned());
+        }
+        w
+    }
+
+    /// Write the systems of `[output] systems` into `dir`.
+    pub fn export_systems(&mut self, dir: std::path::PathBuf, steps: Vec<usize>, max_mb: f64) {
+        self.export = (!steps.is_empty()).then(|| SystemExport::new(dir, steps, max_mb));
+    }
+
+    /// Systems exported so far.
+    pub fn systems_written(&self) -> usize {
+        self.export.as_ref().map_or(0, |e| e.written)
     }
 
     /// A new step: its pattern is checked at the first assembly.
     pub fn begin_step(&mut self) {
         self.pattern_current = false;
+    }
+
+    /// A Newton solve of `system` begins: a new step for the pattern, and
+    /// the export's iteration count restarts.
+    pub fn begin_newton(&mut self, system: &StepSystem) {
+        self.begin_step();
+        if let Some(export) = self.export.as_mut() {
+            export.begin_solve(system);
+        }
     }
 
     /// Assemble K_T (+ M/(βΔt²) when dynamic) at `trial` (DESIGN D17, D19,
@@ -94,19 +148,34 @@ impl Tangent {
     ) -> Result<Vec<f64>, StepError> {
         let matrix = self.assemble(system, trial, profile)?;
         let symmetric = self.symmetric;
-        let before = self.solver.stats().clone();
+        let before = self.solver.stats();
         let kind = profile.time(Stage::Factorisation, || {
             self.solver.factorize(&matrix, symmetric)
         });
-        count_factorisations(&before, self.solver.stats(), profile);
-        let kind = kind?;
-        match kind {
-            FactorKind::Cholesky => usage.cholesky += 1,
-            FactorKind::Lu => usage.lu += 1,
-        }
+        count_factorisations(&before, &self.solver.stats(), profile);
+        kind?;
         usage.max_unknowns = usage.max_unknowns.max(matrix.n());
         let mut correction = residual.to_vec();
-        profile.time(Stage::Solve, || self.solver.solve_in_place(&mut correction))?;
+        let used = profile.time(Stage::Solve, || self.solver.solve_in_place(&mut correction))?;
+        match used {
+            Used::Cholesky => usage.cholesky += 1,
+            Used::Lu => usage.lu += 1,
+            Used::Pcg => usage.pcg += 1,
+            Used::Ldl => usage.ldl += 1,
+        }
+        if let Some(export) = self.export.as_mut() {
+            let after = self.solver.stats();
+            export.record(
+                system,
+                &matrix,
+                residual,
+                &correction,
+                symmetric,
+                used,
+                &before,
+                &after,
+            );
+        }
         Ok(correction)
     }
 

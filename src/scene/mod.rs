@@ -12,11 +12,17 @@
 
 use std::path::Path;
 
+mod budget;
 mod overrides;
 mod schema;
 mod validation;
 mod variants;
 
+mod linear_solver;
+pub use budget::{
+    available_memory, human_bytes, parse_memory, MemoryPart, ResourceEstimate, ResourceLimits,
+    DEFAULT_MAX_STEPS, DEFAULT_MEMORY_SHARE,
+};
 pub use overrides::apply_override;
 pub use schema::*;
 pub use validation::{polygon_contains, FieldError};
@@ -59,6 +65,63 @@ pub enum SceneError {
         /// Every problem found.
         errors: Vec<FieldError>,
     },
+    /// Non-finite numbers (`nan`, `inf`) in the scene file or its overrides.
+    #[error("scene {path}: non-finite value (nan or inf) at {}", keys.join(", "))]
+    NonFinite {
+        /// The scene path.
+        path: String,
+        /// Dotted paths of the non-finite values.
+        keys: Vec<String>,
+    },
+    /// The estimated memory of the run exceeds the limit.
+    #[error("scene {path} is too large: {estimate}\nthe limit is {} ({source_of_limit}); reduce the keys named above", human_bytes(*limit))]
+    MemoryLimit {
+        /// The scene path.
+        path: String,
+        /// The estimate, with the keys that drive each part.
+        estimate: Box<ResourceEstimate>,
+        /// The limit, bytes.
+        limit: f64,
+        /// Where the limit comes from.
+        source_of_limit: String,
+    },
+    /// The run would take more steps than the limit.
+    #[error("scene {path} would take {steps:.3e} steps ({reason}), more than the limit {limit} (limits.max_steps, --max-steps); check {}", fields.join(", "))]
+    StepLimit {
+        /// The scene path.
+        path: String,
+        /// Estimated steps.
+        steps: f64,
+        /// The limit.
+        limit: u64,
+        /// How the step count was found.
+        reason: String,
+        /// Keys that drive it.
+        fields: Vec<String>,
+    },
+}
+
+/// Dotted paths (`body[0].velocity0[1]`) of every `nan` or `±inf` in `value`.
+fn non_finite_keys(value: &toml::Value, path: &str, keys: &mut Vec<String>) {
+    match value {
+        toml::Value::Float(v) if !v.is_finite() => keys.push(path.to_string()),
+        toml::Value::Table(t) => {
+            for (k, v) in t {
+                let child = if path.is_empty() {
+                    k.clone()
+                } else {
+                    format!("{path}.{k}")
+                };
+                non_finite_keys(v, &child, keys);
+            }
+        }
+        toml::Value::Array(a) => {
+            for (i, v) in a.iter().enumerate() {
+                non_finite_keys(v, &format!("{path}[{i}]"), keys);
+            }
+        }
+        _ => {}
+    }
 }
 
 fn list(errors: &[FieldError]) -> String {
@@ -93,6 +156,14 @@ impl Scene {
                 })?;
         for assignment in overrides {
             apply_override(&mut table, assignment)?;
+        }
+        let mut keys = Vec::new();
+        non_finite_keys(&toml::Value::Table(table.clone()), "", &mut keys);
+        if !keys.is_empty() {
+            return Err(SceneError::NonFinite {
+                path: origin.to_string(),
+                keys,
+            });
         }
         let scene: Scene = toml::Value::Table(table)
             .try_into()

@@ -38,6 +38,25 @@ pub struct Scene {
     /// Stress smoothing.
     #[serde(default)]
     pub smoothing: SmoothingSpec,
+    /// Resource limits checked before the run (defaults: half the available
+    /// memory, 1e7 steps).
+    #[serde(default)]
+    pub limits: LimitsSpec,
+}
+
+/// `[limits]`: what a run may use, checked before anything big is allocated
+/// ([`Scene::check_resources`]); `--max-memory` and `--max-steps` set them.
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct LimitsSpec {
+    /// Largest estimated memory, GB (10⁹ bytes); default half the memory
+    /// available when the run starts.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max_memory_gb: Option<f64>,
+    /// Largest number of steps (implicit `steps`, explicit `end_time` over the
+    /// stable step); default 10⁷.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max_steps: Option<u64>,
 }
 
 /// When the nonlocal variable is updated (DESIGN §6).
@@ -243,6 +262,51 @@ pub enum LinearSolverChoice {
     Cholesky,
     /// Sparse LU with partial pivoting.
     Lu,
+    /// Preconditioned conjugate gradients (`pcg_preconditioner`, `pcg_tolerance`); only for
+    /// scenes whose materials all have a symmetric tangent (refused otherwise), LU where K
+    /// turns out indefinite (recorded in run.json).
+    Pcg,
+    /// sprs_ldl's LDLᵀ (build with `--features ldl`); symmetric scenes only.
+    Ldl,
+}
+
+/// `[solver] factorization`: faer's supernodal or simplicial factorisation.
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum FactorizationChoice {
+    /// faer's automatic choice.
+    #[default]
+    Auto,
+    /// Always supernodal.
+    Supernodal,
+    /// Always simplicial.
+    Simplicial,
+}
+
+/// `[solver] ordering`: fill-reducing ordering of the factorisation.
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum OrderingChoice {
+    /// AMD for Cholesky and LDLᵀ, COLAMD for LU.
+    #[default]
+    Default,
+    /// Approximate minimum degree (LU: simplicial only).
+    Amd,
+    /// Column approximate minimum degree.
+    Colamd,
+    /// None: the dof numbering (LU: simplicial only).
+    Identity,
+}
+
+/// `[solver] pcg_preconditioner`.
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum PreconditionerChoice {
+    /// Diagonal scaling.
+    #[default]
+    Jacobi,
+    /// Zero-fill incomplete Cholesky, IC(0).
+    IncompleteCholesky,
 }
 
 /// `[solver]`: Newton, linear solver and explicit settings (defaults of DESIGN §3–4).
@@ -257,8 +321,18 @@ pub struct SolverSpec {
     pub max_iterations: Option<usize>,
     /// Number of step halvings allowed when Newton fails (DESIGN §3: 4, i.e. 1/16).
     pub max_halvings: usize,
-    /// `auto`, `cholesky` or `lu`.
+    /// `auto`, `cholesky`, `lu`, `pcg` or `ldl`.
     pub linear_solver: LinearSolverChoice,
+    /// faer's `auto`, `supernodal` or `simplicial` factorisation.
+    pub factorization: FactorizationChoice,
+    /// Fill-reducing ordering: `default`, `amd`, `colamd` or `identity`.
+    pub ordering: OrderingChoice,
+    /// PCG preconditioner: `jacobi` or `incomplete_cholesky`.
+    pub pcg_preconditioner: PreconditionerChoice,
+    /// PCG stops when ‖R − Kδu‖/‖R‖ ≤ this, in (0, 1).
+    pub pcg_tolerance: f64,
+    /// PCG iteration limit (LU is used for a system that does not converge, recorded).
+    pub pcg_max_iterations: usize,
     /// ε_bg of DESIGN D19 (background stiffness added to the tangent only).
     pub background_stiffness: f64,
     /// Penalty factor β_pen of DESIGN D41 (k_p = β_pen E); default 1e3 implicit, 10 explicit.
@@ -281,6 +355,11 @@ impl Default for SolverSpec {
             max_iterations: None,
             max_halvings: 4,
             linear_solver: LinearSolverChoice::Auto,
+            factorization: FactorizationChoice::Auto,
+            ordering: OrderingChoice::Default,
+            pcg_preconditioner: PreconditionerChoice::Jacobi,
+            pcg_tolerance: 1e-10,
+            pcg_max_iterations: 10_000,
             background_stiffness: 1e-6,
             penalty_factor: None,
             cfl: 0.5,
@@ -290,8 +369,10 @@ impl Default for SolverSpec {
     }
 }
 
-/// A material, tagged by `model`.
-#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+/// A material, tagged by `model`. Read by `model` first, then as the
+/// model's own parameter table, so that an error names the key inside the
+/// material (`materials.soil`: `E`: invalid type …).
+#[derive(Debug, Clone, Serialize, PartialEq)]
 #[serde(tag = "model", rename_all = "snake_case")]
 pub enum MaterialSpec {
     /// Isotropic linear elasticity (DESIGN D22).
@@ -302,6 +383,41 @@ pub enum MaterialSpec {
     /// Von Mises elastic–perfectly plastic with undrained strength `c` (yield when
     /// √J₂ > c; Tresca's limit loads in plane strain, DESIGN §8.4).
     VonMises(VonMisesSpec),
+}
+
+impl<'de> Deserialize<'de> for MaterialSpec {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        use serde::de::Error;
+        const MODELS: &str = "`linear_elastic`, `hmc` or `von_mises`";
+        let mut table = toml::Table::deserialize(deserializer)?;
+        let model = match table.remove("model") {
+            Some(toml::Value::String(model)) => model,
+            Some(other) => {
+                return Err(D::Error::custom(format!(
+                    "key `model`: expected a string ({MODELS}), found {}",
+                    other.type_str()
+                )))
+            }
+            None => return Err(D::Error::custom(format!("missing key `model` ({MODELS})"))),
+        };
+        let parameters = toml::Value::Table(table);
+        let parsed = match model.as_str() {
+            "linear_elastic" => parameters.try_into().map(MaterialSpec::LinearElastic),
+            "hmc" => parameters.try_into().map(MaterialSpec::Hmc),
+            "von_mises" => parameters.try_into().map(MaterialSpec::VonMises),
+            other => {
+                return Err(D::Error::custom(format!(
+                    "key `model`: unknown model `{other}`, expected {MODELS}"
+                )))
+            }
+        };
+        parsed.map_err(|e: toml::de::Error| {
+            D::Error::custom(format!(
+                "model `{model}`: {}",
+                e.to_string().trim().replace('\n', " ")
+            ))
+        })
+    }
 }
 
 /// Parameters of `model = "von_mises"`: `E` (kPa), `nu`, `density` (t/m³), `c` (kPa);
@@ -643,6 +759,11 @@ pub struct OutputSpec {
     /// Also write a snapshot at the end of the first step that reaches each of
     /// these times, s (explicit runs choose their own steps).
     pub snapshot_times: Vec<f64>,
+    /// Implicit runs: steps whose every Newton iteration's system (tangent, residual,
+    /// correction) is written to `systems/` in Matrix Market format with a JSON description.
+    pub systems: Vec<usize>,
+    /// A system whose files would exceed this many MB is skipped with a warning.
+    pub systems_max_mb: f64,
 }
 
 impl Default for OutputSpec {
@@ -652,6 +773,8 @@ impl Default for OutputSpec {
             snapshots: Vec::new(),
             snapshot_every: 0,
             snapshot_times: Vec::new(),
+            systems: Vec::new(),
+            systems_max_mb: 500.0,
         }
     }
 }

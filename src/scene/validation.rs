@@ -108,6 +108,8 @@ impl Scene {
     pub fn validate(&self) -> Vec<FieldError> {
         let mut e = Vec::new();
         self.validate_analysis(&mut e);
+        self.solver
+            .validate_linear(&self.output, self.scene.analysis, &mut e);
         let grid_ok = self.validate_grid(&mut e);
         for (name, m) in &self.materials {
             m.validate(&format!("materials.{name}"), &mut e);
@@ -118,7 +120,9 @@ impl Scene {
             !self.materials.is_empty(),
             "at least one material is required",
         );
+        self.validate_wave_speeds(&mut e);
         self.validate_solver(&mut e);
+        self.validate_limits(&mut e);
         self.validate_bodies(&mut e, grid_ok);
         self.validate_loads(&mut e);
         if grid_ok {
@@ -176,6 +180,7 @@ impl Scene {
                 ));
             }
         }
+        w.extend(self.unused_key_warnings());
         let gravity = self.loads.gravity != 0.0 || self.loads.gravity_ramp.is_some();
         for m in &self.monitor {
             if gravity && m.kind == MonitorKind::ExternalWork {
@@ -200,6 +205,55 @@ impl Scene {
         w
     }
 
+    /// Keys set to a non-default value that this analysis does not read
+    /// (their range is still checked by [`Scene::validate`]).
+    fn unused_key_warnings(&self) -> Vec<String> {
+        let defaults = SolverSpec::default();
+        let s = &self.solver;
+        let mut unused: Vec<&str> = Vec::new();
+        match self.scene.analysis {
+            AnalysisKind::Explicit => {
+                if self.scene.steps.is_some() {
+                    unused.push("scene.steps");
+                }
+                if s.newmark_gamma != defaults.newmark_gamma {
+                    unused.push("solver.newmark_gamma");
+                }
+                if s.max_iterations.is_some() {
+                    unused.push("solver.max_iterations");
+                }
+                if s.linear_solver != defaults.linear_solver {
+                    unused.push("solver.linear_solver");
+                }
+            }
+            AnalysisKind::QuasiStatic | AnalysisKind::ImplicitDynamic => {
+                if self.scene.end_time.is_some() {
+                    unused.push("scene.end_time");
+                }
+                if s.cfl != defaults.cfl {
+                    unused.push("solver.cfl");
+                }
+                if s.damping != defaults.damping {
+                    unused.push("solver.damping");
+                }
+                if self.scene.analysis == AnalysisKind::QuasiStatic
+                    && s.newmark_gamma != defaults.newmark_gamma
+                {
+                    unused.push("solver.newmark_gamma");
+                }
+            }
+        }
+        unused
+            .into_iter()
+            .map(|key| {
+                format!(
+                    "{key} is set but not used by a {:?} analysis (ignored)",
+                    self.scene.analysis
+                )
+            })
+            .collect()
+    }
+
     fn validate_analysis(&self, e: &mut Vec<FieldError>) {
         let a = &self.scene;
         if let Some(dt) = a.dt {
@@ -208,6 +262,14 @@ impl Scene {
                 "scene.dt",
                 dt > 0.0 && dt.is_finite(),
                 format!("must be > 0 s (got {dt})"),
+            );
+        }
+        if let Some(t) = a.end_time {
+            check(
+                e,
+                "scene.end_time",
+                t > 0.0 && t.is_finite(),
+                format!("must be > 0 s (got {t})"),
             );
         }
         match a.analysis {
@@ -232,6 +294,15 @@ impl Scene {
                     a.dt.is_some(),
                     "implicit dynamic runs need a time step dt > 0 s",
                 );
+                if let Some(dt) = a.dt.filter(|dt| *dt > 0.0) {
+                    // the Newmark mass term 4 M / Δt² must stay finite (D15)
+                    check(
+                        e,
+                        "scene.dt",
+                        (4.0 / (dt * dt)).is_finite(),
+                        format!("{dt} s is too small: the Newmark term 4/Δt² overflows"),
+                    );
+                }
             }
             AnalysisKind::QuasiStatic => {
                 check(
@@ -441,6 +512,14 @@ impl Scene {
                         p.len() >= 3,
                         "needs at least 3 vertices",
                     );
+                    if p.len() >= 3 {
+                        if let Some(message) = polygon_defect(p) {
+                            e.push(FieldError {
+                                field: format!("{f}.polygon"),
+                                message,
+                            });
+                        }
+                    }
                 }
             }
             let outline = b.outline();
@@ -565,6 +644,7 @@ impl Scene {
                 "must be finite",
             );
         }
+        self.validate_dof_conflicts(e);
         for (i, p) in self.bc.pressure.iter().enumerate() {
             let f = format!("bc.pressure[{i}]");
             match self.body_index(p.body.as_deref()) {
@@ -734,6 +814,225 @@ impl Scene {
                     m.quantity.is_some(),
                     "`point_stress` needs `quantity` (sxx, syy, szz, sxy, p or q)",
                 );
+            }
+        }
+    }
+}
+
+/// Why a polygon is not a simple outline (`None` when it is): two edges
+/// that are not neighbours cross or touch (a bow-tie), or the area is zero.
+fn polygon_defect(p: &[[f64; 2]]) -> Option<String> {
+    let n = p.len();
+    let twice_area: f64 = (0..n)
+        .map(|i| {
+            let (a, c) = (p[i], p[(i + 1) % n]);
+            a[0] * c[1] - c[0] * a[1]
+        })
+        .sum();
+    if twice_area == 0.0 || !twice_area.is_finite() {
+        return Some("the polygon encloses no area".into());
+    }
+    for i in 0..n {
+        for j in i + 1..n {
+            let adjacent = j == i + 1 || (i == 0 && j == n - 1);
+            let (a, b) = (p[i], p[(i + 1) % n]);
+            let (c, d) = (p[j], p[(j + 1) % n]);
+            if adjacent {
+                // neighbours share a vertex; they must not fold back onto each other
+                let shared = if j == i + 1 { b } else { a };
+                let (u, w) = if j == i + 1 { (a, d) } else { (b, c) };
+                if orientation(u, shared, w) == 0.0
+                    && (u[0] - shared[0]) * (w[0] - shared[0])
+                        + (u[1] - shared[1]) * (w[1] - shared[1])
+                        > 0.0
+                {
+                    return Some(format!(
+                        "edges {i} and {j} fold back onto each other at vertex ({}, {}): the outline must be a simple polygon",
+                        shared[0], shared[1]
+                    ));
+                }
+                continue;
+            }
+            if segments_meet(a, b, c, d) {
+                return Some(format!(
+                    "edge {i} ({:?} → {:?}) meets edge {j} ({:?} → {:?}): the outline crosses itself (a bow-tie); give the vertices in order around a simple polygon",
+                    a, b, c, d
+                ));
+            }
+        }
+    }
+    None
+}
+
+/// Twice the signed area of the triangle a, b, c.
+fn orientation(a: [f64; 2], b: [f64; 2], c: [f64; 2]) -> f64 {
+    (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
+}
+
+/// Whether the closed segments ab and cd share a point.
+fn segments_meet(a: [f64; 2], b: [f64; 2], c: [f64; 2], d: [f64; 2]) -> bool {
+    let on = |p: [f64; 2], q: [f64; 2], r: [f64; 2]| {
+        r[0] >= p[0].min(q[0])
+            && r[0] <= p[0].max(q[0])
+            && r[1] >= p[1].min(q[1])
+            && r[1] <= p[1].max(q[1])
+    };
+    let (o1, o2) = (orientation(a, b, c), orientation(a, b, d));
+    let (o3, o4) = (orientation(c, d, a), orientation(c, d, b));
+    if o1 * o2 < 0.0 && o3 * o4 < 0.0 {
+        return true;
+    }
+    (o1 == 0.0 && on(a, b, c))
+        || (o2 == 0.0 && on(a, b, d))
+        || (o3 == 0.0 && on(c, d, a))
+        || (o4 == 0.0 && on(c, d, b))
+}
+
+/// One Dirichlet entry on one displacement component: u = t (rate + g · x)
+/// on a grid line (a fixed entry has rate = 0, g = 0).
+struct DofEntry {
+    field: String,
+    line: GridLine,
+    component: Component,
+    rate: f64,
+    gradient: [f64; 2],
+}
+
+impl DofEntry {
+    fn value_at(&self, x: [f64; 2]) -> f64 {
+        self.rate + self.gradient[0] * x[0] + self.gradient[1] * x[1]
+    }
+}
+
+impl Scene {
+    /// Every material's wave speed c_p = sqrt((K + 4G/3)/ρ) must be a positive
+    /// finite number (it sets the explicit step and the dynamic mass term):
+    /// refuses e.g. E = 1e300 with density 1e-300.
+    fn validate_wave_speeds(&self, e: &mut Vec<FieldError>) {
+        for (name, m) in &self.materials {
+            let (young, nu, rho) = (m.youngs_modulus(), m.poisson_ratio(), m.density());
+            if !(young > 0.0 && rho > 0.0 && nu > -1.0 && nu < 0.5) {
+                continue; // reported by the material's own checks
+            }
+            let modulus = crate::constitutive::LinearElastic::new(young, nu).p_wave_modulus();
+            let speed = (modulus / rho).sqrt();
+            check(
+                e,
+                format!("materials.{name}.E"),
+                modulus.is_finite() && speed.is_finite() && speed > 0.0,
+                format!(
+                    "E = {young} kPa with density = {rho} t/m³ gives the wave speed sqrt((K + 4G/3)/ρ) = {speed} m/s: out of range"
+                ),
+            );
+            let penalty = self.solver.penalty_factor.unwrap_or(1e3) * young;
+            check(
+                e,
+                format!("materials.{name}.E"),
+                penalty.is_finite(),
+                format!("E = {young} kPa times solver.penalty_factor overflows"),
+            );
+        }
+    }
+
+    fn validate_limits(&self, e: &mut Vec<FieldError>) {
+        if let Some(gb) = self.limits.max_memory_gb {
+            check(
+                e,
+                "limits.max_memory_gb",
+                gb > 0.0 && gb.is_finite(),
+                format!("must be > 0 GB (got {gb})"),
+            );
+        }
+        if let Some(n) = self.limits.max_steps {
+            check(e, "limits.max_steps", n >= 1, "must be >= 1");
+        }
+    }
+
+    /// Two Dirichlet entries that give one dof different values (two
+    /// prescribed rates, or fixed and prescribed ≠ 0) are refused naming
+    /// both: on a shared line compared at both ends, on crossing lines at
+    /// their node.
+    fn validate_dof_conflicts(&self, e: &mut Vec<FieldError>) {
+        let mut entries = Vec::new();
+        for (i, f) in self.bc.fixed.iter().enumerate() {
+            let Ok(line) = GridLine::parse(&f.line) else {
+                continue;
+            };
+            for &component in &f.dofs {
+                entries.push(DofEntry {
+                    field: format!("bc.fixed[{i}]"),
+                    line,
+                    component,
+                    rate: 0.0,
+                    gradient: [0.0; 2],
+                });
+            }
+        }
+        for (i, p) in self.bc.prescribed.iter().enumerate() {
+            let Ok(line) = GridLine::parse(&p.line) else {
+                continue;
+            };
+            entries.push(DofEntry {
+                field: format!("bc.prescribed[{i}]"),
+                line,
+                component: p.dof,
+                rate: p.rate,
+                gradient: p.gradient,
+            });
+        }
+        let lo = self.grid.origin;
+        let hi = [lo[0] + self.grid.size[0], lo[1] + self.grid.size[1]];
+        let tol = 1e-9 * self.grid.cell_size;
+        let mut reported = Vec::new();
+        for (k, b) in entries.iter().enumerate() {
+            for a in &entries[..k] {
+                if a.component != b.component || a.field == b.field {
+                    continue;
+                }
+                // the nodes the two entries share
+                let shared: Vec<[f64; 2]> = if a.line.axis == b.line.axis {
+                    if (a.line.value - b.line.value).abs() > tol {
+                        continue;
+                    }
+                    let (axis, v) = (a.line.axis, a.line.value);
+                    let other = 1 - axis;
+                    let mut ends = [[0.0; 2]; 2];
+                    ends[0][axis] = v;
+                    ends[1][axis] = v;
+                    ends[0][other] = lo[other];
+                    ends[1][other] = hi[other];
+                    ends.to_vec()
+                } else {
+                    let mut node = [0.0; 2];
+                    node[a.line.axis] = a.line.value;
+                    node[b.line.axis] = b.line.value;
+                    vec![node]
+                };
+                let conflict = shared.iter().find(|x| {
+                    let (va, vb) = (a.value_at(**x), b.value_at(**x));
+                    (va - vb).abs() > 1e-9 * (va.abs() + vb.abs()) || !(va - vb).is_finite()
+                });
+                if let Some(x) = conflict {
+                    if reported.contains(&b.field) {
+                        continue;
+                    }
+                    reported.push(b.field.clone());
+                    let dof = match b.component {
+                        Component::X => "x",
+                        Component::Y => "y",
+                    };
+                    e.push(FieldError {
+                        field: b.field.clone(),
+                        message: format!(
+                            "contradicts {} on the {dof} displacement of the node at ({}, {}) m: rates {} and {} per unit time (one dof takes one condition)",
+                            a.field,
+                            x[0],
+                            x[1],
+                            a.value_at(*x),
+                            b.value_at(*x)
+                        ),
+                    });
+                }
             }
         }
     }

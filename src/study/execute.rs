@@ -14,7 +14,7 @@ use crate::profile::Stage;
 pub type Histories = Vec<(String, Vec<(f64, f64)>)>;
 
 /// What one run measured (from its process, `run.json` and `curve.csv`).
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct Measured {
     /// Wall time of the whole process per repeat, s.
     pub wall_seconds: Vec<f64>,
@@ -34,8 +34,24 @@ pub struct Measured {
     pub factorisations: usize,
     /// Step halvings (implicit).
     pub halvings: usize,
+    /// The linear solver's figures from `run.json` (issue 16).
+    pub linear: LinearFigures,
     /// Monitor histories `(t, value)` by monitor name (from `curve.csv`).
     pub histories: Histories,
+}
+
+/// The linear solver's time per Newton iteration, fill and PCG work of a run
+/// (`run.json` `solver.linear`).
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct LinearFigures {
+    /// Seconds of ordering, factorisation and solves per Newton iteration.
+    pub seconds_per_newton_iteration: f64,
+    /// Stored entries of the last factor (or preconditioner), if known.
+    pub factor_nnz: Option<u64>,
+    /// Conjugate-gradient iterations, all systems together.
+    pub pcg_iterations: u64,
+    /// Systems solved by LU instead of the method asked for.
+    pub fallbacks: u64,
 }
 
 impl Measured {
@@ -79,6 +95,7 @@ impl Measured {
             newton_iterations: 0,
             factorisations: 0,
             halvings: 0,
+            linear: LinearFigures::default(),
             histories: Vec::new(),
         }
     }
@@ -116,7 +133,7 @@ pub fn execute(
     std::fs::create_dir_all(dir).map_err(|e| io(dir, &e))?;
     let scene_path = dir.join("scene.toml");
     let text = toml::to_string(&planned.scene).map_err(|e| io(&scene_path, &e))?;
-    std::fs::write(&scene_path, text).map_err(|e| io(&scene_path, &e))?;
+    crate::atomic_file::write_atomic(&scene_path, text).map_err(|e| io(&scene_path, &e))?;
     let out = dir.join("output");
     let mut runs: Vec<(f64, Vec<f64>)> = Vec::new();
     let mut last_status = String::new();
@@ -197,6 +214,7 @@ pub fn execute(
         newton_iterations: usage.1,
         factorisations: usage.2,
         halvings: usage.3,
+        linear: read_linear(&out.join("run.json")).unwrap_or_default(),
         histories,
     })
 }
@@ -287,9 +305,25 @@ fn read_usage(path: &Path) -> Option<(usize, usize, usize, usize)> {
     Some((
         steps,
         count("newton_iterations"),
-        count("cholesky") + count("lu"),
+        count("cholesky") + count("lu") + count("pcg") + count("ldl"),
         count("halvings"),
     ))
+}
+
+/// The linear solver's figures from `run.json`.
+fn read_linear(path: &Path) -> Option<LinearFigures> {
+    let json = read_json(path)?;
+    let linear = json.get("solver")?.get("linear")?;
+    let u = |key: &str| linear.get(key).and_then(|v| v.as_u64());
+    Some(LinearFigures {
+        seconds_per_newton_iteration: linear
+            .get("seconds_per_newton_iteration")
+            .and_then(|v| v.as_f64())
+            .unwrap_or(0.0),
+        factor_nnz: u("factor_nnz"),
+        pcg_iterations: u("pcg_iterations").unwrap_or(0),
+        fallbacks: u("fallbacks_to_lu").unwrap_or(0),
+    })
 }
 
 /// Every monitor column of `curve.csv` as `(t, value)` pairs.
@@ -324,4 +358,45 @@ pub fn read_curve(path: &Path) -> Option<Histories> {
 /// The directory of a run inside the study's output directory.
 pub fn run_dir(out: &Path, planned: &PlannedRun) -> PathBuf {
     out.join("runs").join(&planned.name)
+}
+
+/// File of a run's measurement in its directory.
+const MEASURED_FILE: &str = "measured.json";
+
+/// Fingerprint of a run: its scene, repeats and time-out (a change of any of
+/// them measures it again).
+pub fn fingerprint(planned: &PlannedRun, repeats: usize, timeout: Option<f64>) -> String {
+    let scene = toml::to_string(&planned.scene).unwrap_or_default();
+    crate::campaign::fingerprint_text(&format!("{scene}|{repeats}|{timeout:?}"))
+}
+
+/// Estimated cost of a run, to balance shards: steps (1000 when the
+/// explicit integrator chooses them) over h².
+pub fn cost(scene: &crate::scene::Scene) -> f64 {
+    scene.scene.steps.unwrap_or(1000) as f64 / scene.grid.cell_size.powi(2)
+}
+
+/// The measurement kept in `dir` when it has `fingerprint` (else `None`:
+/// measure it).
+pub fn load_measured(dir: &Path, fingerprint: &str) -> Option<Measured> {
+    let json = read_json(&dir.join(MEASURED_FILE))?;
+    if json.get("fingerprint")?.as_str()? != fingerprint {
+        return None;
+    }
+    serde_json::from_value(json.get("measured")?.clone()).ok()
+}
+
+/// Keep `measured` in `dir` (written under a temporary name and renamed).
+pub fn save_measured(dir: &Path, fingerprint: &str, measured: &Measured) -> Result<(), StudyError> {
+    let path = dir.join(MEASURED_FILE);
+    let fail = |e: &dyn std::fmt::Display| StudyError::Io {
+        path: path.display().to_string(),
+        message: e.to_string(),
+    };
+    let text = serde_json::to_string(&serde_json::json!({
+        "fingerprint": fingerprint,
+        "measured": measured,
+    }))
+    .map_err(|e| fail(&e))?;
+    crate::atomic_file::write_atomic(&path, text).map_err(|e| fail(&e))
 }

@@ -29,6 +29,7 @@ mod measure;
 mod report;
 mod spec;
 
+use crate::campaign::Part;
 use std::path::{Path, PathBuf};
 
 pub use closed_form::{BarVibration, ClosedForm, ClosedFormName, ColumnSettlement};
@@ -63,6 +64,10 @@ pub enum StudyError {
         message: String,
     },
     /// A reference run did not complete: no error can be measured.
+    /// `--collect` (or a shard) found runs not measured yet.
+    #[error("study runs not measured yet (run their shards first): {0}")]
+    Unfinished(String),
+    /// A reference run that did not complete (a study without cases).
     #[error("reference run {run} did not complete: {status}")]
     Reference {
         /// The reference run.
@@ -81,6 +86,10 @@ pub struct StudyOptions {
     pub repeats: Option<usize>,
     /// Print one line per finished run.
     pub verbose: bool,
+    /// The whole study, one shard of it, or the report from the shards
+    /// (runs measured earlier with the same scene, repeats and time-out are
+    /// not run again in any of them).
+    pub part: Part,
 }
 
 /// Run the study of `spec_path` into `out`; returns the compared runs.
@@ -119,17 +128,77 @@ pub fn run_spec(
             }
         }
     };
-    // references once (timed once: they are not compared)
+    // references first, timed once (they are not compared); every run's
+    // measurement is kept in its directory, so a re-run study, a shard or a
+    // collect reuses what was measured with the same scene
+    let all: Vec<&PlannedRun> = plan.references.iter().chain(&plan.runs).collect();
+    let repeats_of = |i: usize| {
+        if i < plan.references.len() {
+            1
+        } else {
+            repeats
+        }
+    };
+    let costs: Vec<f64> = all.iter().map(|p| execute::cost(&p.scene)).collect();
+    let selected = options.part.selects(&costs);
+    let mut measurements: Vec<Option<Measured>> = Vec::with_capacity(all.len());
+    for (i, planned) in all.iter().enumerate() {
+        let dir = execute::run_dir(out, planned);
+        let fingerprint = execute::fingerprint(planned, repeats_of(i), timeout);
+        let earlier = execute::load_measured(&dir, &fingerprint);
+        let measured = match (&planned.refused, earlier) {
+            (Some(why), _) => Some(Measured::refused(why)),
+            (None, Some(measured)) => {
+                if options.verbose && selected[i] {
+                    eprintln!("study: {}: measured earlier, not run again", planned.name);
+                }
+                Some(measured)
+            }
+            (None, None) if selected[i] => {
+                let measured =
+                    execute::execute(&options.executable, planned, &dir, repeats_of(i), timeout)?;
+                execute::save_measured(&dir, &fingerprint, &measured)?;
+                say(&planned.name, &measured);
+                Some(measured)
+            }
+            (None, None) => None,
+        };
+        measurements.push(measured);
+    }
+    let in_scope = |i: usize| match options.part {
+        Part::Shard { .. } => selected[i],
+        Part::Whole | Part::Collect => true,
+    };
+    let missing: Vec<&str> = (0..all.len())
+        .filter(|&i| in_scope(i) && measurements[i].is_none())
+        .map(|i| all[i].name.as_str())
+        .collect();
+    if !missing.is_empty() {
+        return Err(StudyError::Unfinished(missing.join(", ")));
+    }
+    if let Part::Shard { .. } = options.part {
+        // a shard's rows carry no error: the references may be in other shards
+        let first = plan.references.len();
+        return Ok(plan
+            .runs
+            .iter()
+            .enumerate()
+            .filter(|(j, _)| selected[first + j])
+            .filter_map(|(j, planned)| {
+                Some(StudyRow {
+                    planned: planned.clone(),
+                    measured: measurements[first + j].clone()?,
+                    errors: vec![None; planned.quantities.len()],
+                })
+            })
+            .collect());
+    }
+    let mut measurements = measurements.into_iter().flatten();
     let mut references: Vec<(String, Measured)> = Vec::new();
     for planned in &plan.references {
-        let measured = execute::execute(
-            &options.executable,
-            planned,
-            &execute::run_dir(out, planned),
-            1,
-            timeout,
-        )?;
-        say(&planned.name, &measured);
+        let measured = measurements
+            .next()
+            .unwrap_or_else(|| Measured::refused("not run"));
         if !measured.completed() && spec.case.is_empty() {
             return Err(StudyError::Reference {
                 run: planned.name.clone(),
@@ -140,14 +209,9 @@ pub fn run_spec(
     }
     let mut rows = Vec::new();
     for planned in &plan.runs {
-        let measured = execute::execute(
-            &options.executable,
-            planned,
-            &execute::run_dir(out, planned),
-            repeats,
-            timeout,
-        )?;
-        say(&planned.name, &measured);
+        let measured = measurements
+            .next()
+            .unwrap_or_else(|| Measured::refused("not run"));
         let mut planned = planned.clone();
         if let RunReference::Run(name) = &planned.reference {
             match references.iter().find(|(n, _)| n == name) {

@@ -8,6 +8,7 @@ use super::execute::Measured;
 use super::measure::log_log_slope;
 use super::spec::{PlannedRun, RunReference, StudySpec};
 use super::StudyError;
+use crate::atomic_file::{write_atomic, AtomicFile};
 use crate::campaign::IntegratorChoice;
 use crate::plot::{plot_work_precision, Series};
 use crate::profile::Stage;
@@ -193,7 +194,8 @@ pub fn write_csv(path: &Path, spec: &StudySpec, rows: &[StudyRow]) -> Result<(),
         path: path.display().to_string(),
         message: e.to_string(),
     };
-    let mut w = csv::Writer::from_path(path).map_err(|e| io(&e))?;
+    let file = AtomicFile::create(path).map_err(|e| io(&e))?;
+    let mut w = csv::Writer::from_writer(file);
     let cases = !spec.case.is_empty();
     // error columns: every quantity of the spec and its cases, in order
     let mut columns: Vec<String> = Vec::new();
@@ -226,6 +228,10 @@ pub fn write_csv(path: &Path, spec: &StudySpec, rows: &[StudyRow]) -> Result<(),
             "newton_iterations",
             "factorisations",
             "halvings",
+            "linear_seconds_per_newton_iteration",
+            "factor_nnz",
+            "pcg_iterations",
+            "linear_fallbacks",
         ]
         .iter()
         .map(|s| s.to_string()),
@@ -271,6 +277,12 @@ pub fn write_csv(path: &Path, spec: &StudySpec, rows: &[StudyRow]) -> Result<(),
             m.newton_iterations.to_string(),
             m.factorisations.to_string(),
             m.halvings.to_string(),
+            format!("{:e}", m.linear.seconds_per_newton_iteration),
+            m.linear
+                .factor_nnz
+                .map_or_else(String::new, |n| n.to_string()),
+            m.linear.pcg_iterations.to_string(),
+            m.linear.fallbacks.to_string(),
         ]);
         record.extend(
             (0..Stage::ALL.len())
@@ -291,7 +303,9 @@ pub fn write_csv(path: &Path, spec: &StudySpec, rows: &[StudyRow]) -> Result<(),
         }
         w.write_record(&record).map_err(|e| io(&e))?;
     }
-    w.flush().map_err(|e| io(&e))
+    // whole or absent: renamed to its name once every row is written
+    let file = w.into_inner().map_err(|e| io(&e.to_string()))?;
+    file.commit().map_err(|e| io(&e))
 }
 
 /// The work-precision figure: error against median wall time, log–log, one
@@ -405,7 +419,7 @@ pub fn write_report(
         );
     }
     md += "\nFigure: `work_precision.png`. Every run's scene is `runs/<run>/scene.toml`.\n";
-    std::fs::write(path, md).map_err(|e| StudyError::Io {
+    write_atomic(path, md).map_err(|e| StudyError::Io {
         path: path.display().to_string(),
         message: e.to_string(),
     })
@@ -573,7 +587,7 @@ pub fn write_case_report(
         );
     }
     md += "\nEvery run's scene is `runs/<run>/scene.toml` (not written for a refused run), its stderr `runs/<run>/stderr.txt`; `study.csv` has the full outcomes, every error and the stage times.\n";
-    std::fs::write(path, md).map_err(|e| StudyError::Io {
+    write_atomic(path, md).map_err(|e| StudyError::Io {
         path: path.display().to_string(),
         message: e.to_string(),
     })

@@ -134,6 +134,7 @@ fn row(method: &str, wall: f64, error: f64) -> StudyRow {
             newton_iterations: 0,
             factorisations: 0,
             halvings: 0,
+            linear: Default::default(),
             histories: Vec::new(),
         },
         errors: vec![Some(error)],

@@ -1,0 +1,358 @@
+//! One front for every linear solver of the implicit core: faer's Cholesky and LU
+//! ([`DirectSolver`]), preconditioned conjugate gradients ([`Pcg`]) and, with the `ldl` feature,
+//! sprs_ldl's LDLᵀ. A method that does not apply to the system at hand (PCG or LDLᵀ on an
+//! unsymmetric or indefinite K, Cholesky on an unsymmetric one) falls back to faer's LU and
+//! the fallback is counted and described in [`LinearSolver::warnings`]: never a silent wrong
+//! answer.
+
+use std::time::Instant;
+
+use crate::pcg::{Pcg, PcgOptions};
+use crate::SparseMatrix;
+use crate::{DirectSolver, FactorKind, SolverError, SolverOptions, SolverPolicy, SolverStats};
+
+/// Which linear solver [`LinearSolver`] uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Method {
+    /// Cholesky when the caller says K is symmetric, else LU (faer).
+    #[default]
+    Auto,
+    /// faer's sparse Cholesky (LU when K is unsymmetric or not positive definite, recorded).
+    Cholesky,
+    /// faer's sparse LU with partial pivoting.
+    Lu,
+    /// Preconditioned conjugate gradients (symmetric positive definite K only; LU otherwise,
+    /// recorded).
+    Pcg,
+    /// sprs_ldl's LDLᵀ (feature `ldl`; symmetric K only; LU otherwise, recorded).
+    Ldl,
+}
+
+impl Method {
+    /// Whether the method needs a symmetric K (it is refused or falls back otherwise).
+    pub fn needs_symmetry(self) -> bool {
+        matches!(self, Method::Cholesky | Method::Pcg | Method::Ldl)
+    }
+
+    /// Whether this build has the method (`ldl` needs the cargo feature `ldl`).
+    pub fn available(self) -> bool {
+        self != Method::Ldl || cfg!(feature = "ldl")
+    }
+}
+
+/// Everything that configures a [`LinearSolver`].
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct LinearOptions {
+    /// The method.
+    pub method: Method,
+    /// faer's options (also those of the LU fallback's singularity probe).
+    pub direct: SolverOptions,
+    /// Conjugate-gradient options (method [`Method::Pcg`]).
+    pub pcg: PcgOptions,
+}
+
+/// What solved the last system.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Used {
+    /// faer Cholesky.
+    Cholesky,
+    /// faer LU (asked for, or a fallback).
+    Lu,
+    /// Conjugate gradients.
+    Pcg,
+    /// sprs_ldl LDLᵀ.
+    Ldl,
+}
+
+enum Active {
+    Direct,
+    Fallback,
+    Pcg(Pcg),
+    #[cfg(feature = "ldl")]
+    Ldl,
+}
+
+/// The linear solver of the implicit core, see the module documentation.
+pub struct LinearSolver {
+    options: LinearOptions,
+    direct: DirectSolver,
+    /// The LU used when PCG or LDLᵀ do not apply.
+    fallback: DirectSolver,
+    #[cfg(feature = "ldl")]
+    ldl: crate::ldl::LdlSolver,
+    active: Option<Active>,
+    /// The matrix last factorised (PCG needs it for its products and for a late fallback).
+    matrix: Option<SparseMatrix>,
+    own: SolverStats,
+    first_fallback: Option<String>,
+}
+
+impl std::fmt::Debug for LinearSolver {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("LinearSolver")
+            .field("options", &self.options)
+            .field("stats", &self.stats())
+            .finish_non_exhaustive()
+    }
+}
+
+impl LinearSolver {
+    /// A solver with `options`. Errors: [`SolverError::Unsupported`] for a method this build
+    /// lacks (`ldl` without the feature) or an LU ordering faer's supernodal LU cannot use.
+    pub fn new(options: LinearOptions) -> Result<Self, SolverError> {
+        if !options.method.available() {
+            return Err(SolverError::Unsupported(
+                "linear solver `ldl` needs mpm-solvers built with the cargo feature `ldl`".into(),
+            ));
+        }
+        if options.method == Method::Lu {
+            options
+                .direct
+                .check_lu()
+                .map_err(SolverError::Unsupported)?;
+        }
+        let policy = match options.method {
+            Method::Lu => SolverPolicy::Lu,
+            _ => SolverPolicy::Auto,
+        };
+        Ok(Self {
+            options,
+            direct: DirectSolver::with_options(policy, options.direct),
+            fallback: DirectSolver::with_options(
+                SolverPolicy::Lu,
+                SolverOptions {
+                    factorization: Default::default(),
+                    ordering: Default::default(),
+                    ..options.direct
+                },
+            ),
+            #[cfg(feature = "ldl")]
+            ldl: crate::ldl::LdlSolver::new(),
+            active: None,
+            matrix: None,
+            own: SolverStats::default(),
+            first_fallback: None,
+        })
+    }
+
+    /// The options given at construction.
+    pub fn options(&self) -> &LinearOptions {
+        &self.options
+    }
+
+    fn record_fallback(&mut self, why: String) {
+        self.own.fallbacks += 1;
+        if self.first_fallback.is_none() {
+            self.first_fallback = Some(why);
+        }
+    }
+
+    fn fall_back(&mut self, k: &SparseMatrix, why: String) -> Result<Used, SolverError> {
+        self.record_fallback(why);
+        self.fallback.factorize(k, false)?;
+        self.active = Some(Active::Fallback);
+        self.own.last_factor = Some(FactorKind::Lu);
+        Ok(Used::Lu)
+    }
+
+    /// Prepares the solve of `K x = b`: factorises (direct methods) or builds the
+    /// preconditioner (PCG). `symmetric` is the caller's knowledge that K is symmetric.
+    ///
+    /// Errors: those of the method, or of the LU it falls back to.
+    pub fn factorize(&mut self, k: &SparseMatrix, symmetric: bool) -> Result<Used, SolverError> {
+        self.active = None;
+        self.matrix = None;
+        let method = self.options.method;
+        if method.needs_symmetry() && !symmetric {
+            return self.fall_back(
+                k,
+                format!("{method:?} asked for an unsymmetric tangent: faer LU used instead"),
+            );
+        }
+        match method {
+            Method::Auto | Method::Cholesky | Method::Lu => {
+                let kind = self.direct.factorize(k, symmetric)?;
+                self.active = Some(Active::Direct);
+                self.own.factor_nnz = None;
+                Ok(match kind {
+                    FactorKind::Cholesky => Used::Cholesky,
+                    FactorKind::Lu => Used::Lu,
+                })
+            }
+            Method::Pcg => {
+                let t = Instant::now();
+                let built = Pcg::new(k, self.options.pcg);
+                self.own.numeric_seconds += t.elapsed().as_secs_f64();
+                self.own.numeric += 1;
+                match built {
+                    Ok(pcg) => {
+                        self.own.factor_nnz = Some(pcg.nnz());
+                        self.own.last_factor = None;
+                        self.active = Some(Active::Pcg(pcg));
+                        self.matrix = Some(k.clone());
+                        Ok(Used::Pcg)
+                    }
+                    Err(e @ SolverError::NotPositiveDefinite { .. }) => {
+                        self.fall_back(k, format!("{e}: faer LU used instead"))
+                    }
+                    Err(e) => Err(e),
+                }
+            }
+            Method::Ldl => self.factorize_ldl(k),
+        }
+    }
+
+    #[cfg(feature = "ldl")]
+    fn factorize_ldl(&mut self, k: &SparseMatrix) -> Result<Used, SolverError> {
+        let res = self.ldl.factorize(k);
+        self.own.symbolic_seconds += self.ldl.last_symbolic_seconds;
+        self.own.numeric_seconds += self.ldl.last_numeric_seconds;
+        self.own.numeric += 1;
+        self.own.symbolic += usize::from(self.ldl.last_symbolic_seconds > 0.0);
+        match res {
+            Ok(()) => {
+                self.own.factor_nnz = self.ldl.nnz();
+                self.active = Some(Active::Ldl);
+                Ok(Used::Ldl)
+            }
+            Err(e @ SolverError::Singular { .. }) => {
+                self.fall_back(k, format!("{e}: faer LU used instead"))
+            }
+            Err(e) => Err(e),
+        }
+    }
+
+    #[cfg(not(feature = "ldl"))]
+    fn factorize_ldl(&mut self, _k: &SparseMatrix) -> Result<Used, SolverError> {
+        Err(SolverError::Unsupported(
+            "linear solver `ldl` needs the cargo feature `ldl`".into(),
+        ))
+    }
+
+    /// Solves `K x = rhs` for the K of the last [`LinearSolver::factorize`]; `x` overwrites
+    /// `rhs`. A PCG solve that breaks down (`pᵀKp ≤ 0`) or does not converge falls back to LU
+    /// (recorded). Returns what solved it.
+    pub fn solve_in_place(&mut self, rhs: &mut [f64]) -> Result<Used, SolverError> {
+        match self.active.as_ref().ok_or(SolverError::NotFactorized)? {
+            Active::Fallback => {
+                self.fallback.solve_in_place(rhs)?;
+                Ok(Used::Lu)
+            }
+            Active::Direct => {
+                self.direct.solve_in_place(rhs)?;
+                Ok(match self.direct.factor_kind() {
+                    Some(FactorKind::Cholesky) => Used::Cholesky,
+                    _ => Used::Lu,
+                })
+            }
+            Active::Pcg(pcg) => {
+                let k = self.matrix.as_ref().ok_or(SolverError::NotFactorized)?;
+                let t = Instant::now();
+                let res = pcg.solve(k, rhs);
+                self.own.solve_seconds += t.elapsed().as_secs_f64();
+                self.own.solves += 1;
+                match res {
+                    Ok(out) => {
+                        self.own.pcg_iterations += out.iterations;
+                        self.own.last_pcg_iterations = Some(out.iterations);
+                        self.own.last_pcg_residual = Some(out.residual);
+                        self.own.max_pcg_residual =
+                            Some(self.own.max_pcg_residual.unwrap_or(0.0).max(out.residual));
+                        rhs.copy_from_slice(&out.x);
+                        Ok(Used::Pcg)
+                    }
+                    Err(
+                        e @ (SolverError::NotPositiveDefinite { .. }
+                        | SolverError::NotConverged { .. }),
+                    ) => {
+                        if let SolverError::NotConverged { iterations, .. } = e {
+                            self.own.pcg_iterations += iterations;
+                        }
+                        let k = k.clone();
+                        self.fall_back(&k, format!("{e}: faer LU used instead"))?;
+                        self.fallback.solve_in_place(rhs)?;
+                        Ok(Used::Lu)
+                    }
+                    Err(e) => Err(e),
+                }
+            }
+            #[cfg(feature = "ldl")]
+            Active::Ldl => {
+                let t = Instant::now();
+                let res = self.ldl.solve_in_place(rhs);
+                self.own.solve_seconds += t.elapsed().as_secs_f64();
+                self.own.solves += 1;
+                res.map(|()| Used::Ldl)
+            }
+        }
+    }
+
+    /// Counters and cumulative seconds of every part (faer's direct solver, its LU fallback,
+    /// PCG and LDLᵀ) summed; `factor_nnz` and the `last_*` fields are those of the last
+    /// system.
+    pub fn stats(&self) -> SolverStats {
+        let d = self.direct.stats();
+        let f = self.fallback.stats();
+        let o = &self.own;
+        let fallback_last = matches!(self.active, Some(Active::Fallback));
+        SolverStats {
+            symbolic: d.symbolic + f.symbolic + o.symbolic,
+            numeric: d.numeric + f.numeric + o.numeric,
+            numeric_cholesky: d.numeric_cholesky,
+            numeric_lu: d.numeric_lu + f.numeric_lu,
+            solves: d.solves + f.solves + o.solves,
+            cholesky_fallbacks: d.cholesky_fallbacks,
+            symbolic_seconds: d.symbolic_seconds + f.symbolic_seconds + o.symbolic_seconds,
+            numeric_seconds: d.numeric_seconds + f.numeric_seconds + o.numeric_seconds,
+            solve_seconds: d.solve_seconds + f.solve_seconds + o.solve_seconds,
+            probe_seconds: d.probe_seconds + f.probe_seconds,
+            last_factor: if fallback_last {
+                f.last_factor
+            } else {
+                d.last_factor.or(o.last_factor)
+            },
+            last_pivot_ratio: d.last_pivot_ratio,
+            last_probe_error: if fallback_last {
+                f.last_probe_error
+            } else {
+                d.last_probe_error
+            },
+            factor_nnz: match self.active {
+                Some(Active::Fallback) => f.factor_nnz,
+                Some(Active::Direct) => d.factor_nnz,
+                _ => o.factor_nnz,
+            },
+            last_variant: if fallback_last {
+                f.last_variant
+            } else {
+                d.last_variant
+            },
+            pcg_iterations: o.pcg_iterations,
+            last_pcg_iterations: o.last_pcg_iterations,
+            last_pcg_residual: o.last_pcg_residual,
+            max_pcg_residual: o.max_pcg_residual,
+            fallbacks: o.fallbacks,
+        }
+    }
+
+    /// Human-readable notes on fallbacks so far (empty when every system was solved by the
+    /// method asked for).
+    pub fn warnings(&self) -> Vec<String> {
+        let mut w = Vec::new();
+        let chol = self.direct.stats().cholesky_fallbacks;
+        if chol > 0 && self.options.method == Method::Cholesky {
+            w.push(format!(
+                "Cholesky found the tangent not positive definite {chol} time(s): faer LU used instead"
+            ));
+        }
+        if self.own.fallbacks > 0 {
+            w.push(format!(
+                "{:?} did not apply {} time(s) and faer LU was used instead; first: {}",
+                self.options.method,
+                self.own.fallbacks,
+                self.first_fallback.as_deref().unwrap_or("")
+            ));
+        }
+        w
+    }
+}

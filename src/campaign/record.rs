@@ -1,0 +1,215 @@
+//! What a finished campaign run leaves in its directory: `campaign_run.json`,
+//! everything the report needs beyond `curve.csv` (final fields, snapshots,
+//! effort, wall time), with a fingerprint of the scene as run.
+//!
+//! It is what lets a campaign be re-run, spread and collected:
+//! - a re-run campaign skips every run whose record is present, readable and
+//!   has the fingerprint of the scene it would run now (an edited scene or
+//!   another `--set` is run again);
+//! - `--shard K/N` runs one part of the campaign and leaves the records;
+//! - `--collect` builds the report from the records of all parts.
+//!
+//! A single-process campaign builds its report from the same records, so a
+//! collected report equals the single-process one (wall times aside).
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use super::{CampaignError, Effort};
+use crate::run::FieldSnapshot;
+use crate::scene::Scene;
+
+/// File name of a run's record in its output directory.
+pub const RECORD_FILE: &str = "campaign_run.json";
+
+/// Version of the record's layout; a record of another version is run again.
+const RECORD_FORMAT: u32 = 1;
+
+/// A finished run, as the report needs it (the curve is read from `curve.csv`).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct RunRecord {
+    /// [`RECORD_FORMAT`] of the writer.
+    pub format: u32,
+    /// [`fingerprint`] of the scene the run was made from.
+    pub fingerprint: String,
+    /// The error that stopped the run, if any.
+    pub error: Option<String>,
+    /// Final material-point positions, m.
+    pub positions: Vec<[f64; 2]>,
+    /// Final deviatoric strain εq (DESIGN D8) per point.
+    pub eps_q: Vec<f64>,
+    /// Final nonlocal κ̄ (D35) per point (nonlocal runs only).
+    pub kappa_bar: Vec<f64>,
+    /// Final volume of every point, m³ per m.
+    pub volumes: Vec<f64>,
+    /// Fields at the scene's `[output] snapshot_times`.
+    pub fields: Vec<FieldSnapshot>,
+    /// Points removed on leaving the grid: (count, removed mass / initial mass).
+    pub lost_points: (usize, f64),
+    /// Wall time of the run, s.
+    pub wall_seconds: f64,
+    /// Per-stage profile table.
+    pub profile: String,
+    /// Steps, Newton iterations and halvings.
+    pub effort: Effort,
+}
+
+/// A stable fingerprint of `scene` run with `step_factor` times its steps:
+/// FNV-1a (64 bit) of its JSON form, in hex. Any change of a value the run
+/// depends on changes it.
+pub fn fingerprint(scene: &Scene, step_factor: usize) -> String {
+    let text = serde_json::to_string(scene).unwrap_or_default();
+    fingerprint_text(&format!("{text}|{step_factor}|{RECORD_FORMAT}"))
+}
+
+/// FNV-1a (64 bit) of `text`, in hex: the fingerprint of a run's inputs.
+pub fn fingerprint_text(text: &str) -> String {
+    let mut hash: u64 = 0xcbf2_9ce4_8422_2325;
+    for byte in text.bytes() {
+        hash ^= u64::from(byte);
+        hash = hash.wrapping_mul(0x0100_0000_01b3);
+    }
+    format!("{hash:016x}")
+}
+
+impl RunRecord {
+    /// A record of the current format for a run of the scene with `fingerprint`.
+    pub fn new(fingerprint: String) -> Self {
+        Self {
+            format: RECORD_FORMAT,
+            fingerprint,
+            error: None,
+            positions: Vec::new(),
+            eps_q: Vec::new(),
+            kappa_bar: Vec::new(),
+            volumes: Vec::new(),
+            fields: Vec::new(),
+            lost_points: (0, 0.0),
+            wall_seconds: 0.0,
+            profile: String::new(),
+            effort: Effort::default(),
+        }
+    }
+
+    /// The record in `dir` if it is there, readable, of this format and of
+    /// the scene with `fingerprint`, and the run's `curve.csv` is there too;
+    /// `None` means the run has to be made (again).
+    pub fn load_matching(dir: &Path, fingerprint: &str) -> Option<Self> {
+        let text = std::fs::read_to_string(dir.join(RECORD_FILE)).ok()?;
+        let record: RunRecord = serde_json::from_str(&text).ok()?;
+        let whole = record.format == RECORD_FORMAT
+            && record.fingerprint == fingerprint
+            && dir.join("curve.csv").is_file();
+        whole.then_some(record)
+    }
+
+    /// Write the record into `dir` under a temporary name and rename it, so
+    /// that a record is whole or absent.
+    pub fn save(&self, dir: &Path) -> Result<(), CampaignError> {
+        let path = dir.join(RECORD_FILE);
+        let fail = |e: &dyn std::fmt::Display| {
+            CampaignError::Output(path.display().to_string(), e.to_string())
+        };
+        let text = serde_json::to_string(self).map_err(|e| fail(&e))?;
+        crate::atomic_file::write_atomic(&path, text).map_err(|e| fail(&e))
+    }
+}
+
+/// Which part of a campaign (or study) this process does.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Part {
+    /// Every run (skipping those already complete), then the report.
+    #[default]
+    Whole,
+    /// The `index`-th (1-based) of `count` disjoint parts, no report.
+    Shard {
+        /// 1 ..= count.
+        index: usize,
+        /// Number of parts.
+        count: usize,
+    },
+    /// No run: the report from the records every part left.
+    Collect,
+}
+
+impl Part {
+    /// Parse `K/N` (1 ≤ K ≤ N).
+    pub fn shard(text: &str) -> Result<Self, String> {
+        let bad = || format!("--shard `{text}`: expected K/N with 1 <= K <= N, e.g. 2/3");
+        let (k, n) = text.split_once('/').ok_or_else(bad)?;
+        let (index, count): (usize, usize) = (
+            k.trim().parse().map_err(|_| bad())?,
+            n.trim().parse().map_err(|_| bad())?,
+        );
+        if index == 0 || index > count {
+            return Err(bad());
+        }
+        Ok(Part::Shard { index, count })
+    }
+
+    /// Which of `costs.len()` runs (by index) this part runs: all for
+    /// [`Part::Whole`], none for [`Part::Collect`]; for a shard, the runs are
+    /// ranked by estimated cost (largest first, ties by index) and dealt out
+    /// in turn, so the parts are disjoint, cover every run and take about
+    /// the same time.
+    pub fn selects(&self, costs: &[f64]) -> Vec<bool> {
+        match *self {
+            Part::Whole => vec![true; costs.len()],
+            Part::Collect => vec![false; costs.len()],
+            Part::Shard { index, count } => {
+                let mut order: Vec<usize> = (0..costs.len()).collect();
+                order.sort_by(|&a, &b| costs[b].total_cmp(&costs[a]).then(a.cmp(&b)));
+                let mut selected = vec![false; costs.len()];
+                for (rank, run) in order.into_iter().enumerate() {
+                    selected[run] = rank % count == index - 1;
+                }
+                selected
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shards_are_disjoint_and_cover_every_run() {
+        let costs = [4.0, 1.0, 9.0, 9.0, 2.0, 0.5, 7.0];
+        let parts: Vec<Vec<bool>> = (1..=3)
+            .map(|k| Part::Shard { index: k, count: 3 }.selects(&costs))
+            .collect();
+        for run in 0..costs.len() {
+            assert_eq!(parts.iter().filter(|p| p[run]).count(), 1, "run {run}");
+        }
+        // the two most costly runs go to different shards
+        assert!(parts.iter().all(|p| !(p[2] && p[3])));
+        assert_eq!(Part::Whole.selects(&costs), vec![true; 7]);
+        assert_eq!(Part::Collect.selects(&costs), vec![false; 7]);
+    }
+
+    #[test]
+    fn shard_text_is_checked() {
+        assert_eq!(Part::shard("2/3"), Ok(Part::Shard { index: 2, count: 3 }));
+        for bad in ["0/3", "4/3", "3", "a/b", "1/0"] {
+            assert!(Part::shard(bad).is_err(), "{bad}");
+        }
+    }
+
+    #[test]
+    fn a_record_is_reused_only_for_the_same_scene() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut record = RunRecord::new("00ff".into());
+        record.eps_q = vec![0.1 + 0.2, 1.0 / 3.0, 5e-324];
+        record.save(dir.path()).unwrap();
+        // no curve.csv yet: not a finished run
+        assert!(RunRecord::load_matching(dir.path(), "00ff").is_none());
+        std::fs::write(dir.path().join("curve.csv"), "step,time\n").unwrap();
+        let read = RunRecord::load_matching(dir.path(), "00ff").unwrap();
+        assert_eq!(read.eps_q, record.eps_q, "f64 round trip");
+        assert!(RunRecord::load_matching(dir.path(), "00fe").is_none());
+        std::fs::write(dir.path().join(RECORD_FILE), "{\"format\": 1").unwrap();
+        assert!(RunRecord::load_matching(dir.path(), "00ff").is_none());
+    }
+}
