@@ -329,6 +329,9 @@ pub fn identify(error: &(dyn std::error::Error + 'static)) -> Option<ErrorId> {
     if let Some(e) = error.downcast_ref::<StudyError>() {
         return Some(e.error_id());
     }
+    if let Some(e) = error.downcast_ref::<crate::checkpoint::CheckpointError>() {
+        return Some(e.error_id());
+    }
     if let Some(e) = error.downcast_ref::<PointDriverError>() {
         return Some(e.error_id());
     }

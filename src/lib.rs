@@ -17,7 +17,8 @@
 //! - the step: [`integrators`] (implicit Newton/Newmark and explicit MUSL,
 //!   each a list of named stages in the order of paper Fig. 1);
 //! - the run: [`simulation`] (time loop, monitors), [`monitor`], [`output`],
-//!   [`run`] and [`profile`] (what a run writes and measures), [`scene`]
+//!   [`run`] and [`profile`] (what a run writes and measures),
+//!   [`checkpoint`] (saving and resuming a run), [`scene`]
 //!   (TOML input and its validation), [`campaign`] and [`metrics`] (mesh
 //!   studies), [`study`] (error against run time), [`error`];
 //! - runs that survive: [`atomic_file`] (outputs whole or absent),
@@ -31,6 +32,7 @@
 pub mod atomic_file;
 pub mod bc;
 pub mod campaign;
+pub mod checkpoint;
 pub mod constitutive;
 pub mod dofs;
 pub mod error;

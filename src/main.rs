@@ -1,13 +1,14 @@
 //! `mpm-geo` command line: run, check and inspect scenes.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
 use mpm_geo::campaign::{CampaignOptions, Part};
+use mpm_geo::checkpoint::{Resumable, ResumeOptions, SceneSource};
 use mpm_geo::error_id::{ErrorId, Identified};
-use mpm_geo::run::{run_scene_with, RunOptions};
+use mpm_geo::run::{run_scene_with, RunOptions, RunOutcome};
 use mpm_geo::scene::{Formulation, Scene};
 
 /// 2D plane-strain material point method for brittle geomaterials.
@@ -45,6 +46,29 @@ enum Command {
         /// Step-count limit (default 1e7; scene key `limits.max_steps`).
         #[arg(long, value_name = "N")]
         max_steps: Option<u64>,
+        /// Write the whole state to OUT/checkpoint.bin every N steps (and on
+        /// SIGINT/SIGTERM), so `mpm-geo resume OUT` can continue the run.
+        #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
+        checkpoint_every: Option<u64>,
+        /// Test hook: end the run after step M as a kill would (no last
+        /// row, run.json left `running`), leaving the last periodic checkpoint.
+        #[arg(long, value_name = "M", hide = true)]
+        stop_after_step: Option<usize>,
+    },
+    /// Continue a run started with `--checkpoint-every` from its last
+    /// checkpoint; the outputs end as those of an uninterrupted run.
+    Resume {
+        /// The run's output directory.
+        dir: PathBuf,
+        /// No progress bar.
+        #[arg(long)]
+        quiet: bool,
+        /// Checkpoint interval instead of the run's own.
+        #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
+        checkpoint_every: Option<u64>,
+        /// Test hook: end the run after step M as a kill would.
+        #[arg(long, value_name = "M", hide = true)]
+        stop_after_step: Option<usize>,
     },
     /// Run every scene of a directory (in parallel) and write curves.csv,
     /// metrics.csv, report.md and plots (mesh-objectivity campaign).
@@ -320,8 +344,14 @@ fn main() -> ExitCode {
             overwrite,
             max_memory,
             max_steps,
+            checkpoint_every,
+            stop_after_step,
         } => {
-            let mut loaded = match Scene::load(&scene, &overrides) {
+            let source = match SceneSource::read(&scene, &overrides) {
+                Ok(s) => s,
+                Err(e) => return fail_with(2, &e),
+            };
+            let mut loaded = match source.scene() {
                 Ok(s) => s,
                 Err(e) => return fail_with(2, &e),
             };
@@ -334,71 +364,115 @@ fn main() -> ExitCode {
                 .map(|s| s.to_string_lossy().into_owned())
                 .unwrap_or_else(|| "run".into());
             let out = out.unwrap_or_else(|| PathBuf::from("out").join(stem));
-            if let Err(e) = mpm_geo::interrupt::install() {
-                eprintln!("warning: SIGINT/SIGTERM will end the run without run.json: {e}");
-            }
+            install_interrupt();
             let options = RunOptions {
                 show_progress: !quiet,
                 overwrite,
+                checkpoint: checkpoint_every.map(|n| (source, n as usize)),
+                stop_after: stop_after_step,
             };
-            match run_scene_with(loaded, &out, &options) {
-                Err(e) => fail_with(2, e.as_ref()),
-                Ok(outcome) => {
-                    eprintln!("{}", outcome.simulation.profile.table(outcome.wall_seconds));
-                    eprintln!("{}", outcome.simulation.profile.work_line());
-                    let usage = outcome.simulation.integrator.usage();
-                    let sim = &outcome.simulation.model;
-                    eprintln!(
-                        "steps {}  time {:.6e} s  Newton iterations {}  factorisations: Cholesky {} LU {}  halvings {}  stagnated steps {}",
-                        sim.step,
-                        sim.time,
-                        usage.newton_iterations,
-                        usage.cholesky,
-                        usage.lu,
-                        usage.halvings,
-                        usage.stagnated_steps
-                    );
-                    if let (Some((lo, hi)), Some(by)) =
-                        (usage.explicit_time_step, &usage.time_step_limited_by)
-                    {
-                        eprintln!("explicit time step {lo:.3e} to {hi:.3e} s (limited by {by})");
-                    }
-                    if let Some(first) = sim.lost_points.first() {
-                        let mass: f64 = sim.lost_points.iter().map(|l| l.mass).sum();
-                        let total: f64 = sim.particles.mass.iter().sum::<f64>() + mass;
-                        eprintln!(
-                            "warning: {} material point(s) left the grid and were removed (first at step {}, {:.2e} of the mass; listed in run.json)",
-                            sim.lost_points.len(),
-                            first.step,
-                            mass / total
-                        );
-                    }
-                    match (outcome.error, outcome.interrupted) {
-                        (Some(e), _) => fail(
-                            1,
-                            e.error_id(),
-                            &format!(
-                                "run stopped: {e}\noutputs up to the last completed step are in {}",
-                                out.display()
-                            ),
-                        ),
-                        (None, Some(signal)) => {
-                            eprintln!(
-                                "interrupted by {} after step {} (t = {:.6e} s); outputs up to it are in {}",
-                                signal.name(),
-                                sim.step,
-                                sim.time,
-                                out.display()
-                            );
-                            ExitCode::from(signal.exit_code())
-                        }
-                        (None, None) => {
-                            eprintln!("outputs in {}", out.display());
-                            ExitCode::SUCCESS
-                        }
-                    }
-                }
+            report(run_scene_with(loaded, &out, &options), &out)
+        }
+        Command::Resume {
+            dir,
+            quiet,
+            checkpoint_every,
+            stop_after_step,
+        } => {
+            let resumable = match Resumable::open(&dir) {
+                Ok(r) => r,
+                Err(e) => return fail_with(2, e.as_ref()),
+            };
+            for w in resumable.scene().warnings() {
+                eprintln!("warning: {w}");
             }
+            eprintln!(
+                "resuming {} from the checkpoint of step {}",
+                resumable.source().origin,
+                resumable.step()
+            );
+            install_interrupt();
+            let options = ResumeOptions {
+                checkpoint_every: checkpoint_every.map(|n| n as usize),
+                stop_after: stop_after_step,
+            };
+            report(resumable.run(!quiet, &options), &dir)
+        }
+    }
+}
+
+fn install_interrupt() {
+    if let Err(e) = mpm_geo::interrupt::install() {
+        eprintln!("warning: SIGINT/SIGTERM will end the run without run.json: {e}");
+    }
+}
+
+/// Print a run's summary and turn its outcome into the exit code.
+fn report(
+    outcome: Result<RunOutcome, Box<dyn std::error::Error + Send + Sync>>,
+    out: &Path,
+) -> ExitCode {
+    let outcome = match outcome {
+        Err(e) => return fail_with(2, e.as_ref()),
+        Ok(outcome) => outcome,
+    };
+    eprintln!("{}", outcome.simulation.profile.table(outcome.wall_seconds));
+    eprintln!("{}", outcome.simulation.profile.work_line());
+    let usage = outcome.simulation.integrator.usage();
+    let sim = &outcome.simulation.model;
+    eprintln!(
+        "steps {}  time {:.6e} s  Newton iterations {}  factorisations: Cholesky {} LU {}  halvings {}  stagnated steps {}",
+        sim.step,
+        sim.time,
+        usage.newton_iterations,
+        usage.cholesky,
+        usage.lu,
+        usage.halvings,
+        usage.stagnated_steps
+    );
+    if let (Some((lo, hi)), Some(by)) = (usage.explicit_time_step, &usage.time_step_limited_by) {
+        eprintln!("explicit time step {lo:.3e} to {hi:.3e} s (limited by {by})");
+    }
+    if let Some(first) = sim.lost_points.first() {
+        let mass: f64 = sim.lost_points.iter().map(|l| l.mass).sum();
+        let total: f64 = sim.particles.mass.iter().sum::<f64>() + mass;
+        eprintln!(
+            "warning: {} material point(s) left the grid and were removed (first at step {}, {:.2e} of the mass; listed in run.json)",
+            sim.lost_points.len(),
+            first.step,
+            mass / total
+        );
+    }
+    match (outcome.error, outcome.interrupted) {
+        (Some(e), _) => fail(
+            1,
+            e.error_id(),
+            &format!(
+                "run stopped: {e}\noutputs up to the last completed step are in {}",
+                out.display()
+            ),
+        ),
+        (None, Some(signal)) => {
+            eprintln!(
+                "interrupted by {} after step {} (t = {:.6e} s); outputs up to it are in {}",
+                signal.name(),
+                sim.step,
+                sim.time,
+                out.display()
+            );
+            ExitCode::from(signal.exit_code())
+        }
+        (None, None) if !outcome.simulation.finished() => {
+            eprintln!(
+                "stopped after step {} (--stop-after-step); continue with `mpm-geo resume {}`",
+                sim.step,
+                out.display()
+            );
+            ExitCode::SUCCESS
+        }
+        (None, None) => {
+            eprintln!("outputs in {}", out.display());
+            ExitCode::SUCCESS
         }
     }
 }

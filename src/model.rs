@@ -90,7 +90,7 @@ pub struct Model {
     /// Points removed after leaving the grid (`[grid] lost_points = "remove"`).
     pub lost_points: Vec<LostPoint>,
     /// Force of every rigid body on the soil at the end of the last step, kN/m.
-    rigid_force: Vec<[f64; 2]>,
+    pub(crate) rigid_force: Vec<[f64; 2]>,
 }
 
 /// Build a material law from its scene entry; the problems of an invalid

@@ -78,6 +78,14 @@ impl Monitor {
         }
     }
 
+    /// Follow material point `p` (restoring a checkpoint); a monitor that
+    /// follows no point is left as it is.
+    pub fn set_particle(&mut self, p: usize) {
+        if let Target::Particle(i) = &mut self.target {
+            *i = p;
+        }
+    }
+
     /// Follow the monitored point to its index after points were removed
     /// (`new_index[old]`; the caller keeps monitored points).
     pub fn remap_particle(&mut self, new_index: &[Option<usize>]) {

@@ -75,6 +75,30 @@ impl CurveWriter {
         Ok(writer)
     }
 
+    /// Open an existing file to append rows after its first `keep` bytes
+    /// (resuming a run: later rows are cut off). Errs when it is shorter.
+    pub fn reopen(path: &Path, keep: u64) -> Result<Self, OutputError> {
+        let error = |e: std::io::Error| OutputError::new(path, e);
+        let mut file = std::fs::OpenOptions::new()
+            .write(true)
+            .open(path)
+            .map_err(error)?;
+        let len = file.metadata().map_err(error)?.len();
+        if len < keep {
+            return Err(error(std::io::Error::other(format!(
+                "{len} bytes, fewer than the {keep} to keep"
+            ))));
+        }
+        file.set_len(keep).map_err(error)?;
+        file.seek(SeekFrom::Start(keep)).map_err(error)?;
+        Ok(Self {
+            file,
+            path: path.to_path_buf(),
+            whole: keep,
+            broken: false,
+        })
+    }
+
     /// Append one row (values written with full round-trip precision) and flush.
     pub fn row(&mut self, step: usize, time: f64, values: &[f64]) -> Result<(), OutputError> {
         let mut record = vec![step.to_string(), format!("{time:e}")];

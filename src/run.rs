@@ -10,6 +10,7 @@ use std::time::Instant;
 use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
 
+use crate::checkpoint::Checkpointer;
 use crate::error::RunError;
 use crate::integrators::StepReport;
 use crate::interrupt::Interruption;
@@ -41,6 +42,33 @@ pub struct OutputObserver {
     fields: Vec<FieldSnapshot>,
     /// The snapshots written so far, (time, file name), for the `.pvd`.
     snapshots: Vec<(f64, String)>,
+    /// Writes a checkpoint every N steps (`--checkpoint-every`) and on an interruption.
+    checkpoints: Option<Checkpointer>,
+    /// Continuing a run from a checkpoint: the start is already written.
+    resumed: bool,
+    /// Test hook: end the run after this step as a kill would (no last
+    /// row, `run.json` left `running`, no checkpoint at that step).
+    stop_after: Option<usize>,
+    /// Set once the step `stop_after` is done.
+    stop: bool,
+}
+
+/// Where a run's outputs stood after a step: what a checkpoint stores so a
+/// resumed run writes on exactly as the uninterrupted one would.
+#[derive(Clone, Debug, Default)]
+pub struct OutputCursor {
+    /// Step of the last `curve.csv` row (`None` before the first).
+    pub last_row_step: Option<usize>,
+    /// `[output] snapshot_times` not reached yet, latest first.
+    pub pending_times: Vec<f64>,
+    /// The fields at the snapshot times reached so far.
+    pub fields: Vec<FieldSnapshot>,
+    /// The snapshots written so far, (time, file name), as in the `.pvd`.
+    pub snapshots: Vec<(f64, String)>,
+    /// Length of `curve.csv` then, bytes.
+    pub curve_bytes: u64,
+    /// CRC-32 of those bytes.
+    pub curve_checksum: u32,
 }
 
 /// The material points' positions and strains at one snapshot time (what the
@@ -85,21 +113,7 @@ impl OutputObserver {
         })?;
         let names: Vec<String> = sim.monitors.iter().map(|m| m.name.clone()).collect();
         let curve = CurveWriter::create(&dir.join("curve.csv"), &names).map_err(at(sim))?;
-        let progress = if show_progress {
-            let total = match sim.model.analysis() {
-                AnalysisKind::Explicit => 1000,
-                _ => sim.model.scene.scene.steps.unwrap_or(0) as u64,
-            };
-            let bar = ProgressBar::new(total);
-            let template = "{bar:30} {pos}/{len} [{elapsed_precise} < {eta_precise}] {msg}";
-            bar.set_style(
-                ProgressStyle::with_template(template)
-                    .unwrap_or_else(|_| ProgressStyle::default_bar()),
-            );
-            bar
-        } else {
-            ProgressBar::hidden()
-        };
+        let progress = progress_bar(sim, show_progress);
         let mut pending_times = sim.model.scene.output.snapshot_times.clone();
         pending_times.sort_by(|a, b| b.total_cmp(a));
         Ok(Self {
@@ -110,7 +124,89 @@ impl OutputObserver {
             pending_times,
             fields: Vec::new(),
             snapshots: Vec::new(),
+            checkpoints: None,
+            resumed: false,
+            stop_after: None,
+            stop: false,
         })
+    }
+
+    /// Continue the outputs of `dir` from `cursor` (`sim` restored from the
+    /// same checkpoint): `curve.csv` cut back to the cursor's length, the
+    /// snapshots of later steps removed (the run writes them again) and the
+    /// `.pvd` rewritten with the earlier ones.
+    pub fn resume(
+        dir: &Path,
+        sim: &Simulation,
+        cursor: OutputCursor,
+        show_progress: bool,
+    ) -> Result<Self, RunError> {
+        let curve =
+            CurveWriter::reopen(&dir.join("curve.csv"), cursor.curve_bytes).map_err(at(sim))?;
+        remove_snapshots_after(dir, sim.model.step).map_err(at(sim))?;
+        if !cursor.snapshots.is_empty() {
+            write_pvd(&dir.join(PVD_FILE), &cursor.snapshots).map_err(at(sim))?;
+        }
+        let progress = progress_bar(sim, show_progress);
+        progress.set_position(progress_position(sim));
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            curve,
+            progress,
+            last_row_step: cursor.last_row_step.unwrap_or(usize::MAX),
+            pending_times: cursor.pending_times,
+            fields: cursor.fields,
+            snapshots: cursor.snapshots,
+            checkpoints: None,
+            resumed: true,
+            stop_after: None,
+            stop: false,
+        })
+    }
+
+    /// Write a checkpoint with `checkpoints` (every N steps and on an
+    /// interruption, see [`Checkpointer`]) and end the run after step
+    /// `stop_after` (test hook).
+    pub fn with_checkpoints(
+        mut self,
+        checkpoints: Option<Checkpointer>,
+        stop_after: Option<usize>,
+    ) -> Self {
+        self.checkpoints = checkpoints;
+        self.stop_after = stop_after;
+        self
+    }
+
+    /// The output cursors now (the `curve.csv` length and checksum are the
+    /// checkpoint writer's to fill in).
+    pub fn cursor(&self) -> OutputCursor {
+        OutputCursor {
+            last_row_step: (self.last_row_step != usize::MAX).then_some(self.last_row_step),
+            pending_times: self.pending_times.clone(),
+            fields: self.fields.clone(),
+            snapshots: self.snapshots.clone(),
+            curve_bytes: 0,
+            curve_checksum: 0,
+        }
+    }
+
+    /// Write a checkpoint of `sim` now, if the run writes checkpoints (the
+    /// step's outputs must be written already). On an interruption it is
+    /// written before the extra last row, which an uninterrupted run would
+    /// not have (the resume cuts it off).
+    pub fn write_checkpoint(&mut self, sim: &Simulation) -> Result<(), RunError> {
+        let cursor = self.cursor();
+        match self.checkpoints.as_mut() {
+            Some(checkpoints) => checkpoints
+                .write(sim, cursor)
+                .map_err(|e| e.at(sim.model.step, sim.model.time)),
+            None => Ok(()),
+        }
+    }
+
+    /// True when the run ended early at the `stop_after` test hook.
+    pub fn stopped(&self) -> bool {
+        self.stop
     }
 
     /// Capture the fields for every snapshot time the run has now reached
@@ -197,8 +293,60 @@ impl OutputObserver {
     }
 }
 
+/// A progress bar over the steps (implicit) or over 1000ths of the end time (explicit).
+fn progress_bar(sim: &Simulation, show: bool) -> ProgressBar {
+    if !show {
+        return ProgressBar::hidden();
+    }
+    let total = match sim.model.analysis() {
+        AnalysisKind::Explicit => 1000,
+        _ => sim.model.scene.scene.steps.unwrap_or(0) as u64,
+    };
+    let bar = ProgressBar::new(total);
+    let template = "{bar:30} {pos}/{len} [{elapsed_precise} < {eta_precise}] {msg}";
+    bar.set_style(
+        ProgressStyle::with_template(template).unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    bar
+}
+
+/// The progress bar's position for `sim`'s step and time.
+fn progress_position(sim: &Simulation) -> u64 {
+    match sim.model.analysis() {
+        AnalysisKind::Explicit => {
+            let end = sim.model.scene.scene.end_time.unwrap_or(1.0);
+            (1000.0 * sim.model.time / end) as u64
+        }
+        _ => sim.model.step as u64,
+    }
+}
+
+/// Remove the snapshots `particles_NNNNNN.vtu` of steps after `step`.
+fn remove_snapshots_after(dir: &Path, step: usize) -> Result<(), OutputError> {
+    let io = |path: &Path, e: std::io::Error| OutputError {
+        path: path.to_path_buf(),
+        source: e,
+    };
+    for entry in std::fs::read_dir(dir).map_err(|e| io(dir, e))? {
+        let path = entry.map_err(|e| io(dir, e))?.path();
+        let later = path
+            .file_name()
+            .and_then(|n| n.to_str())
+            .and_then(|n| n.strip_prefix("particles_")?.strip_suffix(".vtu"))
+            .and_then(|n| n.parse::<usize>().ok())
+            .is_some_and(|n| n > step);
+        if later {
+            std::fs::remove_file(&path).map_err(|e| io(&path, e))?;
+        }
+    }
+    Ok(())
+}
+
 impl Observer for OutputObserver {
     fn on_start(&mut self, sim: &Simulation) -> Result<(), RunError> {
+        if self.resumed {
+            return Ok(());
+        }
         sim.profile.time(Stage::Output, || {
             self.write_row(sim)?;
             let at_time = self.capture_due_times(sim);
@@ -220,8 +368,18 @@ impl Observer for OutputObserver {
                 self.write_snapshot(sim)?;
             }
             self.show_progress(sim, report);
-            Ok(())
-        })
+            Ok::<_, RunError>(())
+        })?;
+        self.stop = self.stop_after == Some(sim.model.step);
+        if !self.stop && self.checkpoints.as_ref().is_some_and(|c| c.due(sim)) {
+            sim.profile
+                .time(Stage::Output, || self.write_checkpoint(sim))?;
+        }
+        Ok(())
+    }
+
+    fn stop_requested(&self) -> bool {
+        self.stop
     }
 
     fn on_interrupt(
@@ -230,12 +388,13 @@ impl Observer for OutputObserver {
         _interruption: Interruption,
     ) -> Result<(), RunError> {
         sim.profile.time(Stage::Output, || {
+            // a checkpoint of this step to resume from, taken before the
+            // row below (which an uninterrupted run would not have)
+            self.write_checkpoint(sim)?;
             // the interrupted step's row, even if `curve_every` skips it
             if self.last_row_step != sim.model.step {
                 self.write_row(sim)?;
             }
-            // checkpoint hook: a checkpoint of this step to resume from is
-            // written here (src/checkpoint/)
             Ok(())
         })
     }
@@ -257,13 +416,22 @@ pub struct RunOutcome {
 }
 
 /// How a run writes its output directory.
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Debug, Default)]
 pub struct RunOptions {
     /// Draw a progress bar on stderr.
     pub show_progress: bool,
     /// Remove an earlier run's files from the directory instead of refusing
     /// it ([`output_dir::prepare`]).
     pub overwrite: bool,
+    /// Write a checkpoint every `every` steps and on an interruption, with
+    /// the scene source `mpm-geo resume` rebuilds the run from
+    /// ([`crate::checkpoint`]); `every = 0`: only on an interruption or
+    /// when asked ([`OutputObserver::write_checkpoint`]).
+    pub checkpoint: Option<(crate::checkpoint::SceneSource, usize)>,
+    /// Test hook: end the run after this step as a kill would (no last row,
+    /// `run.json` left `running`); the simulation in the outcome is then
+    /// not finished.
+    pub stop_after: Option<usize>,
 }
 
 /// Run a validated scene, writing `curve.csv`, snapshots and `run.json` into
@@ -275,7 +443,7 @@ pub fn run_scene(
 ) -> Result<RunOutcome, Box<dyn std::error::Error + Send + Sync>> {
     let options = RunOptions {
         show_progress,
-        overwrite: false,
+        ..RunOptions::default()
     };
     run_scene_with(scene, out, &options)
 }
@@ -301,8 +469,43 @@ pub fn run_scene_with(
     if let Some(implicit) = sim.integrator.implicit_mut() {
         implicit.export_systems(out.join("systems"), systems, max_mb);
     }
+    let checkpoints = match &options.checkpoint {
+        Some((source, every)) => Some(Checkpointer::start(out, source, *every)?),
+        None => None,
+    };
+    let (show, stop_after) = (options.show_progress, options.stop_after);
+    drive(sim, out, start, move |sim| {
+        let observer = sim
+            .profile
+            .time(Stage::Output, || OutputObserver::new(out, sim, show))?;
+        Ok(observer.with_checkpoints(checkpoints, stop_after))
+    })
+}
+
+/// Run `sim` in `out` (locked by the caller) with the observer `make`
+/// gives (a new run's or a resumed one's): `run.json` says `running`, the
+/// time loop, the last row, `run.json` with the end status.
+pub(crate) fn drive(
+    mut sim: Simulation,
+    out: &Path,
+    start: Instant,
+    make: impl FnOnce(&Simulation) -> Result<OutputObserver, RunError>,
+) -> Result<RunOutcome, Box<dyn std::error::Error + Send + Sync>> {
     let mut observer = None;
-    let result = start_and_run(&mut sim, out, options.show_progress, &mut observer);
+    let result = start_and_run(&mut sim, out, make, &mut observer);
+    if let (Ok(_), Some(o)) = (&result, observer.as_mut()) {
+        if o.stopped() {
+            // the stop hook leaves what a kill leaves
+            o.progress.finish_and_clear();
+            return Ok(RunOutcome {
+                wall_seconds: start.elapsed().as_secs_f64(),
+                simulation: sim,
+                error: None,
+                interrupted: None,
+                fields: observer.map(|o| o.fields).unwrap_or_default(),
+            });
+        }
+    }
     let (mut error, interrupted) = match result {
         Ok(RunEnd::Completed) => (None, None),
         Ok(RunEnd::Interrupted(signal)) => (None, Some(signal)),
@@ -337,13 +540,11 @@ pub fn run_scene_with(
 fn start_and_run(
     sim: &mut Simulation,
     out: &Path,
-    show_progress: bool,
+    make: impl FnOnce(&Simulation) -> Result<OutputObserver, RunError>,
     observer: &mut Option<OutputObserver>,
 ) -> Result<RunEnd, RunError> {
     write_run_json(&out.join("run.json"), sim, 0.0, RunStatus::Running).map_err(at(sim))?;
-    let new = sim.profile.time(Stage::Output, || {
-        OutputObserver::new(out, sim, show_progress)
-    })?;
+    let new = make(sim)?;
     sim.run(observer.insert(new))
 }
 

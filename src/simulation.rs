@@ -19,6 +19,11 @@ pub trait Observer {
     fn on_start(&mut self, sim: &Simulation) -> Result<(), RunError>;
     /// Called after every completed step.
     fn on_step(&mut self, sim: &Simulation, report: &StepReport) -> Result<(), RunError>;
+    /// True when the run should end after the step just reported, before its
+    /// end (checked after every step; a test hook that stops as a kill would).
+    fn stop_requested(&self) -> bool {
+        false
+    }
     /// Called once when a signal stops the run, after the `on_step` of the
     /// last completed step: the place to finish that step's outputs and to
     /// leave a checkpoint to resume from. The default does nothing.
@@ -126,7 +131,7 @@ impl Simulation {
     /// in progress and its outputs ([`Observer::on_interrupt`]).
     pub fn run(&mut self, observer: &mut dyn Observer) -> Result<RunEnd, RunError> {
         observer.on_start(self)?;
-        while !self.finished() {
+        while !self.finished() && !observer.stop_requested() {
             let report = self.step_once()?;
             observer.on_step(self, &report)?;
             if let Some(interruption) = interrupt::requested().filter(|_| !self.finished()) {

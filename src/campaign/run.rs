@@ -244,6 +244,7 @@ fn execute(planned: &Planned, out: &Path) -> Result<RunRecord, CampaignError> {
     let options = RunOptions {
         show_progress: false,
         overwrite: true,
+        ..RunOptions::default()
     };
     match run_scene_with(planned.scene.clone(), out, &options) {
         Err(e) => record.error = Some(e.to_string()),
