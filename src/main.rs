@@ -102,6 +102,10 @@ enum Command {
         /// the output directory.
         #[arg(long)]
         collect: bool,
+        /// Checkpoint every run every N steps; a run stopped earlier (a
+        /// killed campaign) is then resumed from its checkpoint.
+        #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
+        checkpoint_every: Option<u64>,
     },
     /// Error against run time: run a study spec's sweep (each run a whole
     /// process, timed `repeats` times) and write study.csv,
@@ -178,6 +182,7 @@ fn main() -> ExitCode {
             formulation,
             shard,
             collect,
+            checkpoint_every,
         } => {
             let part = match parse_part(shard, collect) {
                 Ok(part) => part,
@@ -199,6 +204,7 @@ fn main() -> ExitCode {
                 step_refinement,
                 formulation,
                 part,
+                checkpoint_every: checkpoint_every.map(|n| n as usize),
             };
             match mpm_geo::campaign::run_campaign(&dir, &out, &options) {
                 Ok(runs) => {

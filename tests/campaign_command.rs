@@ -337,3 +337,58 @@ echo $RANDOM
         metrics_without_wall_time(&sharded)
     );
 }
+
+/// Issue 14: a campaign run with `--checkpoint-every` whose run was stopped
+/// mid-way (here by the hidden `--stop-after-step`, as a kill would: no last
+/// row, `run.json` left `running`) resumes that run from its checkpoint when
+/// the campaign is run again, and its curve is byte-identical to an
+/// uninterrupted campaign's.
+#[test]
+fn a_stopped_campaign_run_resumes_from_its_checkpoint() {
+    let dir = tempfile::tempdir().unwrap();
+    let scenes = dir.path().join("scenes");
+    std::fs::create_dir_all(&scenes).unwrap();
+    for name in ["nonlocal_h300.toml", "campaign.toml"] {
+        std::fs::copy(
+            common::validation(&format!("biaxial/{name}")),
+            scenes.join(name),
+        )
+        .unwrap();
+    }
+    let campaign = |out: &std::path::Path| {
+        Command::new(env!("CARGO_BIN_EXE_mpm-geo"))
+            .args(["campaign", scenes.to_str().unwrap(), "--out"])
+            .arg(out)
+            .args(["--set", "scene.steps=30", "--checkpoint-every", "5"])
+            .output()
+            .unwrap()
+    };
+    let whole = dir.path().join("whole");
+    assert!(campaign(&whole).status.success());
+    let stopped = dir.path().join("stopped");
+    let run = Command::new(env!("CARGO_BIN_EXE_mpm-geo"))
+        .arg("run")
+        .arg(scenes.join("nonlocal_h300.toml"))
+        .arg("--out")
+        .arg(stopped.join("nonlocal_h300"))
+        .args(["--set", "scene.steps=30", "--checkpoint-every", "5"])
+        .args(["--stop-after-step", "17", "--quiet"])
+        .status()
+        .unwrap();
+    assert!(run.code().is_some());
+    assert!(stopped.join("nonlocal_h300/checkpoint.bin").exists());
+    let resumed = campaign(&stopped);
+    assert!(resumed.status.success());
+    let stderr = String::from_utf8_lossy(&resumed.stderr);
+    assert!(
+        stderr.contains("resumed from the checkpoint of step 15"),
+        "{stderr}"
+    );
+    let curve = |out: &std::path::Path| std::fs::read(out.join("nonlocal_h300/curve.csv")).unwrap();
+    assert_eq!(curve(&whole), curve(&stopped));
+    assert_eq!(curve(&whole).iter().filter(|&&b| b == b'\n').count(), 32);
+    assert_eq!(
+        metrics_without_wall_time(&whole),
+        metrics_without_wall_time(&stopped)
+    );
+}

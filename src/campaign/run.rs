@@ -11,6 +11,7 @@ use super::record::{fingerprint, Part, RunRecord};
 use super::report::{last_value, read_curve, write_outputs, write_step_convergence};
 use super::spec::{Benchmark, CampaignSpec, SPEC_FILE};
 use super::{CampaignError, CampaignRun, CurveColumns, Effort, EnergyBalance};
+use crate::checkpoint::{Resumable, ResumeOptions, SceneSource};
 use crate::output::deviatoric_hencky_strain;
 use crate::run::{run_scene_with, RunOptions};
 use crate::scene::{Formulation, Scene};
@@ -28,6 +29,9 @@ pub struct CampaignOptions {
     pub formulation: Formulation,
     /// The whole campaign, one shard of it, or the report from the shards.
     pub part: Part,
+    /// Checkpoint every run every N steps, and resume a run stopped earlier
+    /// from its checkpoint.
+    pub checkpoint_every: Option<usize>,
 }
 
 fn scenes_in(dir: &Path) -> Result<Vec<PathBuf>, CampaignError> {
@@ -124,7 +128,7 @@ pub fn run_campaign(
                     break;
                 };
                 let planned = &all[index];
-                let record = execute(planned, &out.join(&planned.name));
+                let record = execute(planned, &out.join(&planned.name), options.checkpoint_every);
                 match &record {
                     Ok(record) => eprintln!(
                         "campaign: {} finished in {:.1} s{}",
@@ -234,19 +238,49 @@ fn refine_steps(name: &str, scene: &Scene, k: usize) -> Result<Scene, CampaignEr
     Ok(refined)
 }
 
-/// Run one planned scene into `out` and leave its [`RunRecord`] there.
-fn execute(planned: &Planned, out: &Path) -> Result<RunRecord, CampaignError> {
+/// Run one planned scene into `out` and leave its [`RunRecord`] there. With
+/// `checkpoint_every`, the run writes checkpoints, and a run of the same
+/// scene stopped earlier in `out` (a killed campaign) is resumed from its
+/// checkpoint instead of started again.
+fn execute(
+    planned: &Planned,
+    out: &Path,
+    checkpoint_every: Option<usize>,
+) -> Result<RunRecord, CampaignError> {
     let mut record = RunRecord::new(planned.fingerprint.clone());
     let start = Instant::now();
-    // the campaign owns its runs' directories: an earlier campaign's files
-    // there (of another scene: a finished run of this one is not run again)
-    // are replaced
-    let options = RunOptions {
-        show_progress: false,
-        overwrite: true,
-        ..RunOptions::default()
+    let outcome = match checkpoint_every.and_then(|_| resumable(planned, out)) {
+        Some(resumable) => {
+            eprintln!(
+                "campaign: {} resumed from the checkpoint of step {}",
+                planned.name,
+                resumable.step()
+            );
+            resumable.run(false, &ResumeOptions::default())
+        }
+        None => {
+            // the campaign owns its runs' directories: an earlier campaign's
+            // files there (of another scene: a finished run of this one is
+            // not run again) are replaced
+            let source = |every| {
+                let text = toml::to_string(&planned.scene).unwrap_or_default();
+                let source = SceneSource {
+                    origin: planned.name.clone(),
+                    text,
+                    overrides: Vec::new(),
+                };
+                (source, every)
+            };
+            let options = RunOptions {
+                show_progress: false,
+                overwrite: true,
+                checkpoint: checkpoint_every.map(source),
+                ..Default::default()
+            };
+            run_scene_with(planned.scene.clone(), out, &options)
+        }
     };
-    match run_scene_with(planned.scene.clone(), out, &options) {
+    match outcome {
         Err(e) => record.error = Some(e.to_string()),
         Ok(outcome) => {
             let model = &outcome.simulation.model;
@@ -280,6 +314,16 @@ fn execute(planned: &Planned, out: &Path) -> Result<RunRecord, CampaignError> {
         record.save(out)?;
     }
     Ok(record)
+}
+
+/// The checkpointed run of `planned`'s scene in `out`, if there is one.
+fn resumable(planned: &Planned, out: &Path) -> Option<Resumable> {
+    if !out.join(crate::checkpoint::CHECKPOINT_FILE).is_file() {
+        return None;
+    }
+    let resumable = Resumable::open(out).ok()?;
+    (fingerprint(resumable.scene(), planned.step_factor) == planned.fingerprint)
+        .then_some(resumable)
 }
 
 /// The campaign run of `planned` from its record and the `curve.csv` in
