@@ -155,7 +155,7 @@ fn a_moved_scene_file_is_the_same_scene() {
 }
 
 #[test]
-fn every_identifier_opens_its_message() {
+fn every_checkpoint_error_has_a_listed_checkpoint_identifier() {
     let errors = [
         CheckpointError::Missing {
             path: "p".into(),
@@ -172,6 +172,11 @@ fn every_identifier_opens_its_message() {
         },
     ];
     for e in errors {
-        assert!(e.to_string().starts_with(&format!("[{}]", e.id())), "{e}");
+        let id = crate::error_id::Identified::error_id(&e);
+        assert!(crate::error_id::ErrorId::ALL.contains(&id));
+        assert!(
+            e.id().starts_with("CHECKPOINT_") && e.id() == id.name(),
+            "{e}"
+        );
     }
 }
