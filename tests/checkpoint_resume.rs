@@ -369,3 +369,72 @@ fn a_checkpoint_written_on_request_at_any_step_resumes_identically() {
         "outputs differ after the resume"
     );
 }
+
+/// Issue 14 check 1 as a user meets it: SIGTERM at whatever step the run
+/// has reached (once `curve.csv` has 20 rows), exit 143 with `run.json`
+/// `interrupted` and a checkpoint of that step, then `resume`: the same
+/// outputs as the uninterrupted run.
+#[cfg(unix)]
+#[test]
+fn sigterm_then_resume_gives_the_uninterrupted_outputs() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = common::validation("vertical_cut/nonlocal_h100.toml");
+    let mut overrides = COARSE.to_vec();
+    overrides.extend(["scene.steps=200", "output.curve_every=3"]);
+    let (straight, killed) = (tmp.path().join("straight"), tmp.path().join("killed"));
+    run(&scene, &straight, &overrides, &[]);
+
+    let mut args = vec![
+        "run".to_string(),
+        scene.display().to_string(),
+        "--quiet".into(),
+        "--out".into(),
+        killed.display().to_string(),
+        "--checkpoint-every".into(),
+        "1000".into(),
+    ];
+    for o in &overrides {
+        args.extend(["--set".to_string(), o.to_string()]);
+    }
+    let mut child = Command::new(env!("CARGO_BIN_EXE_mpm-geo"))
+        .args(&args)
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let rows = || {
+        std::fs::read_to_string(killed.join("curve.csv"))
+            .map(|t| t.lines().count())
+            .unwrap_or(0)
+    };
+    while rows() < 20 {
+        assert!(
+            child.try_wait().unwrap().is_none(),
+            "the run ended before the signal"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    let pid = child.id().to_string();
+    assert!(Command::new("kill")
+        .args(["-TERM", &pid])
+        .status()
+        .unwrap()
+        .success());
+    let code = child.wait().unwrap().code();
+    assert_eq!(code, Some(143));
+    let (state, step) = status(&killed);
+    assert_eq!(state, "interrupted");
+    assert!(step < 200, "interrupted at step {step}");
+
+    let output = resume(&killed, &[]);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "{stderr}");
+    assert!(
+        stderr.contains(&format!("from the checkpoint of step {step}")),
+        "{stderr}"
+    );
+    assert!(
+        outputs(&straight) == outputs(&killed),
+        "outputs differ after SIGTERM and resume (step {step})"
+    );
+    assert_eq!(status(&killed).0, "completed");
+}
