@@ -8,20 +8,31 @@
 
 mod common;
 
+use std::path::{Path, PathBuf};
 use std::process::Command;
 
-#[test]
-fn campaign_writes_curves_metrics_report_and_plots() {
-    let dir = tempfile::tempdir().unwrap();
-    let scenes = dir.path().join("scenes");
+/// A campaign directory `dir/scenes` holding copies of the named files of
+/// `validation/biaxial/`.
+fn biaxial_scenes(dir: &Path, names: &[&str]) -> PathBuf {
+    let scenes = dir.join("scenes");
     std::fs::create_dir_all(&scenes).unwrap();
-    for name in ["local_h300.toml", "nonlocal_h300.toml", "campaign.toml"] {
+    for name in names {
         std::fs::copy(
             common::validation(&format!("biaxial/{name}")),
             scenes.join(name),
         )
         .unwrap();
     }
+    scenes
+}
+
+#[test]
+fn campaign_writes_curves_metrics_report_and_plots() {
+    let dir = tempfile::tempdir().unwrap();
+    let scenes = biaxial_scenes(
+        dir.path(),
+        &["local_h300.toml", "nonlocal_h300.toml", "campaign.toml"],
+    );
     let out = dir.path().join("out");
     let status = Command::new(env!("CARGO_BIN_EXE_mpm-geo"))
         .args([
@@ -193,20 +204,15 @@ fn metrics_without_wall_time(out: &std::path::Path) -> Vec<Vec<String>> {
 #[test]
 fn sharded_campaign_collects_to_the_same_report_and_a_rerun_runs_nothing() {
     let dir = tempfile::tempdir().unwrap();
-    let scenes = dir.path().join("scenes");
-    std::fs::create_dir_all(&scenes).unwrap();
-    for name in [
-        "local_h300.toml",
-        "nonlocal_h300.toml",
-        "local_h500.toml",
-        "campaign.toml",
-    ] {
-        std::fs::copy(
-            common::validation(&format!("biaxial/{name}")),
-            scenes.join(name),
-        )
-        .unwrap();
-    }
+    let scenes = biaxial_scenes(
+        dir.path(),
+        &[
+            "local_h300.toml",
+            "nonlocal_h300.toml",
+            "local_h500.toml",
+            "campaign.toml",
+        ],
+    );
     let campaign = |out: &std::path::Path, extra: &[&str]| {
         Command::new(env!("CARGO_BIN_EXE_mpm-geo"))
             .args(["campaign", scenes.to_str().unwrap(), "--out"])
@@ -272,15 +278,10 @@ fn sharded_campaign_collects_to_the_same_report_and_a_rerun_runs_nothing() {
 #[test]
 fn slurm_script_runs_the_shards_and_collects() {
     let dir = tempfile::tempdir().unwrap();
-    let scenes = dir.path().join("scenes");
-    std::fs::create_dir_all(&scenes).unwrap();
-    for name in ["local_h300.toml", "nonlocal_h300.toml", "campaign.toml"] {
-        std::fs::copy(
-            common::validation(&format!("biaxial/{name}")),
-            scenes.join(name),
-        )
-        .unwrap();
-    }
+    let scenes = biaxial_scenes(
+        dir.path(),
+        &["local_h300.toml", "nonlocal_h300.toml", "campaign.toml"],
+    );
     // stand-in sbatch: --array=1-N runs --wrap N times with SLURM_ARRAY_TASK_ID
     let bin = dir.path().join("bin");
     std::fs::create_dir_all(&bin).unwrap();
@@ -346,15 +347,7 @@ echo $RANDOM
 #[test]
 fn a_stopped_campaign_run_resumes_from_its_checkpoint() {
     let dir = tempfile::tempdir().unwrap();
-    let scenes = dir.path().join("scenes");
-    std::fs::create_dir_all(&scenes).unwrap();
-    for name in ["nonlocal_h300.toml", "campaign.toml"] {
-        std::fs::copy(
-            common::validation(&format!("biaxial/{name}")),
-            scenes.join(name),
-        )
-        .unwrap();
-    }
+    let scenes = biaxial_scenes(dir.path(), &["nonlocal_h300.toml", "campaign.toml"]);
     let campaign = |out: &std::path::Path| {
         Command::new(env!("CARGO_BIN_EXE_mpm-geo"))
             .args(["campaign", scenes.to_str().unwrap(), "--out"])
