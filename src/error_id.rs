@@ -4,7 +4,7 @@
 //! records the identifier of the error that stopped a run (`error_id`), and
 //! the user guide (`docs/guide.md` §11) lists every identifier with what it
 //! means and what to do about it. The list is defined once, here, by
-//! [`error_ids!`]; `mpm-geo errors` prints it as the guide's table, and
+//! `error_ids!`; `mpm-geo errors` prints it as the guide's table, and
 //! `tests/guide.rs` checks that the guide holds exactly that table.
 //!
 //! [`identify`] finds the identifier of any error the library returns,

@@ -15,9 +15,9 @@
 //! m = [1, 1, 1, 0] and V_c = Σ_{q∈c} V_q over the points q of p's cell c:
 //!
 //! ```text
-//!   θ̄_c  = Σ_{q∈c} V_q θ_q / V_c                                   [B1]
-//!   Δε̄_p = Δε_p + ⅓ (θ̄_c − θ_p) m                                  [B2]
-//!   B̄_p  = B_p + ⅓ m ⊗ (b̄_c − b_p),  b̄_c = Σ_{q∈c} V_q b_q / V_c     [B3]
+//!   θ̄_c  = Σ_{q∈c} V_q θ_q / V_c                                   \[B1\]
+//!   Δε̄_p = Δε_p + ⅓ (θ̄_c − θ_p) m                                  \[B2\]
+//!   B̄_p  = B_p + ⅓ m ⊗ (b̄_c − b_p),  b̄_c = Σ_{q∈c} V_q b_q / V_c     \[B3\]
 //! ```
 //!
 //! where b_p is the row of nodal dofs giving θ_p (b_p,(a,x) = ∂N_a/∂x,
@@ -26,10 +26,10 @@
 //! volume average,
 //!
 //! ```text
-//!   σ̄_p = σ_p + (s̄_c − s_p) m,  s_p = tr σ_p / 3,  s̄_c = Σ_{q∈c} V_q s_q / V_c   [B4]
+//!   σ̄_p = σ_p + (s̄_c − s_p) m,  s_p = tr σ_p / 3,  s̄_c = Σ_{q∈c} V_q s_q / V_c   \[B4\]
 //! ```
 //!
-//! (sum [B3] over the cell), so the one internal-force kernel of
+//! (sum \[B3\] over the cell), so the one internal-force kernel of
 //! [`crate::transfer::internal_force`] serves both treatments. The consistent
 //! tangent is Σ_p V_p B̄_pᵀ D_alg B̄_p (plus the spin term with B̄ on the
 //! left); B̄_p spans the whole node patch of the cell, so with GIMP every
@@ -51,7 +51,7 @@ fn dilatation(gradient: &[f64; 4]) -> f64 {
     gradient[0] + gradient[3]
 }
 
-/// ⅓ (θ̄_c − θ_p) for every point p ([B1]–[B2]): the amount added to the
+/// ⅓ (θ̄_c − θ_p) for every point p (\[B1\]–\[B2\]): the amount added to the
 /// xx, yy and zz components of its strain increment.
 pub fn dilatation_corrections(
     bins: &ParticleBins,
@@ -69,7 +69,7 @@ pub fn dilatation_corrections(
     correction
 }
 
-/// The strain increment [B2]: `strain` with ⅓ (θ̄_c − θ_p) = `correction`
+/// The strain increment \[B2\]: `strain` with ⅓ (θ̄_c − θ_p) = `correction`
 /// added to its normal components.
 #[inline]
 pub fn corrected_strain(strain: &Voigt, correction: f64) -> Voigt {
@@ -82,7 +82,7 @@ pub fn corrected_strain(strain: &Voigt, correction: f64) -> Voigt {
 }
 
 /// The stresses whose standard internal force is the B-bar internal force
-/// ([B4]): each point's mean stress replaced by its cell's volume average.
+/// (\[B4\]): each point's mean stress replaced by its cell's volume average.
 pub fn force_stresses(bins: &ParticleBins, volume: &[f64], stress: &[Voigt]) -> Vec<Voigt> {
     let mean: Vec<f64> = stress.iter().map(|s| (s[0] + s[1] + s[2]) / 3.0).collect();
     let mut out = stress.to_vec();
@@ -117,7 +117,7 @@ fn cell_averages<'a>(
     })
 }
 
-/// b̄_c of [B3] for every active cell (in the order of
+/// b̄_c of \[B3\] for every active cell (in the order of
 /// `bins.active_cells`): the volume-averaged gradient row of the dilatation
 /// over the cell's node patch, `[∂x, ∂y]` per patch place.
 #[derive(Clone, Debug, Default)]
@@ -162,7 +162,7 @@ impl CellMeanGradients {
     }
 }
 
-/// B̄_p of [B3] as a dense 4 × `2·places` matrix over the cell's patch dofs
+/// B̄_p of \[B3\] as a dense 4 × `2·places` matrix over the cell's patch dofs
 /// (dof `2·place + direction`), row-major in `out` (resized).
 pub fn b_bar_matrix(shape: &ShapeAt, mean_gradient: &[[f64; 2]], out: &mut Vec<f64>) {
     let dofs = 2 * mean_gradient.len();
@@ -261,8 +261,8 @@ mod tests {
             .collect()
     }
 
-    /// B̄_p u equals the averaged strain [B2] of the point's own gradient,
-    /// for arbitrary nodal values: checks [B3] against [B1]–[B2].
+    /// B̄_p u equals the averaged strain \[B2\] of the point's own gradient,
+    /// for arbitrary nodal values: checks \[B3\] against \[B1\]–\[B2\].
     #[test]
     fn b_bar_matrix_gives_the_averaged_strain() {
         for kind in kinds() {
@@ -336,7 +336,7 @@ mod tests {
     }
 
     /// Σ_p V_p B̄_pᵀ σ_p (dense B̄) equals the standard force of the
-    /// averaged-mean stresses [B4].
+    /// averaged-mean stresses \[B4\].
     #[test]
     fn force_of_averaged_mean_stress_is_the_b_bar_force() {
         for kind in kinds() {

@@ -14,7 +14,7 @@
 //!   orderings), preconditioned conjugate gradients ([`Pcg`]: Jacobi or IC(0)) and, with the
 //!   `ldl` feature, sprs_ldl's LDLᵀ behind one front, falling back to LU (recorded) where a
 //!   method does not apply;
-//! * [`mm`] writes and reads systems in Matrix Market format, and [`bench`] runs every solver
+//! * [`mm`] writes and reads systems in Matrix Market format, and [`mod@bench`] runs every solver
 //!   on a directory of them (`mpm-solvers bench`).
 
 mod assembly;

@@ -68,7 +68,7 @@ pub fn soil_inside_outline(
 }
 
 /// Share of the deviatoric strain Σ V_p εq_p that lies in the strip under
-/// each footing corner ([`CORNER_STRIP_DEPTH`], [`CORNER_STRIP_HALF_WIDTH`]),
+/// each footing corner (`CORNER_STRIP_DEPTH`, `CORNER_STRIP_HALF_WIDTH`),
 /// at penetration `delta`: `[left, right]`. A secondary vertical band under a
 /// corner raises its share; a Prandtl mechanism alone crosses the strip only
 /// with its fan near the corner.

@@ -124,22 +124,22 @@ impl History {
 /// The metrics of one time-history run (DESIGN §9 M1 and M6, issue 12).
 #[derive(Clone, Debug, Default)]
 pub struct HistoryMetrics {
-    /// First time |u_A| > [`ONSET_DISPLACEMENT`], s.
+    /// First time |u_A| > `ONSET_DISPLACEMENT`, s.
     pub onset: Option<f64>,
-    /// |u_A| at [`COMPARISON_TIME`], m.
+    /// |u_A| at `COMPARISON_TIME`, m.
     pub displacement_at_comparison: Option<f64>,
     /// |u_A| at the end, m.
     pub final_displacement: f64,
     /// Run-out front at the end, m.
     pub final_run_out: Option<f64>,
-    /// Peak q_B of the failure phase (kPa, up to [`PEAK_WINDOW`] after the
+    /// Peak q_B of the failure phase (kPa, up to `PEAK_WINDOW` after the
     /// onset) and its time (s).
     pub stress_peak: Option<(f64, f64)>,
-    /// Total variation of q_B from that peak to [`FALL_WINDOW`] after the
+    /// Total variation of q_B from that peak to `FALL_WINDOW` after the
     /// onset over its net drop (1: monotone fall).
     pub stress_roughness: Option<f64>,
     /// Reversals of q_B after the onset, with a hysteresis of
-    /// [`REVERSAL_THRESHOLD`] q_peak (M6 noise index).
+    /// `REVERSAL_THRESHOLD` q_peak (M6 noise index).
     pub stress_reversals: Option<usize>,
     /// M1 \[D42\] of u_A(t) on [0, t_end] against the family reference.
     pub discrepancy: Option<f64>,

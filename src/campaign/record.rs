@@ -29,9 +29,9 @@ const RECORD_FORMAT: u32 = 1;
 /// A finished run, as the report needs it (the curve is read from `curve.csv`).
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct RunRecord {
-    /// [`RECORD_FORMAT`] of the writer.
+    /// Version of the record layout that wrote it.
     pub format: u32,
-    /// [`fingerprint`] of the scene the run was made from.
+    /// Fingerprint (the function `fingerprint`) of the scene the run was made from.
     pub fingerprint: String,
     /// The error that stopped the run, if any.
     pub error: Option<String>,

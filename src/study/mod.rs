@@ -8,7 +8,7 @@
 //! one reference run, or each series against its own finest run. Every run
 //! is first built and validated ([`StudySpec::plan`]), then run as a whole
 //! `mpm-geo run` process on its resolved `scene.toml`, one at a time, timed
-//! `repeats` times ([`execute`]). Outputs ([`report`]): `study.csv`,
+//! `repeats` times (`execute.rs`). Outputs (`report.rs`): `study.csv`,
 //! `work_precision.png` (log–log error against median wall time, one line per
 //! method, the Pareto front marked) and `report.md` (Pareto-optimal runs,
 //! crossover points, observed orders of convergence).
