@@ -213,8 +213,38 @@ pub fn add_spin_stiffness(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
+
+    /// Σ over the active `cells` of each patch block times the nodal
+    /// displacements `u` of its patch: the assembled K u, per node.
+    pub(crate) fn blocks_times(
+        grid: &Grid,
+        cells: &[u32],
+        blocks: &[Vec<f64>],
+        u: &[[f64; 2]],
+    ) -> Vec<[f64; 2]> {
+        let dofs = patch_dofs(grid);
+        let mut ku = vec![[0.0; 2]; grid.node_count()];
+        for (block, &c) in blocks.iter().zip(cells) {
+            let (ci, cj) = grid.cell_ij(c as usize);
+            let nodes = grid.patch_nodes(ci, cj);
+            for (ra, node_a) in nodes.iter().enumerate() {
+                for (rb, node_b) in nodes.iter().enumerate() {
+                    let (Some(na), Some(nb)) = (node_a, node_b) else {
+                        continue;
+                    };
+                    for r in 0..2 {
+                        for e in 0..2 {
+                            ku[*na as usize][r] +=
+                                block[(2 * ra + r) * dofs + 2 * rb + e] * u[*nb as usize][e];
+                        }
+                    }
+                }
+            }
+        }
+        ku
+    }
     use crate::transfer::tests::{kinds, setup};
     use crate::transfer::{gradient, internal_force, shapes_at, strain_and_spin};
 
@@ -282,25 +312,7 @@ mod tests {
             let f = internal_force(&grid, &bins, &shapes, &vol, &stress);
             let blocks =
                 cell_stiffness_blocks(&grid, &bins, &shapes, &vol, &vec![d; pos.len()], None, None);
-            let dofs = patch_dofs(&grid);
-            let mut ku = vec![[0.0; 2]; grid.node_count()];
-            for (block, &c) in blocks.iter().zip(&bins.active_cells) {
-                let (ci, cj) = grid.cell_ij(c as usize);
-                let nodes = grid.patch_nodes(ci, cj);
-                for (ra, node_a) in nodes.iter().enumerate() {
-                    for (rb, node_b) in nodes.iter().enumerate() {
-                        let (Some(na), Some(nb)) = (node_a, node_b) else {
-                            continue;
-                        };
-                        for r in 0..2 {
-                            for e in 0..2 {
-                                ku[*na as usize][r] +=
-                                    block[(2 * ra + r) * dofs + 2 * rb + e] * u[*nb as usize][e];
-                            }
-                        }
-                    }
-                }
-            }
+            let ku = blocks_times(&grid, &bins.active_cells, &blocks, &u);
             let scale = f
                 .iter()
                 .fold(0.0f64, |m, v| m.max(v[0].abs()).max(v[1].abs()));

@@ -246,7 +246,8 @@ pub fn add_particle_stiffness_b_bar(
 mod tests {
     use super::*;
     use crate::constitutive::{mat4_mul_vec, LinearElastic};
-    use crate::stiffness::patch_dofs;
+    use crate::stiffness::cell_stiffness_blocks;
+    use crate::stiffness::tests::blocks_times;
     use crate::transfer::tests::{kinds, setup};
     use crate::transfer::{gradient, internal_force, shapes_at, strain_and_spin};
 
@@ -416,32 +417,11 @@ mod tests {
             );
             let side = grid.patch_side();
             let means = CellMeanGradients::new(&bins, &shapes, &vol, side * side);
-            let dofs = patch_dofs(&grid);
-            let mut ku = vec![[0.0; 2]; grid.node_count()];
-            let mut b = Vec::new();
-            for (slot, &c) in bins.active_cells.iter().enumerate() {
-                let mut block = vec![0.0; dofs * dofs];
-                for &p in bins.particles_in(c as usize) {
-                    let s = &shapes[p as usize];
-                    b_bar_matrix(s, means.of_slot(slot), &mut b);
-                    add_particle_stiffness_b_bar(&mut block, s, &b, vol[p as usize], &d, None);
-                }
-                let (ci, cj) = grid.cell_ij(c as usize);
-                let nodes = grid.patch_nodes(ci, cj);
-                for (ra, na) in nodes.iter().enumerate() {
-                    for (rb, nb) in nodes.iter().enumerate() {
-                        let (Some(na), Some(nb)) = (na, nb) else {
-                            continue;
-                        };
-                        for r in 0..2 {
-                            for e in 0..2 {
-                                ku[*na as usize][r] +=
-                                    block[(2 * ra + r) * dofs + 2 * rb + e] * u[*nb as usize][e];
-                            }
-                        }
-                    }
-                }
-            }
+            // the production assembly of the B-bar blocks (B3)
+            let tangents = vec![d; pos.len()];
+            let blocks =
+                cell_stiffness_blocks(&grid, &bins, &shapes, &vol, &tangents, None, Some(&means));
+            let ku = blocks_times(&grid, &bins.active_cells, &blocks, &u);
             let scale = f
                 .iter()
                 .fold(0.0f64, |m, v| m.max(v[0].abs()).max(v[1].abs()));
