@@ -18,39 +18,33 @@
 //!
 //! * A cell-linked list of bin size `R_c` (enlarged by a relative 1e-9 so that floating-point
 //!   rounding in the bin index can never hide a neighbour at distance exactly `R_c`). It is
-//!   stored without a dense grid: MPs are sorted by the key `(group, bin_y, bin_x)`, so that the
-//!   three bins `bin_x − 1 ..= bin_x + 1` of one bin row of one group form a single contiguous
-//!   slice, found by binary search. Memory is `O(N)` whatever the spread of the points.
+//!   stored without a dense grid: MPs are sorted by the key `(group, bin_y, bin_x, sub-bin)`,
+//!   the sub-bins splitting a bin into patches of about 128 MPs. Memory is `O(N)` whatever the
+//!   spread of the points.
+//! * Tiles: the key-ordered MPs are cut into runs of ≤ 128 MPs of one bin row (compact
+//!   patches, thanks to the sub-bins), and every pair of tiles whose bounding boxes come
+//!   within `R_c` is listed once (`SymmetricPlan`). All sums run over tile pairs: one task per
+//!   pair, private partial sums for both tiles, then per MP the partials in a fixed pair
+//!   order, so every result is bit-identical for any number of rayon threads.
 //! * The denominators `Σ_s w V_s` are computed once per operator, at the first call with a
-//!   nonzero field (so never in an elastic step), over all pairs (no pair list of all MPs is
-//!   stored: neighbour counts reach ~7000 per MP, DESIGN §6), by a symmetric pass that evaluates the kernel once per unordered pair: the key-ordered MPs are
-//!   cut into tiles of ≤ 128 MPs of one bin row, every pair of nearby tiles is a parallel task
-//!   with private partial sums for both tiles, and the partials are added per MP in a fixed
-//!   tile-pair order. The same pass gives the numerators of a mostly nonzero field without
-//!   cache.
+//!   nonzero field (so never in an elastic step), evaluating the kernel once per unordered
+//!   pair. The same pass gives the numerators of a mostly nonzero field without cache, in the
+//!   denominators' order: a field equal to 1 is reproduced bit-exactly and any uniform field
+//!   to a few ulps.
 //! * Weight cache for \[D36\]: the weights are fixed within a step while `average` runs once
 //!   per Newton iteration, and only the plastic MPs (`Δκ_q ≠ 0`) are sources.
-//!   [`NonlocalAverager::cache_sources`] stores `w(|x_p − x_q|) V_q` for a source set (the
-//!   engine passes the increments of the first iteration of the step, later iterations add
-//!   further blocks for sources that became plastic), for all receivers within `R_c`, in
-//!   *gather* CSR form: per receiver `p` the list `(slot(q), w V_q)`. An iteration then costs
-//!   one multiply-add per cached pair (12 bytes streamed, no `sqrt`/`exp`) instead of a
-//!   distance, a square root and an exponential. Gather rather than scatter (per source a
-//!   receiver list) because every output entry is then summed by one task in a fixed order
-//!   (deterministic, no atomics or per-thread buffers) and a source that stopped yielding costs
-//!   one multiply by zero. The pair count is bounded by a budget (default
-//!   [`DEFAULT_PAIR_BUDGET`]); sources beyond it, and uncached sources with `field_q ≠ 0`, are
-//!   evaluated on the fly.
-//! * [`NonlocalAverager::average`] compacts the nonzero uncached entries of the field (in the
-//!   sorted order) and *gathers* for every output MP first the cached rows, then the on-the-fly
-//!   sources. Every output entry is summed by one task in a fixed order (cache blocks, four
-//!   interleaved partial sums per row; on-the-fly rows `dy = −1, 0, 1`, then sorted order): the
-//!   result is bit-identical for any number of rayon threads, and equals the uncached
-//!   evaluation up to summation order (tested to 1e−12 relative to `max|field|`).
-//! * Without a cache and for a field nonzero at more than half of the MPs, the numerator is
-//!   computed by the symmetric pass of the denominators, in exactly their order, with the term
-//!   `w · (V_q f_q)` against `w · V_q`; a field equal to 1 is thus reproduced bit-exactly and
-//!   any uniform field to a few ulps.
+//!   [`NonlocalAverager::cache_sources`] stores, for every tile pair around a source tile, the
+//!   dense block of `w(|x_p − x_q|)` (8 bytes a pair of MPs, no index; at the first call filled
+//!   by the denominators' pass itself). `w` is symmetric, so one block read serves both tiles:
+//!   row dot products for the receivers of one, row-wise axpys from the sources of the other.
+//!   Measured on the biaxial lattice (6,000 MPs, ~4,700 neighbours each, every MP a source):
+//!   7 ms per average against 34 ms with the gather lists of (receiver, source, `w V`) it
+//!   replaces, and 92 ms against 404 ms for denominators plus cache. The stored weights are
+//!   bounded by a budget (default [`DEFAULT_PAIR_BUDGET`]); tile pairs beyond it, and
+//!   uncached pairs with a source, are evaluated on the fly.
+//! * [`NonlocalAverager::average`] skips every tile pair whose source tile has no nonzero
+//!   entry; the result equals the uncached evaluation up to summation order (tested to
+//!   1e−12 relative to `max|field|`).
 
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -67,22 +61,13 @@ const BIN_SAFETY: f64 = 1.0 + 1e-9;
 /// Minimum number of output MPs per rayon task.
 const MIN_CHUNK: usize = 64;
 
-/// Default budget of cached weight pairs of [`NonlocalAverager::cache_sources`]: 64 Mi pairs,
-/// 12 bytes each (768 MiB). Sources beyond it are evaluated on the fly (DESIGN §6 warns that
-/// a full pair list of the footing at h = 0.1 would hold ~350M pairs).
+/// Default budget of stored weights of [`NonlocalAverager::cache_sources`]: 64 Mi weights,
+/// 8 bytes each (512 MiB). Tiles beyond it are evaluated on the fly (DESIGN §6 warns that a
+/// full pair list of the footing at h = 0.1 would hold ~350M pairs).
 pub const DEFAULT_PAIR_BUDGET: usize = 64 << 20;
-
-/// Maximum number of CSR blocks of the cache; later new sources are evaluated on the fly.
-const MAX_BLOCKS: usize = 8;
-
-/// Receivers per chunk of a cache block (unit of parallel work of the cached average).
-const CACHE_CHUNK: usize = 128;
 
 /// MPs per tile of the symmetric pair pass ([`SymmetricPlan`]).
 const TILE: usize = 128;
-
-/// Slot marker of an MP that is not cached.
-const NO_SLOT: u32 = u32::MAX;
 
 /// Parameters of the nonlocal averaging (DESIGN §6, \[D33\]–\[D34\]; paper eq. 6).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -191,12 +176,15 @@ fn kernel(r2: f64, inv_l2: f64) -> f64 {
     r2.sqrt() * inv_l2 * (-(r2 * inv_l2)).exp()
 }
 
-/// Sort key of an MP: group first, then bin row, then bin column.
+/// Sort key of an MP: group first, then bin row, bin column, and the sub-bin within the bin
+/// (row-major), so that consecutive MPs of a bin, and hence the tiles of the
+/// [`SymmetricPlan`], are compact patches rather than strips across the bin.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
 struct BinKey {
     group: u16,
     by: i64,
     bx: i64,
+    sub: u32,
 }
 
 /// A list of sources in `BinKey` order (structure of arrays).
@@ -224,42 +212,6 @@ impl SourceList {
         self.x.push(x);
         self.y.push(y);
         self.s.push(s);
-    }
-
-    /// Calls `visit(j, r², s_j)` for every source `j` (index in this list) of `key.group` in
-    /// the 3×3 bins around `key` with `r² ≤ rc2`, in a fixed order (rows `by − 1, by, by + 1`,
-    /// then list order).
-    #[inline]
-    fn for_each_neighbour(
-        &self,
-        key: BinKey,
-        px: f64,
-        py: f64,
-        rc2: f64,
-        mut visit: impl FnMut(usize, f64, f64),
-    ) {
-        for dy in -1..=1 {
-            let lo_key = BinKey {
-                group: key.group,
-                by: key.by + dy,
-                bx: key.bx - 1,
-            };
-            let hi_key = BinKey {
-                bx: key.bx + 1,
-                ..lo_key
-            };
-            let lo = self.keys.partition_point(|k| *k < lo_key);
-            let hi = lo + self.keys[lo..].partition_point(|k| *k <= hi_key);
-            let (xs, ys, ss) = (&self.x[lo..hi], &self.y[lo..hi], &self.s[lo..hi]);
-            for j in 0..xs.len() {
-                let dx = px - xs[j];
-                let dyv = py - ys[j];
-                let r2 = dx * dx + dyv * dyv;
-                if r2 <= rc2 {
-                    visit(lo + j, r2, ss[j]);
-                }
-            }
-        }
     }
 }
 
@@ -300,87 +252,83 @@ struct Weights {
     plan: SymmetricPlan,
     /// `Σ_s w(|x_p − x_s|) V_s`; 0 for an isolated MP.
     den: Vec<f64>,
-    /// Number of same-group neighbours within `R_c` of every MP (itself excluded): an upper
-    /// bound of the cached pairs a source adds (budget check).
-    counts: Vec<u32>,
     /// Neighbour count statistics (min, mean, max) over all MPs.
     stats: (usize, f64, usize),
 }
 
-/// Weights `w(|x_p − x_q|) V_q` of \[D34\] cached for a set of sources (the MPs plastic in the
-/// step), reused by every [`NonlocalAverager::average`] call of the step (\[D36\]).
+impl Weights {
+    /// Denominators, counts and their statistics from the symmetric pass with `s = V`.
+    fn from_sums(plan: SymmetricPlan, results: &[(f64, usize)]) -> Self {
+        let n = results.len();
+        let den: Vec<f64> = results.iter().map(|r| r.0).collect();
+        let stats = if n == 0 {
+            (0, 0.0, 0)
+        } else {
+            let min = results.iter().map(|r| r.1).min().unwrap_or(0);
+            let max = results.iter().map(|r| r.1).max().unwrap_or(0);
+            let mean = results.iter().map(|r| r.1 as f64).sum::<f64>() / n as f64;
+            (min, mean, max)
+        };
+        Weights { plan, den, stats }
+    }
+}
+
+/// Weights `w(|x_p − x_q|)` of \[D34\] cached for the tile pairs around the step's plastic
+/// sources, reused by every [`NonlocalAverager::average`] call of the step (\[D36\]).
 ///
-/// Every cached source has a *slot* (0, 1, … in the order of caching). The weights are held
-/// in gather form, one CSR block per call of [`NonlocalAverager::cache_sources`] that added
-/// sources: for each receiver `p` (key order) the `(slot, w V_q)` of the block's sources within
-/// `R_c`, `q ≠ p`, in the fixed visiting order of the cell list.
+/// One dense block per cached pair `(I, J)` of tiles of the [`SymmetricPlan`]: row `p` holds
+/// the weights from the `p`-th MP of tile `I` to every MP of tile `J` (zero beyond `R_c` and
+/// between coincident MPs). `w` is symmetric, so one block serves both directions: receivers
+/// in `I` gather `W_IJ (V f)_J` (row dot products) and receivers in `J` gather `W_IJᵀ (V f)_I`
+/// (row-wise axpy). A diagonal pair (`I = J`) holds the full square. Per cached pair of MPs
+/// this is 8 bytes, read in contiguous rows (no index), once per unordered pair and call.
 #[derive(Debug, Clone, Default)]
 struct WeightCache {
-    /// `slot_of[k]` = slot of the MP with key-order index `k`, or [`NO_SLOT`].
-    slot_of: Vec<u32>,
-    /// `slot_key[s]` = key-order index of the MP in slot `s`.
-    slot_key: Vec<u32>,
-    /// CSR blocks, summed in this order.
-    blocks: Vec<CacheBlock>,
-    /// Total number of cached pairs over all blocks.
+    /// `blocks[e]`: the weight block of tile pair `e` of the plan (empty if not cached).
+    blocks: Vec<Vec<f64>>,
+    /// Tiles every pair of which is cached.
+    tile_cached: Vec<bool>,
+    /// Per MP (key order): a candidate of [`NonlocalAverager::cache_sources`] in a cached tile.
+    source_cached: Vec<bool>,
+    /// Number of `true` entries of `source_cached`.
+    sources: usize,
+    /// Number of cached blocks (nonempty entries of `blocks`).
+    block_count: usize,
+    /// Stored weights over all blocks.
     pairs: usize,
-    /// Maximum number of cached pairs (memory budget, 12 bytes a pair).
+    /// Maximum number of stored weights (memory budget, 8 bytes each).
     budget: usize,
 }
 
-/// One block of [`WeightCache`]: CSR in gather form, split into chunks of [`CACHE_CHUNK`]
-/// consecutive receivers (key order) so that it is built in one parallel pass without a
-/// counting pass; chunk `c` holds the rows of receivers `c·CACHE_CHUNK ..`.
-#[derive(Debug, Clone, Default)]
-struct CacheBlock {
-    chunks: Vec<CacheChunk>,
-}
-
-/// Rows of [`CACHE_CHUNK`] consecutive receivers of a [`CacheBlock`].
-#[derive(Debug, Clone, Default)]
-struct CacheChunk {
-    /// Local row `i` is `row_ptr[i] .. row_ptr[i + 1]`.
-    row_ptr: Vec<u32>,
-    /// Slot of the source of each entry.
-    slot: Vec<u32>,
-    /// `w(|x_p − x_q|) V_q` of each entry.
-    wv: Vec<f64>,
-}
-
-impl CacheChunk {
-    /// `Σ_j wv_j f_slot(j)` over local row `i`, with four interleaved partial sums (fixed
-    /// order, independent of the thread count).
-    #[inline]
-    fn row_dot(&self, i: usize, slot_field: &[f64]) -> f64 {
-        let (lo, hi) = (self.row_ptr[i] as usize, self.row_ptr[i + 1] as usize);
-        let (slots, wv) = (&self.slot[lo..hi], &self.wv[lo..hi]);
-        let mut acc = [0.0f64; 4];
-        let mut sc = slots.chunks_exact(4);
-        let mut wc = wv.chunks_exact(4);
-        for (s4, w4) in (&mut sc).zip(&mut wc) {
-            for l in 0..4 {
-                acc[l] += w4[l] * slot_field[s4[l] as usize];
-            }
+impl WeightCache {
+    fn new(budget: usize) -> Self {
+        Self {
+            budget,
+            ..Self::default()
         }
-        let mut tail = 0.0;
-        for (s, w) in sc.remainder().iter().zip(wc.remainder()) {
-            tail += w * slot_field[*s as usize];
-        }
-        ((acc[0] + acc[1]) + (acc[2] + acc[3])) + tail
+    }
+
+    /// The block of tile pair `e`, if cached.
+    fn block(&self, e: usize) -> Option<&[f64]> {
+        self.blocks
+            .get(e)
+            .filter(|b| !b.is_empty())
+            .map(Vec::as_slice)
     }
 }
 
 /// Cache statistics of a [`NonlocalAverager`] (see [`NonlocalAverager::cache_stats`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct CacheStats {
-    /// Number of cached sources.
+    /// Number of cached sources (candidates of [`NonlocalAverager::cache_sources`] whose
+    /// weights to every receiver are stored).
     pub sources: usize,
-    /// Number of cached pairs `(p, q)`.
+    /// Number of stored weights (pairs `(p, q)` of MPs of cached tile pairs, within `R_c` or
+    /// not; an unordered pair is stored once).
     pub pairs: usize,
-    /// Number of CSR blocks (one per [`NonlocalAverager::cache_sources`] call that added
-    /// sources).
+    /// Number of cached tile-pair blocks.
     pub blocks: usize,
-    /// Pair budget ([`NonlocalAverager::set_pair_budget`]).
+    /// Budget of stored weights ([`NonlocalAverager::set_pair_budget`]).
     pub budget: usize,
 }
 
@@ -417,10 +365,27 @@ impl NonlocalAverager {
             origin[0] = origin[0].min(p[0]);
             origin[1] = origin[1].min(p[1]);
         }
-        let key_of = |i: usize| BinKey {
-            group: groups[i],
-            by: ((positions[i][1] - origin[1]) / bin).floor() as i64,
-            bx: ((positions[i][0] - origin[0]) / bin).floor() as i64,
+        let bin_of = |i: usize| {
+            [
+                ((positions[i][0] - origin[0]) / bin).floor() as i64,
+                ((positions[i][1] - origin[1]) / bin).floor() as i64,
+            ]
+        };
+        let subdivisions = sub_bins_per_side(n, (0..n).map(|i| (groups[i], bin_of(i))));
+        let key_of = |i: usize| {
+            let [bx, by] = bin_of(i);
+            let sub_bin = bin / subdivisions as f64;
+            let sub_index = |x: f64, b: i64, o: f64| {
+                (((x - o - b as f64 * bin) / sub_bin).floor() as i64).clamp(0, subdivisions - 1)
+            };
+            let sx = sub_index(positions[i][0], bx, origin[0]);
+            let sy = sub_index(positions[i][1], by, origin[1]);
+            BinKey {
+                group: groups[i],
+                by,
+                bx,
+                sub: (sy * subdivisions + sx) as u32,
+            }
         };
         let mut order: Vec<usize> = (0..n).collect();
         // Stable sort: ties (same bin) keep the original index order -> deterministic.
@@ -439,39 +404,16 @@ impl NonlocalAverager {
             sorted,
             order,
             weights: OnceLock::new(),
-            cache: WeightCache {
-                slot_of: vec![NO_SLOT; n],
-                budget: DEFAULT_PAIR_BUDGET,
-                ..WeightCache::default()
-            },
+            cache: WeightCache::new(DEFAULT_PAIR_BUDGET),
         })
     }
 
     /// Denominators and neighbour counts (symmetric pass, [`SymmetricPlan`]), computed once.
     fn weights(&self) -> &Weights {
         self.weights.get_or_init(|| {
-            let n = self.len();
             let plan = SymmetricPlan::new(&self.sorted, self.rc2);
-            let results = plan.sums(&self.sorted, &self.sorted.s, self.rc2, self.inv_l2);
-            let den: Vec<f64> = results.iter().map(|r| r.0).collect();
-            let counts: Vec<u32> = results
-                .iter()
-                .map(|r| u32::try_from(r.1).unwrap_or(u32::MAX))
-                .collect();
-            let stats = if n == 0 {
-                (0, 0.0, 0)
-            } else {
-                let min = results.iter().map(|r| r.1).min().unwrap_or(0);
-                let max = results.iter().map(|r| r.1).max().unwrap_or(0);
-                let mean = results.iter().map(|r| r.1 as f64).sum::<f64>() / n as f64;
-                (min, mean, max)
-            };
-            Weights {
-                plan,
-                den,
-                counts,
-                stats,
-            }
+            let results = plan.sums(&self.sorted, &self.sorted.s, self.rc2, self.inv_l2, &mut []);
+            Weights::from_sums(plan, &results)
         })
     }
 
@@ -509,14 +451,13 @@ impl NonlocalAverager {
     /// Applies the operator of \[D34\]: `out_p = Σ_q W_pq field_q` for a field given at every MP
     /// (original order), as used by \[D35\]/\[D36\] with `field = Δκ` (paper eq. 6).
     ///
-    /// Sources cached by [`Self::cache_sources`] use their stored weights (one multiply-add
-    /// per pair, also when `field_q = 0`); the other sources with `field_q ≠ 0` are evaluated on
-    /// the fly (compacted first, then every output entry gathers from them), sources with
-    /// `field_q = 0` outside the cache are skipped. Each `out_p` is summed in a fixed order by a
-    /// single task (cache blocks in order, then the on-the-fly sources): the result is
-    /// bit-identical for any number of rayon threads, and equals the uncached evaluation
-    /// ([`Self::average_uncached`]) up to summation order. Isolated MPs (zero denominator) copy
-    /// their own value (`W_pp = 1`). `out` is overwritten.
+    /// Every output tile gathers, over the tile pairs it belongs to (in plan order), the
+    /// contributions of the other tile's nonzero sources: from the stored block where the pair
+    /// is cached ([`Self::cache_sources`]), else by evaluating the kernel on the fly; tiles
+    /// without a nonzero source are skipped. Each `out_p` is summed in a fixed order by a single
+    /// task: the result is bit-identical for any number of rayon threads, and equals the
+    /// uncached evaluation ([`Self::average_uncached`]) up to summation order. Isolated MPs
+    /// (zero denominator) copy their own value (`W_pp = 1`). `out` is overwritten.
     ///
     /// # Errors
     /// [`NonlocalError::FieldLengthMismatch`] if `field` or `out` does not have [`Self::len`]
@@ -559,213 +500,217 @@ impl NonlocalAverager {
             return Ok(());
         }
         let n = self.len();
-        let cache = &self.cache;
         let weights = self.weights();
-        let cached = use_cache && !cache.blocks.is_empty();
-        // Field values of the cached sources, by slot.
-        let slot_field: Vec<f64> = if cached {
-            cache
-                .slot_key
-                .iter()
-                .map(|&k| field[self.order[k as usize]])
-                .collect()
-        } else {
-            Vec::new()
-        };
-        // Compact the nonzero sources outside the cache, keeping the key order of the list.
-        let mut sources = SourceList::with_capacity(n / 4);
-        for (k, &i) in self.order.iter().enumerate() {
-            let f = field[i];
-            if f != 0.0 && !(cached && cache.slot_of[k] != NO_SLOT) {
-                sources.push(
-                    self.sorted.keys[k],
-                    self.sorted.x[k],
-                    self.sorted.y[k],
-                    self.sorted.s[k] * f,
-                );
-            }
-        }
-        let (rc2, inv_l2) = (self.rc2, self.inv_l2);
-        // One output entry: cached blocks in order, then the on-the-fly sources.
-        let entry = |k: usize, cached_num: f64| -> f64 {
-            let den = weights.den[k];
-            if den == 0.0 {
-                return field[self.order[k]];
-            }
-            let mut num = cached_num;
-            sources.for_each_neighbour(
-                self.sorted.keys[k],
-                self.sorted.x[k],
-                self.sorted.y[k],
-                rc2,
-                |_, r2, s| num += kernel(r2, inv_l2) * s,
-            );
-            num / den
-        };
-        let mut out_sorted = vec![0.0; n];
-        if !cached && 2 * sources.keys.len() > n {
+        // `s_q = V_q f_q` in key order.
+        let s: Vec<f64> = self
+            .order
+            .iter()
+            .zip(&self.sorted.s)
+            .map(|(&i, &v)| v * field[i])
+            .collect();
+        let nonzero = self.order.iter().filter(|&&i| field[i] != 0.0).count();
+        let cached = use_cache && self.cache.block_count > 0;
+        let numerators = if !cached && 2 * nonzero > n {
             // Mostly nonzero field: the symmetric pass (each kernel once per unordered pair)
             // is cheaper than gathering every source per receiver. Its summation order is that
             // of the denominators, so a field of ones is reproduced bit-exactly.
-            let s: Vec<f64> = self
-                .order
-                .iter()
-                .zip(&self.sorted.s)
-                .map(|(&i, &v)| v * field[i])
-                .collect();
-            let sums = weights.plan.sums(&self.sorted, &s, rc2, inv_l2);
-            for (k, (o, (num, _))) in out_sorted.iter_mut().zip(sums).enumerate() {
-                let den = weights.den[k];
-                *o = if den == 0.0 {
-                    field[self.order[k]]
-                } else {
-                    num / den
-                };
-            }
-        } else if cached {
-            out_sorted
-                .par_chunks_mut(CACHE_CHUNK)
-                .enumerate()
-                .for_each(|(c, o)| {
-                    for (i, oi) in o.iter_mut().enumerate() {
-                        let mut num = 0.0;
-                        for block in &cache.blocks {
-                            num += block.chunks[c].row_dot(i, &slot_field);
-                        }
-                        *oi = entry(c * CACHE_CHUNK + i, num);
-                    }
-                });
-        } else if !sources.keys.is_empty() {
-            out_sorted
-                .par_iter_mut()
-                .with_min_len(MIN_CHUNK)
-                .enumerate()
-                .for_each(|(k, o)| *o = entry(k, 0.0));
-        }
-        for (k, &i) in self.order.iter().enumerate() {
-            out[i] = out_sorted[k];
+            let sums = weights
+                .plan
+                .sums(&self.sorted, &s, self.rc2, self.inv_l2, &mut []);
+            sums.into_iter().map(|(num, _)| num).collect()
+        } else {
+            self.gather_numerators(&weights.plan, &s, cached)
+        };
+        for (k, (&i, num)) in self.order.iter().zip(numerators).enumerate() {
+            let den = weights.den[k];
+            out[i] = if den == 0.0 { field[i] } else { num / den };
         }
         Ok(())
     }
 
-    /// Caches the weights `w(|x_p − x_q|) V_q` (\[D34\]) of every source `q` with
-    /// `candidates_q ≠ 0` that is not cached yet, for all receivers `p` within `R_c`, so that
-    /// the following [`Self::average`] calls of the step (\[D36\]: one per Newton iteration)
-    /// reuse them instead of re-evaluating the kernel. Typically `candidates = Δκ`.
+    /// `Σ_q w(|x_p − x_q|) s_q` for every MP `p` (key order), over the tile pairs of the plan:
+    /// one parallel task per tile pair with a nonzero source forms the partial sums of both
+    /// tiles (`W_IJ s_J` and `W_IJᵀ s_I`, reading a cached block once, or evaluating each
+    /// kernel once), then every MP sums its partials in plan order. The order is fixed, so
+    /// the result is bit-identical for any number of threads.
+    fn gather_numerators(&self, plan: &SymmetricPlan, s: &[f64], use_cache: bool) -> Vec<f64> {
+        let has_source: Vec<bool> = plan
+            .tiles
+            .iter()
+            .map(|t| s[t.lo..t.hi].iter().any(|&v| v != 0.0))
+            .collect();
+        let partials: Vec<(Vec<f64>, Vec<f64>)> = plan
+            .pairs
+            .par_iter()
+            .enumerate()
+            .map(|(e, &(i, j))| {
+                let (a, b) = (&plan.tiles[i], &plan.tiles[j]);
+                // rows gather from J's sources; columns (not for a diagonal pair, whose
+                // rows cover the full square) from I's
+                let rows = has_source[j];
+                let columns = i != j && has_source[i];
+                let mut from_j = vec![0.0; if rows { a.hi - a.lo } else { 0 }];
+                let mut from_i = vec![0.0; if columns { b.hi - b.lo } else { 0 }];
+                if rows || columns {
+                    let (s_i, s_j) = (&s[a.lo..a.hi], &s[b.lo..b.hi]);
+                    match self.cache.block(e).filter(|_| use_cache) {
+                        Some(w) => block_times(w, s_i, s_j, &mut from_j, &mut from_i),
+                        None => self.pair_on_the_fly(a, b, s, &mut from_j, &mut from_i),
+                    }
+                }
+                (from_j, from_i)
+            })
+            .collect();
+        let mut numerators = vec![0.0; self.len()];
+        for (t, tile) in plan.tiles.iter().enumerate() {
+            let out = &mut numerators[tile.lo..tile.hi];
+            for &(e, second) in &plan.touches[t] {
+                let part = if second {
+                    &partials[e].1
+                } else {
+                    &partials[e].0
+                };
+                for (o, v) in out.iter_mut().zip(part) {
+                    *o += v;
+                }
+            }
+        }
+        numerators
+    }
+
+    /// The partial sums of tile pair `(a, b)` with the kernel evaluated on the fly:
+    /// `from_b_p += Σ_{q ∈ b} w_pq s_q` for `p ∈ a` (if `from_b` is not empty; for a diagonal
+    /// pair over the full square) and `from_a_q += Σ_{p ∈ a} w_pq s_p` for `q ∈ b` (if `from_a`
+    /// is not empty).
+    fn pair_on_the_fly(
+        &self,
+        a: &Tile,
+        b: &Tile,
+        s: &[f64],
+        from_b: &mut [f64],
+        from_a: &mut [f64],
+    ) {
+        let (x, y) = (&self.sorted.x, &self.sorted.y);
+        let (rows, columns) = (!from_b.is_empty(), !from_a.is_empty());
+        for p in a.lo..a.hi {
+            if !rows && s[p] == 0.0 {
+                continue;
+            }
+            let mut acc = 0.0;
+            for q in b.lo..b.hi {
+                if s[q] == 0.0 && s[p] == 0.0 {
+                    continue;
+                }
+                let (dx, dy) = (x[p] - x[q], y[p] - y[q]);
+                let r2 = dx * dx + dy * dy;
+                if r2 <= self.rc2 {
+                    let w = kernel(r2, self.inv_l2);
+                    acc += w * s[q];
+                    if columns {
+                        from_a[q - b.lo] += w * s[p];
+                    }
+                }
+            }
+            if rows {
+                from_b[p - a.lo] += acc;
+            }
+        }
+    }
+
+    /// Caches the weights `w(|x_p − x_q|)` (\[D34\]) of the tile pairs around every MP with
+    /// `candidates_q ≠ 0` not cached yet, so that the following [`Self::average`] calls of the
+    /// step (\[D36\]: one per Newton iteration) read them instead of re-evaluating the kernel.
+    /// Typically `candidates = Δκ`.
     ///
-    /// The new sources form one CSR block (gather form, built in parallel, deterministic).
-    /// Sources are admitted in key order while the pair budget ([`Self::set_pair_budget`],
-    /// bounded by each source's neighbour count) allows; the excess, and all new sources once
-    /// the block limit (8) is reached or when fewer than `max(16, cached/16)` sources are new,
-    /// stay uncached and are evaluated on the fly by [`Self::average`]. Returns the number of
-    /// sources added.
+    /// The tiles holding a candidate are admitted in key order while the budget of stored
+    /// weights ([`Self::set_pair_budget`]) allows all their missing tile pairs; the others are
+    /// evaluated on the fly by [`Self::average`]. At the first call with a nonzero candidate
+    /// the blocks are filled by the same symmetric pass that computes the denominators (one
+    /// kernel evaluation per unordered pair for both); later blocks by a pass of their own.
+    /// Returns the number of candidates newly cached.
     ///
     /// # Errors
     /// [`NonlocalError::FieldLengthMismatch`] if `candidates` does not have [`Self::len`]
     /// entries.
     pub fn cache_sources(&mut self, candidates: &[f64]) -> Result<usize, NonlocalError> {
         self.check_field(candidates, self.len())?;
-        let n = self.len();
-        if self.cache.blocks.len() >= MAX_BLOCKS {
+        let is_candidate: Vec<bool> = self.order.iter().map(|&i| candidates[i] != 0.0).collect();
+        if !is_candidate.contains(&true) {
             return Ok(0);
         }
-        let new: Vec<usize> = (0..n)
-            .filter(|&k| candidates[self.order[k]] != 0.0 && self.cache.slot_of[k] == NO_SLOT)
-            .collect();
-        if new.len() < (self.cache.slot_key.len() / 16).max(16) {
-            return Ok(0);
+        let fresh = self.weights.get().is_none();
+        let plan = match self.weights.get() {
+            Some(w) => w.plan.clone(),
+            None => SymmetricPlan::new(&self.sorted, self.rc2),
+        };
+        let cache = &mut self.cache;
+        if cache.blocks.len() != plan.pairs.len() {
+            cache.blocks = vec![Vec::new(); plan.pairs.len()];
+            cache.tile_cached = vec![false; plan.tiles.len()];
+            cache.source_cached = vec![false; self.order.len()];
         }
-        // Budget: admit in key order while the (upper bound of the) pair count fits.
-        let mut room = self.cache.budget.saturating_sub(self.cache.pairs);
-        let mut admitted = SourceList::with_capacity(new.len());
-        let mut admitted_slots = Vec::with_capacity(new.len());
-        for &k in &new {
-            let c = self.weights().counts[k] as usize;
-            if c <= room {
-                room -= c;
-                let slot = self.cache.slot_key.len() as u32;
-                self.cache.slot_of[k] = slot;
-                self.cache.slot_key.push(k as u32);
-                admitted_slots.push(slot);
-                admitted.push(
-                    self.sorted.keys[k],
-                    self.sorted.x[k],
-                    self.sorted.y[k],
-                    self.sorted.s[k],
-                );
+        let mut is_new = vec![false; plan.pairs.len()];
+        let mut new_pairs = Vec::new();
+        for (t, tile) in plan.tiles.iter().enumerate() {
+            if cache.tile_cached[t] || !is_candidate[tile.lo..tile.hi].contains(&true) {
+                continue;
+            }
+            let missing: Vec<usize> = plan.touches[t]
+                .iter()
+                .map(|&(e, _)| e)
+                .filter(|&e| cache.blocks[e].is_empty() && !is_new[e])
+                .collect();
+            let size: usize = missing.iter().map(|&e| plan.block_len(e)).sum();
+            if cache.pairs + size > cache.budget {
+                continue;
+            }
+            cache.pairs += size;
+            cache.tile_cached[t] = true;
+            for &e in &missing {
+                is_new[e] = true;
+            }
+            new_pairs.extend(missing);
+        }
+        for &e in &new_pairs {
+            cache.blocks[e] = vec![0.0; plan.block_len(e)];
+        }
+        cache.block_count += new_pairs.len();
+        let mut added = 0;
+        for (t, tile) in plan.tiles.iter().enumerate() {
+            if !cache.tile_cached[t] {
+                continue;
+            }
+            for k in tile.lo..tile.hi {
+                if is_candidate[k] && !cache.source_cached[k] {
+                    cache.source_cached[k] = true;
+                    added += 1;
+                }
             }
         }
-        if admitted_slots.is_empty() {
-            return Ok(0);
+        cache.sources += added;
+        if fresh {
+            let results = plan.sums(
+                &self.sorted,
+                &self.sorted.s,
+                self.rc2,
+                self.inv_l2,
+                &mut cache.blocks,
+            );
+            // `fresh`: the cell is empty, so this cannot fail
+            let _ = self.weights.set(Weights::from_sums(plan, &results));
+        } else {
+            let (sorted, rc2, inv_l2) = (&self.sorted, self.rc2, self.inv_l2);
+            cache
+                .blocks
+                .par_iter_mut()
+                .enumerate()
+                .filter(|(e, _)| is_new[*e])
+                .for_each(|(e, block)| plan.fill_block(e, sorted, rc2, inv_l2, block));
         }
-        let block = self.build_block(&admitted, &admitted_slots);
-        self.cache.pairs += block.chunks.iter().map(|c| c.wv.len()).sum::<usize>();
-        self.cache.blocks.push(block);
-        Ok(admitted_slots.len())
+        Ok(added)
     }
 
-    /// CSR block (gather form) of the sources `list` (slots `slots`) for all receivers, built
-    /// in one parallel pass over chunks of [`CACHE_CHUNK`] receivers.
-    fn build_block(&self, list: &SourceList, slots: &[u32]) -> CacheBlock {
-        let n = self.len();
-        let inv_l2 = self.inv_l2;
-        let counts = &self.weights().counts;
-        let chunks = (0..n.div_ceil(CACHE_CHUNK))
-            .into_par_iter()
-            .map(|c| {
-                let rows = c * CACHE_CHUNK..((c + 1) * CACHE_CHUNK).min(n);
-                // Expected entries: the receivers' neighbour counts times the share of
-                // sources in `list` (+25 %), to avoid most reallocations.
-                let expect = rows
-                    .clone()
-                    .map(|k| counts[k] as usize)
-                    .sum::<usize>()
-                    .saturating_mul(list.keys.len())
-                    / n.max(1);
-                let expect = expect + expect / 4 + 16;
-                let mut chunk = CacheChunk {
-                    row_ptr: Vec::with_capacity(rows.len() + 1),
-                    slot: Vec::with_capacity(expect),
-                    wv: Vec::with_capacity(expect),
-                };
-                chunk.row_ptr.push(0);
-                for k in rows {
-                    self.visit_block_row(list, k, |j, r2, v| {
-                        chunk.slot.push(slots[j]);
-                        chunk.wv.push(kernel(r2, inv_l2) * v);
-                    });
-                    // Row lengths are bounded by the pair budget (< 2^32 per chunk).
-                    chunk.row_ptr.push(chunk.slot.len() as u32);
-                }
-                chunk.slot.shrink_to_fit();
-                chunk.wv.shrink_to_fit();
-                chunk
-            })
-            .collect();
-        CacheBlock { chunks }
-    }
-
-    /// Visits the sources of `list` cached for receiver `k` (key order): same group, within
-    /// `R_c`, `r > 0` (`w(0) = 0`); none for an isolated receiver (`W_pp = 1`).
-    #[inline]
-    fn visit_block_row(&self, list: &SourceList, k: usize, mut f: impl FnMut(usize, f64, f64)) {
-        if self.weights().den[k] == 0.0 {
-            return;
-        }
-        list.for_each_neighbour(
-            self.sorted.keys[k],
-            self.sorted.x[k],
-            self.sorted.y[k],
-            self.rc2,
-            |j, r2, v| {
-                if r2 > 0.0 {
-                    f(j, r2, v)
-                }
-            },
-        );
-    }
-
-    /// Sets the budget of cached pairs of [`Self::cache_sources`] (default
+    /// Sets the budget of stored weights of [`Self::cache_sources`] (default
     /// [`DEFAULT_PAIR_BUDGET`]; 0 disables caching). Already cached blocks are kept.
     pub fn set_pair_budget(&mut self, pairs: usize) {
         self.cache.budget = pairs;
@@ -773,24 +718,18 @@ impl NonlocalAverager {
 
     /// Drops all cached weights ([`Self::average`] then evaluates every source on the fly).
     pub fn clear_cache(&mut self) {
-        let budget = self.cache.budget;
-        self.cache = WeightCache {
-            slot_of: vec![NO_SLOT; self.len()],
-            budget,
-            ..WeightCache::default()
-        };
+        self.cache = WeightCache::new(self.cache.budget);
     }
 
-    /// Number of cached sources, pairs and blocks, and the pair budget.
+    /// Number of cached sources, stored weights and blocks, and the budget.
     pub fn cache_stats(&self) -> CacheStats {
         CacheStats {
-            sources: self.cache.slot_key.len(),
+            sources: self.cache.sources,
             pairs: self.cache.pairs,
-            blocks: self.cache.blocks.len(),
+            blocks: self.cache.block_count,
             budget: self.cache.budget,
         }
     }
-
     /// `O(N²)` brute-force reference of the same operator \[D34\] (tests and benchmark): for
     /// every MP `p`, loops over all MPs `q` of the same group within `R_c`, accumulating both
     /// the denominator and the numerator; isolated MPs keep their own value (`W_pp = 1`).
@@ -947,6 +886,30 @@ impl SymmetricPlan {
         }
     }
 
+    /// Number of weights of the block of tile pair `e` (rows × columns).
+    fn block_len(&self, e: usize) -> usize {
+        let (i, j) = self.pairs[e];
+        (self.tiles[i].hi - self.tiles[i].lo) * (self.tiles[j].hi - self.tiles[j].lo)
+    }
+
+    /// Fills the weight block of tile pair `e` ([`WeightCache`]): `w(|x_p − x_q|)` for every MP
+    /// `p` of the first tile (rows) and `q` of the second (columns) within `R_c`, the same
+    /// bits as the symmetric pass ([`Self::sums`]) writes.
+    fn fill_block(&self, e: usize, sorted: &SourceList, rc2: f64, inv_l2: f64, block: &mut [f64]) {
+        let (a, b) = (&self.tiles[self.pairs[e].0], &self.tiles[self.pairs[e].1]);
+        let width = b.hi - b.lo;
+        for (p, row) in (a.lo..a.hi).zip(block.chunks_exact_mut(width)) {
+            for (q, w) in (b.lo..b.hi).zip(row.iter_mut()) {
+                let dx = sorted.x[p] - sorted.x[q];
+                let dy = sorted.y[p] - sorted.y[q];
+                let r2 = dx * dx + dy * dy;
+                if r2 <= rc2 {
+                    *w = kernel(r2, inv_l2);
+                }
+            }
+        }
+    }
+
     /// `(Σ_q kernel(r_pq²) s_q, count)` over all same-group `q ≠ p` within `R_c`, for every MP
     /// `p` (key order), evaluating the kernel once per unordered pair: `s = V` gives the
     /// denominators of \[D34\] and the neighbour counts, `s = V f` the numerators.
@@ -955,39 +918,63 @@ impl SymmetricPlan {
     /// private partial arrays; the partials are then summed per MP in tile-pair order. The
     /// summation order is fixed (independent of the number of rayon threads) and the same for
     /// every `s`, so `s = V · 1` reproduces the denominators bit-exactly.
-    fn sums(&self, sorted: &SourceList, s: &[f64], rc2: f64, inv_l2: f64) -> Vec<(f64, usize)> {
+    ///
+    /// `blocks` is empty, or holds one entry per tile pair: the pass also writes the weights
+    /// into every nonempty (zeroed) entry, laid out as [`WeightCache`] describes.
+    fn sums(
+        &self,
+        sorted: &SourceList,
+        s: &[f64],
+        rc2: f64,
+        inv_l2: f64,
+        blocks: &mut [Vec<f64>],
+    ) -> Vec<(f64, usize)> {
         let tiles = &self.tiles;
-        let partials: Vec<TilePartial> = self
-            .pairs
-            .par_iter()
-            .map(|&(i, j)| {
-                let (a, b) = (&tiles[i], &tiles[j]);
-                let mut da = vec![0.0; a.hi - a.lo];
-                let mut ca = vec![0u32; a.hi - a.lo];
-                let mut db = vec![0.0; b.hi - b.lo];
-                let mut cb = vec![0u32; b.hi - b.lo];
-                for p in a.lo..a.hi {
-                    let (px, py, sp) = (sorted.x[p], sorted.y[p], s[p]);
-                    let start = if i == j { p + 1 } else { b.lo };
-                    let (mut acc, mut count) = (0.0, 0u32);
-                    for q in start..b.hi {
-                        let dx = px - sorted.x[q];
-                        let dy = py - sorted.y[q];
-                        let r2 = dx * dx + dy * dy;
-                        if r2 <= rc2 {
-                            let w = kernel(r2, inv_l2);
-                            acc += w * s[q];
-                            count += 1;
-                            db[q - b.lo] += w * sp;
-                            cb[q - b.lo] += 1;
+        let pair_pass = |(i, j): (usize, usize), mut block: Option<&mut [f64]>| {
+            let (a, b) = (&tiles[i], &tiles[j]);
+            let width = b.hi - b.lo;
+            let mut da = vec![0.0; a.hi - a.lo];
+            let mut ca = vec![0u32; a.hi - a.lo];
+            let mut db = vec![0.0; width];
+            let mut cb = vec![0u32; width];
+            for p in a.lo..a.hi {
+                let (px, py, sp) = (sorted.x[p], sorted.y[p], s[p]);
+                let start = if i == j { p + 1 } else { b.lo };
+                let (mut acc, mut count) = (0.0, 0u32);
+                for q in start..b.hi {
+                    let dx = px - sorted.x[q];
+                    let dy = py - sorted.y[q];
+                    let r2 = dx * dx + dy * dy;
+                    if r2 <= rc2 {
+                        let w = kernel(r2, inv_l2);
+                        acc += w * s[q];
+                        count += 1;
+                        db[q - b.lo] += w * sp;
+                        cb[q - b.lo] += 1;
+                        if let Some(block) = block.as_deref_mut() {
+                            block[(p - a.lo) * width + (q - b.lo)] = w;
+                            if i == j {
+                                block[(q - b.lo) * width + (p - a.lo)] = w;
+                            }
                         }
                     }
-                    da[p - a.lo] = acc;
-                    ca[p - a.lo] = count;
                 }
-                (da, ca, db, cb)
-            })
-            .collect();
+                da[p - a.lo] = acc;
+                ca[p - a.lo] = count;
+            }
+            (da, ca, db, cb)
+        };
+        let partials: Vec<TilePartial> = if blocks.is_empty() {
+            self.pairs.par_iter().map(|&e| pair_pass(e, None)).collect()
+        } else {
+            self.pairs
+                .par_iter()
+                .zip(blocks.par_iter_mut())
+                .map(|(&e, block)| {
+                    pair_pass(e, (!block.is_empty()).then_some(block.as_mut_slice()))
+                })
+                .collect()
+        };
         let per_tile: Vec<Vec<(f64, usize)>> = tiles
             .par_iter()
             .zip(&self.touches)
@@ -1009,6 +996,56 @@ impl SymmetricPlan {
             .collect();
         per_tile.into_iter().flatten().collect()
     }
+}
+
+/// The partial sums of a cached block ([`WeightCache`]), read once: `from_j_p = Σ_q w_pq s_j,q`
+/// per row `p` (if `from_j` is not empty) and `from_i_q = Σ_p w_pq s_i,p` per column `q` (if
+/// `from_i` is not empty; one axpy per row with `s_i,p ≠ 0`).
+fn block_times(block: &[f64], s_i: &[f64], s_j: &[f64], from_j: &mut [f64], from_i: &mut [f64]) {
+    if s_j.is_empty() {
+        return;
+    }
+    let (rows, columns) = (!from_j.is_empty(), !from_i.is_empty());
+    for (p, row) in block.chunks_exact(s_j.len()).enumerate() {
+        if rows {
+            from_j[p] = dot(row, s_j);
+        }
+        let sp = s_i[p];
+        if columns && sp != 0.0 {
+            for (o, &w) in from_i.iter_mut().zip(row) {
+                *o += w * sp;
+            }
+        }
+    }
+}
+
+/// `Σ a_i b_i` with eight interleaved partial sums (a fixed order the compiler vectorises).
+#[inline]
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    let mut acc = [0.0f64; 8];
+    let (ac, bc) = (a.chunks_exact(8), b.chunks_exact(8));
+    let tail: f64 = ac
+        .remainder()
+        .iter()
+        .zip(bc.remainder())
+        .map(|(x, y)| x * y)
+        .sum();
+    for (a8, b8) in ac.zip(bc) {
+        for l in 0..8 {
+            acc[l] += a8[l] * b8[l];
+        }
+    }
+    ((acc[0] + acc[1]) + (acc[2] + acc[3])) + ((acc[4] + acc[5]) + (acc[6] + acc[7])) + tail
+}
+
+/// Sub-bins per bin side: about [`TILE`] MPs per sub-bin on average over the occupied bins
+/// (1 when a bin holds fewer), so that a tile of the [`SymmetricPlan`] is about one sub-bin.
+fn sub_bins_per_side(n: usize, bins: impl Iterator<Item = (u16, [i64; 2])>) -> i64 {
+    let mut occupied: Vec<(u16, [i64; 2])> = bins.collect();
+    occupied.sort_unstable();
+    occupied.dedup();
+    let per_bin = n as f64 / occupied.len().max(1) as f64;
+    ((per_bin / TILE as f64).sqrt().ceil() as i64).clamp(1, 64)
 }
 
 fn validate_inputs(

@@ -657,8 +657,8 @@ fn nonlocal_cached_matches_brute_force() {
                 let nonzero = field.iter().filter(|&&v| v != 0.0).count();
                 assert_eq!(added, nonzero);
                 let stats = nl.cache_stats();
-                assert_eq!((stats.sources, stats.blocks), (nonzero, 1));
-                assert!(stats.pairs > 0);
+                assert_eq!(stats.sources, nonzero);
+                assert!(stats.pairs > 0 && stats.blocks > 0);
                 let mut a = vec![0.0; n];
                 let mut b = vec![0.0; n];
                 nl.average(field, &mut a).unwrap();
@@ -714,27 +714,25 @@ fn nonlocal_cached_equals_uncached_when_sources_change() {
     };
     check(&nl, &first, "first field");
     check(&nl, &second, "second field, new sources on the fly");
-    // Cache the new sources as a second block.
+    // Cache the new sources: tiles not cached yet get their blocks.
+    let blocks_before = nl.cache_stats().blocks;
     let added = nl.cache_sources(&second).unwrap();
     let new_sources = (0..n)
         .filter(|&i| second[i] != 0.0 && first[i] == 0.0)
         .count();
     assert_eq!(added, new_sources);
-    assert_eq!(nl.cache_stats().blocks, 2);
+    assert!(nl.cache_stats().blocks >= blocks_before);
     assert_eq!(nl.cache_stats().sources, cached_sources + new_sources);
-    check(&nl, &second, "second field, two blocks");
-    // Three new sources only: below the block threshold, evaluated on the fly.
+    check(&nl, &second, "second field, cache extended");
+    // The same candidates again add nothing.
+    assert_eq!(nl.cache_sources(&second).unwrap(), 0);
+    // A source that was no candidate: read from a cached block or evaluated on the fly.
     let mut third = second.clone();
-    let mut extra = 0;
-    for i in 0..n {
-        if first[i] == 0.0 && second[i] == 0.0 && extra < 3 {
-            third[i] = 0.7;
-            extra += 1;
-        }
-    }
-    assert_eq!(nl.cache_sources(&third).unwrap(), 0);
-    assert_eq!(nl.cache_stats().blocks, 2);
-    check(&nl, &third, "third field, small set on the fly");
+    let mut small = NonlocalAverager::new(&params, &pos, &vol, &grp).unwrap();
+    let k = (0..n).find(|&i| second[i] == 0.0).unwrap();
+    third[k] = 0.7;
+    small.cache_sources(&second).unwrap();
+    check(&small, &third, "third field, one uncached source");
     // All-zero field: zero output except isolated MPs (their own value, 0).
     check(&nl, &vec![0.0; n], "zero field");
     // Clearing the cache falls back to the uncached path.
