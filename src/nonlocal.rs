@@ -173,7 +173,114 @@ pub fn weight(r: f64, length_scale: f64) -> f64 {
 /// One shared definition keeps denominators, numerators and cached weights bit-consistent.
 #[inline(always)]
 fn kernel(r2: f64, inv_l2: f64) -> f64 {
-    r2.sqrt() * inv_l2 * (-(r2 * inv_l2)).exp()
+    r2.sqrt() * inv_l2 * exp_nonpositive(-(r2 * inv_l2))
+}
+
+/// `exp(x)` for `x ≤ 0`, within 2 ulp of the exact value for `x ≥ −708` (below, `exp(−708)`
+/// ≈ 3e−308: a weight beyond 26 `l_s`), written without branches or calls so that the loops of
+/// kernel evaluations vectorise (std's `exp` is a library call per pair).
+///
+/// Cody–Waite reduction `x = k ln2 + r`, `|r| ≤ ln2/2`, with `k` rounded by the `1.5·2⁵²`
+/// shift, the Taylor polynomial of degree 13 of `exp(r)` (truncation `< 5e−18`), and `2^k`
+/// assembled from its exponent bits.
+#[inline(always)]
+fn exp_nonpositive(x: f64) -> f64 {
+    const SHIFT: f64 = 6_755_399_441_055_744.0; // 1.5 · 2^52
+                                                // ln 2 = LN2_HI + LN2_LO, LN2_HI with 11 trailing zero bits (exact times any |k| < 2^11)
+    const LN2_HI: f64 = f64::from_bits(0x3fe6_2e42_fee0_0000);
+    const LN2_LO: f64 = f64::from_bits(0x3dea_39ef_3579_3c76);
+    // 1/n!, n = 13 … 2
+    const INV_FACTORIALS: [f64; 12] = [
+        1.0 / 6_227_020_800.0,
+        1.0 / 479_001_600.0,
+        1.0 / 39_916_800.0,
+        1.0 / 3_628_800.0,
+        1.0 / 362_880.0,
+        1.0 / 40_320.0,
+        1.0 / 5_040.0,
+        1.0 / 720.0,
+        1.0 / 120.0,
+        1.0 / 24.0,
+        1.0 / 6.0,
+        0.5,
+    ];
+    let x = x.max(-708.0);
+    let shifted = x * std::f64::consts::LOG2_E + SHIFT;
+    let k = shifted - SHIFT;
+    let r = (x - k * LN2_HI) - k * LN2_LO;
+    let mut poly = INV_FACTORIALS[0];
+    for c in &INV_FACTORIALS[1..] {
+        poly = poly * r + c;
+    }
+    poly = poly * r + 1.0;
+    poly = poly * r + 1.0;
+    // the low bits of `shifted` hold k (two's complement); 2^k has the biased exponent k + 1023
+    let k_bits = shifted.to_bits().wrapping_sub(SHIFT.to_bits());
+    poly * f64::from_bits(k_bits.wrapping_add(1023) << 52)
+}
+
+/// One row of the kernel ([`kernel`]): `w_q = kernel(|x_p − x_q|²)` where `|x_p − x_q| ≤ R_c`,
+/// else 0, for the MPs `q` at `(xs, ys)`; `r2_out` gets the squared distances. Branch-free,
+/// so the compiler vectorises it. Returns the number of MPs within `R_c`.
+///
+/// On x86-64 CPUs with AVX2 the same code is compiled a second time for AVX2 (4 lanes instead
+/// of SSE2's 2) and chosen at run time; both perform the same IEEE operations in the same
+/// order (no fused multiply-add), so the weights are bit-identical either way.
+#[inline]
+fn weight_row(
+    p: [f64; 2],
+    xs: &[f64],
+    ys: &[f64],
+    rc2: f64,
+    inv_l2: f64,
+    r2_out: &mut [f64],
+    w_out: &mut [f64],
+) -> u32 {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU supports AVX2 (checked just above).
+        return unsafe { weight_row_avx2(p, xs, ys, rc2, inv_l2, r2_out, w_out) };
+    }
+    weight_row_portable(p, xs, ys, rc2, inv_l2, r2_out, w_out)
+}
+
+/// [`weight_row`] compiled with AVX2 enabled.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn weight_row_avx2(
+    p: [f64; 2],
+    xs: &[f64],
+    ys: &[f64],
+    rc2: f64,
+    inv_l2: f64,
+    r2_out: &mut [f64],
+    w_out: &mut [f64],
+) -> u32 {
+    weight_row_portable(p, xs, ys, rc2, inv_l2, r2_out, w_out)
+}
+
+/// The body of [`weight_row`], inlined into each instruction-set variant.
+#[inline(always)]
+fn weight_row_portable(
+    p: [f64; 2],
+    xs: &[f64],
+    ys: &[f64],
+    rc2: f64,
+    inv_l2: f64,
+    r2_out: &mut [f64],
+    w_out: &mut [f64],
+) -> u32 {
+    let mut count = 0u32;
+    for (((w, r2_slot), &xq), &yq) in w_out.iter_mut().zip(r2_out.iter_mut()).zip(xs).zip(ys) {
+        let (dx, dy) = (p[0] - xq, p[1] - yq);
+        let r2 = dx * dx + dy * dy;
+        let inside = r2 <= rc2;
+        let k = kernel(r2, inv_l2);
+        *w = if inside { k } else { 0.0 };
+        *r2_slot = r2;
+        count += u32::from(inside);
+    }
+    count
 }
 
 /// Sort key of an MP: group first, then bin row, bin column, and the sub-bin within the bin
@@ -898,15 +1005,17 @@ impl SymmetricPlan {
     fn fill_block(&self, e: usize, sorted: &SourceList, rc2: f64, inv_l2: f64, block: &mut [f64]) {
         let (a, b) = (&self.tiles[self.pairs[e].0], &self.tiles[self.pairs[e].1]);
         let width = b.hi - b.lo;
+        let mut r2 = [0.0; TILE];
         for (p, row) in (a.lo..a.hi).zip(block.chunks_exact_mut(width)) {
-            for (q, w) in (b.lo..b.hi).zip(row.iter_mut()) {
-                let dx = sorted.x[p] - sorted.x[q];
-                let dy = sorted.y[p] - sorted.y[q];
-                let r2 = dx * dx + dy * dy;
-                if r2 <= rc2 {
-                    *w = kernel(r2, inv_l2);
-                }
-            }
+            weight_row(
+                [sorted.x[p], sorted.y[p]],
+                &sorted.x[b.lo..b.hi],
+                &sorted.y[b.lo..b.hi],
+                rc2,
+                inv_l2,
+                &mut r2[..width],
+                row,
+            );
         }
     }
 
@@ -937,30 +1046,36 @@ impl SymmetricPlan {
             let mut ca = vec![0u32; a.hi - a.lo];
             let mut db = vec![0.0; width];
             let mut cb = vec![0u32; width];
+            let (mut r2, mut scratch) = ([0.0; TILE], [0.0; TILE]);
             for p in a.lo..a.hi {
-                let (px, py, sp) = (sorted.x[p], sorted.y[p], s[p]);
+                // a diagonal pair visits q > p only (each unordered pair once)
                 let start = if i == j { p + 1 } else { b.lo };
-                let (mut acc, mut count) = (0.0, 0u32);
-                for q in start..b.hi {
-                    let dx = px - sorted.x[q];
-                    let dy = py - sorted.y[q];
-                    let r2 = dx * dx + dy * dy;
-                    if r2 <= rc2 {
-                        let w = kernel(r2, inv_l2);
-                        acc += w * s[q];
-                        count += 1;
-                        db[q - b.lo] += w * sp;
-                        cb[q - b.lo] += 1;
-                        if let Some(block) = block.as_deref_mut() {
-                            block[(p - a.lo) * width + (q - b.lo)] = w;
-                            if i == j {
-                                block[(q - b.lo) * width + (p - a.lo)] = w;
-                            }
-                        }
+                let (r2, cols) = (&mut r2[..b.hi - start], start - b.lo..width);
+                let w = match block.as_deref_mut() {
+                    Some(block) => &mut block[(p - a.lo) * width..][cols.clone()],
+                    None => &mut scratch[..b.hi - start],
+                };
+                let xp = [sorted.x[p], sorted.y[p]];
+                let (xs, ys) = (&sorted.x[start..b.hi], &sorted.y[start..b.hi]);
+                ca[p - a.lo] = weight_row(xp, xs, ys, rc2, inv_l2, r2, w);
+                da[p - a.lo] = dot(w, &s[start..b.hi]);
+                let sp = s[p];
+                for ((d, c), (&wq, &r2q)) in db[cols.clone()]
+                    .iter_mut()
+                    .zip(&mut cb[cols])
+                    .zip(w.iter().zip(r2.iter()))
+                {
+                    *d += wq * sp;
+                    *c += u32::from(r2q <= rc2);
+                }
+            }
+            if let (Some(block), true) = (block, i == j) {
+                // the lower triangle of a diagonal block mirrors the upper one
+                for p in 0..width {
+                    for q in 0..p {
+                        block[p * width + q] = block[q * width + p];
                     }
                 }
-                da[p - a.lo] = acc;
-                ca[p - a.lo] = count;
             }
             (da, ca, db, cb)
         };

@@ -1,0 +1,74 @@
+#!/usr/bin/env python3
+"""Wall time per run and per stage of finished campaigns (issue 15's campaign benchmark).
+
+Reads every `*/run.json` under each campaign output directory given on the command line
+and writes, to the directory named by --out:
+  timings.csv  one row per run: campaign, run, status, steps, Newton iterations, wall
+               seconds, then the seconds of every profile stage (src/profile.rs);
+  timings.md   the same as a Markdown table, with a total per campaign and overall.
+Standard library only.
+"""
+import argparse
+import csv
+import json
+import pathlib
+
+# the stages of `mpm-geo run`'s profile, in its order (src/profile.rs)
+STAGES = ["setup", "p2g", "time_step", "newton", "stress_update", "nonlocal", "assembly",
+          "factorisation", "solve", "g2p", "remap", "stresses", "double_mapping", "commit",
+          "output", "other"]
+
+
+def runs_of(campaign_dir):
+    for run_json in sorted(pathlib.Path(campaign_dir).glob("*/run.json")):
+        record = json.loads(run_json.read_text())
+        # "profile": [{"stage": name, "calls": n, "seconds": s}, ...]
+        by_stage = {e.get("stage"): e.get("seconds", 0.0) for e in record.get("profile") or []}
+        seconds = {stage: float(by_stage.get(stage, 0.0)) for stage in STAGES}
+        usage = (record.get("solver") or {}).get("usage") or {}
+        yield {
+            "campaign": pathlib.Path(campaign_dir).name,
+            "run": run_json.parent.name,
+            "status": record.get("status", "?"),
+            "steps": record.get("steps_completed", 0),
+            "newton_iterations": usage.get("newton_iterations", 0),
+            "wall_seconds": record.get("wall_seconds", 0.0),
+            **seconds,
+        }
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("campaigns", nargs="+", help="campaign output directories")
+    parser.add_argument("--out", required=True, help="directory for timings.csv and timings.md")
+    args = parser.parse_args()
+    rows = [row for c in args.campaigns for row in runs_of(c)]
+    out = pathlib.Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    columns = ["campaign", "run", "status", "steps", "newton_iterations", "wall_seconds"] + STAGES
+    with open(out / "timings.csv", "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=columns)
+        writer.writeheader()
+        writer.writerows(rows)
+    # the Markdown table leaves out stages that are zero in every run
+    used = [s for s in STAGES if any(r[s] > 0.0005 for r in rows)]
+    lines = ["| campaign | run | status | steps | wall (s) | " + " | ".join(used) + " |",
+             "|---|---|---|---|---|" + "---|" * len(used)]
+    for r in rows:
+        lines.append(f"| {r['campaign']} | {r['run']} | {r['status']} | {r['steps']} | "
+                     f"{r['wall_seconds']:.1f} | " + " | ".join(f"{r[s]:.1f}" for s in used) + " |")
+    lines.append("")
+    total = 0.0
+    for c in dict.fromkeys(r["campaign"] for r in rows):
+        wall = sum(r["wall_seconds"] for r in rows if r["campaign"] == c)
+        total += wall
+        lines.append(f"- {c}: {wall:.0f} s of run wall time "
+                     f"({sum(r['campaign'] == c for r in rows)} runs)")
+    lines.append(f"- all: {total:.0f} s = {total / 60:.1f} min of run wall time "
+                 "(runs in parallel overlap: see the campaigns' elapsed time in bench.log)")
+    (out / "timings.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()
