@@ -48,7 +48,7 @@
 
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-use std::sync::OnceLock;
+use std::sync::{Mutex, OnceLock};
 
 /// Default cutoff factor: `R_c = 3 l_s` (DESIGN §6 / decision log item 12). Beyond `3 l_s` the
 /// area-weighted tail of [`weight`] holds 4.4e−4 of its integral.
@@ -410,8 +410,13 @@ struct WeightCache {
 impl WeightCache {
     fn new(budget: usize) -> Self {
         Self {
+            blocks: Vec::new(),
+            tile_cached: Vec::new(),
+            source_cached: Vec::new(),
+            sources: 0,
+            block_count: 0,
+            pairs: 0,
             budget,
-            ..Self::default()
         }
     }
 
@@ -421,6 +426,36 @@ impl WeightCache {
             .get(e)
             .filter(|b| !b.is_empty())
             .map(Vec::as_slice)
+    }
+}
+
+/// Blocks of dropped caches, reused by the next step's cache ([`recycled_block`]): every
+/// step builds a new operator, and its blocks (hundreds of MB at the paper's resolutions) would
+/// otherwise be fresh memory, mapped and zeroed page by page by the kernel each step. Holds
+/// at most the blocks of one cache.
+static BLOCK_POOL: Mutex<Vec<Vec<f64>>> = Mutex::new(Vec::new());
+
+impl Drop for WeightCache {
+    fn drop(&mut self) {
+        let blocks: Vec<Vec<f64>> = self.blocks.drain(..).filter(|b| !b.is_empty()).collect();
+        if let Ok(mut pool) = BLOCK_POOL.lock() {
+            if blocks.len() >= pool.len() {
+                *pool = blocks;
+            }
+        }
+    }
+}
+
+/// A block of `len` weights for [`WeightCache`], taken from [`BLOCK_POOL`] where one is free.
+/// Its contents are unspecified: the passes that fill a block write every entry.
+fn recycled_block(len: usize) -> Vec<f64> {
+    let reused = BLOCK_POOL.lock().ok().and_then(|mut pool| pool.pop());
+    match reused {
+        Some(mut block) => {
+            block.resize(len, 0.0);
+            block
+        }
+        None => vec![0.0; len],
     }
 }
 
@@ -779,7 +814,7 @@ impl NonlocalAverager {
             new_pairs.extend(missing);
         }
         for &e in &new_pairs {
-            cache.blocks[e] = vec![0.0; plan.block_len(e)];
+            cache.blocks[e] = recycled_block(plan.block_len(e));
         }
         cache.block_count += new_pairs.len();
         let mut added = 0;
@@ -1070,11 +1105,13 @@ impl SymmetricPlan {
                 }
             }
             if let (Some(block), true) = (block, i == j) {
-                // the lower triangle of a diagonal block mirrors the upper one
+                // the lower triangle of a diagonal block mirrors the upper one (every entry
+                // is written: a recycled block holds the weights of an earlier step)
                 for p in 0..width {
                     for q in 0..p {
                         block[p * width + q] = block[q * width + p];
                     }
+                    block[p * width + p] = 0.0;
                 }
             }
             (da, ca, db, cb)
