@@ -6,9 +6,10 @@
 use crate::error::{BoundaryPointKind, StepError};
 use crate::grid::ShapeAt;
 use crate::model::Model;
-use crate::transfer::{self, ParticleBins};
+use crate::transfer::{self, ParticleBins, ShapeScratch};
 
 /// The start-of-step interpolation of one (sub-)step.
+#[derive(Default)]
 pub struct StepSetup {
     /// N_ip, ∇N_ip at every material point.
     pub shapes: Vec<ShapeAt>,
@@ -18,20 +19,34 @@ pub struct StepSetup {
     pub traction_shapes: Vec<ShapeAt>,
     /// Shape functions of the rigid bodies' tied points.
     pub driven_shapes: Vec<ShapeAt>,
+    /// Buffers of the shape functions and the binning, kept for [`Self::refresh`].
+    scratch: ShapeScratch,
+    /// Cells some GIMP domain reaches (binning buffer).
+    reached: Vec<bool>,
 }
 
 impl StepSetup {
     /// Shape functions and bins for the model as it is now; a material or
     /// boundary point outside the grid is an error naming it.
     pub fn new(model: &Model) -> Result<Self, StepError> {
+        let mut setup = Self::default();
+        setup.refresh(model)?;
+        Ok(setup)
+    }
+
+    /// The setup of the model as it is now, in place: what [`Self::new`]
+    /// gives, reusing the arrays of an earlier step (no allocation for the
+    /// material points' shape functions and bins once they have grown).
+    pub fn refresh(&mut self, model: &Model) -> Result<(), StepError> {
         let grid = &model.grid;
-        let shapes = transfer::shapes_at(grid, &model.particles.position).map_err(|o| {
-            StepError::ParticleLeftGrid {
+        let positions = &model.particles.position;
+        transfer::shapes_into(grid, positions, &mut self.scratch, &mut self.shapes).map_err(
+            |o| StepError::ParticleLeftGrid {
                 particle: o.particle,
                 position: o.position,
-            }
-        })?;
-        let bins = ParticleBins::new(grid, &shapes);
+            },
+        )?;
+        self.bins.rebuild(grid, &self.shapes, &mut self.reached);
         let min_points = model.traction_min_points();
         let boundary = |kind: BoundaryPointKind| {
             move |o: transfer::OutsideGrid| StepError::BoundaryPointLeftGrid {
@@ -40,19 +55,14 @@ impl StepSetup {
                 position: o.position,
             }
         };
-        let traction_shapes = model
+        self.traction_shapes = model
             .traction
-            .shapes(grid, &bins, min_points)
+            .shapes(grid, &self.bins, min_points)
             .map_err(boundary(BoundaryPointKind::Traction))?;
-        let driven_shapes = model
+        self.driven_shapes = model
             .driven
-            .shapes(grid, &bins, min_points, &shapes)
+            .shapes(grid, &self.bins, min_points, &self.shapes)
             .map_err(boundary(BoundaryPointKind::Contact))?;
-        Ok(Self {
-            shapes,
-            bins,
-            traction_shapes,
-            driven_shapes,
-        })
+        Ok(())
     }
 }

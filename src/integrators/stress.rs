@@ -65,13 +65,54 @@ pub fn evaluate_stresses(
     spin_term: bool,
     trial: &mut TrialStresses,
 ) -> UpdateTally {
+    let tangents = if spin_term {
+        Tangents::WithSpinTerm
+    } else {
+        Tangents::Kept
+    };
+    evaluate(model, setup, du, strength, tangents, trial)
+}
+
+/// [`evaluate_stresses`] for a step that builds no tangent (explicit):
+/// the same stresses, states, gradients and rotated stresses, with
+/// `trial.tangent` and `trial.spin_sensitivity` left empty.
+pub fn evaluate_stresses_without_tangent(
+    model: &Model,
+    setup: &StepSetup,
+    du: &[[f64; 2]],
+    strength: Option<NonlocalStrength<'_>>,
+    trial: &mut TrialStresses,
+) -> UpdateTally {
+    evaluate(model, setup, du, strength, Tangents::None, trial)
+}
+
+/// Which tangents a stress evaluation keeps.
+#[derive(Clone, Copy, PartialEq)]
+enum Tangents {
+    /// None (explicit steps).
+    None,
+    /// The algorithmic tangents dσ/dΔε.
+    Kept,
+    /// The tangents and dσ/dω (unsymmetric tangents with the spin term).
+    WithSpinTerm,
+}
+
+/// The stress update of every point for the increment `du`, with the
+/// tangents `tangents` asks for ([`evaluate_stresses`]).
+fn evaluate(
+    model: &Model,
+    setup: &StepSetup,
+    du: &[[f64; 2]],
+    strength: Option<NonlocalStrength<'_>>,
+    tangents: Tangents,
+    trial: &mut TrialStresses,
+) -> UpdateTally {
     let (particles, materials, shapes) = (&model.particles, &model.materials, &setup.shapes);
-    let compliances = spin_term.then_some(model.compliances.as_slice());
+    let compliances = (tangents == Tangents::WithSpinTerm).then_some(model.compliances.as_slice());
     let b_bar = model.b_bar().then_some(&setup.bins);
     let n = particles.len();
     trial.stress.resize(n, [0.0; 4]);
     trial.state.resize(n, PointState::default());
-    trial.tangent.resize(n, [[0.0; 4]; 4]);
     trial.rotated.resize(n, [0.0; 4]);
     trial.gradient.clear();
     trial
@@ -83,40 +124,70 @@ pub fn evaluate_stresses(
         None => Vec::new(),
     };
     let (gradient, correction) = (&trial.gradient, &trial.volumetric_correction);
-    let tally = trial
+    // the update of point p: its trial stress, state and rotated stress
+    // stored, its tangent returned
+    let update_point = |tally: &mut UpdateTally,
+                        p: usize,
+                        stress: &mut Voigt,
+                        state: &mut PointState,
+                        rotated_out: &mut Voigt|
+     -> Option<Mat4> {
+        let (strain, spin) = transfer::strain_and_spin(&gradient[p]);
+        let strain_increment = match correction.get(p) {
+            Some(&c) => volumetric::corrected_strain(&strain, c),
+            None => strain,
+        };
+        let rotated = transfer::rotate_stress(&particles.stress[p], spin);
+        *rotated_out = rotated;
+        let material = &materials[particles.material[p] as usize];
+        let strength = strength.map_or(StrengthVariable::Local, |s| s.at(p));
+        tally.updates += 1;
+        tally.yield_checks += u64::from(!material.is_elastic());
+        match material.update(&rotated, &strain_increment, &particles.state[p], strength) {
+            Ok(update) => {
+                tally.return_mappings += u64::from(update.yielded);
+                *stress = update.stress;
+                *state = update.state;
+                Some(update.tangent)
+            }
+            Err(e) => {
+                tally.fail(p, e);
+                None
+            }
+        }
+    };
+    let points = trial
         .stress
         .par_iter_mut()
         .zip(trial.state.par_iter_mut())
-        .zip(trial.tangent.par_iter_mut())
         .zip(trial.rotated.par_iter_mut())
-        .enumerate()
-        .fold(
-            UpdateTally::default,
-            |mut tally, (p, (((stress, state), tangent), rotated_out))| {
-                let (strain, spin) = transfer::strain_and_spin(&gradient[p]);
-                let strain_increment = match correction.get(p) {
-                    Some(&c) => volumetric::corrected_strain(&strain, c),
-                    None => strain,
-                };
-                let rotated = transfer::rotate_stress(&particles.stress[p], spin);
-                *rotated_out = rotated;
-                let material = &materials[particles.material[p] as usize];
-                let strength = strength.map_or(StrengthVariable::Local, |s| s.at(p));
-                tally.updates += 1;
-                tally.yield_checks += u64::from(!material.is_elastic());
-                match material.update(&rotated, &strain_increment, &particles.state[p], strength) {
-                    Ok(update) => {
-                        tally.return_mappings += u64::from(update.yielded);
-                        *stress = update.stress;
-                        *state = update.state;
-                        *tangent = update.tangent;
+        .enumerate();
+    let tally = if tangents == Tangents::None {
+        trial.tangent.clear();
+        points
+            .fold(
+                UpdateTally::default,
+                |mut tally, (p, ((stress, state), rotated))| {
+                    update_point(&mut tally, p, stress, state, rotated);
+                    tally
+                },
+            )
+            .reduce(UpdateTally::default, UpdateTally::merge)
+    } else {
+        trial.tangent.resize(n, [[0.0; 4]; 4]);
+        points
+            .zip(trial.tangent.par_iter_mut())
+            .fold(
+                UpdateTally::default,
+                |mut tally, ((p, ((stress, state), rotated)), tangent)| {
+                    if let Some(t) = update_point(&mut tally, p, stress, state, rotated) {
+                        *tangent = t;
                     }
-                    Err(e) => tally.fail(p, e),
-                }
-                tally
-            },
-        )
-        .reduce(UpdateTally::default, UpdateTally::merge);
+                    tally
+                },
+            )
+            .reduce(UpdateTally::default, UpdateTally::merge)
+    };
     if let Some(compliances) = compliances {
         trial.spin_sensitivity.resize(n, [0.0; 4]);
         trial
