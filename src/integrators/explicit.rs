@@ -13,9 +13,9 @@
 
 use rayon::prelude::*;
 
-use super::commit::{commit, NodalResults};
+use super::commit::{commit_swapping, NodalResults};
 use super::g2p::{g2p, GridMotion, VelocityUpdate};
-use super::stresses::converged_stresses;
+use super::stresses::{converged_stresses_into, ConvergedStresses};
 use super::time_step::StableTimeStep;
 use super::{
     evaluate_stresses_without_tangent, NonlocalStep, SolverUsage, StepReport, StepSetup,
@@ -74,6 +74,9 @@ struct Workspace {
     contact_motion: Vec<[f64; 2]>,
     /// Trial stresses of the step.
     trial: TrialStresses,
+    /// Converged stresses of the step; after the commit, the arrays of the
+    /// step before.
+    converged: ConvergedStresses,
 }
 
 /// The grid of a step: P2G results, then their momentum update (DESIGN §4
@@ -158,10 +161,11 @@ impl ExplicitIntegrator {
             increment,
             contact_motion,
             trial,
+            converged,
             ..
         } = work;
-        let converged = profile.time(Stage::Stresses, || {
-            converged_stresses(model, setup, trial, nonlocal.as_mut(), profile)
+        profile.time(Stage::Stresses, || {
+            converged_stresses_into(model, setup, trial, nonlocal.as_mut(), profile, converged)
         })?;
         let removed = profile.time(Stage::Commit, || {
             grid.contact_motion(model, dt, contact_motion);
@@ -170,7 +174,7 @@ impl ExplicitIntegrator {
                 increment,
                 contact_motion,
             };
-            commit(model, setup, trial, converged, nodal)
+            commit_swapping(model, setup, trial, converged, nodal)
         })?;
         model.step += 1;
         model.time = t + dt;
