@@ -23,8 +23,8 @@ use super::{
 };
 use crate::bc::DofConstraint;
 use crate::error::StepError;
-use crate::grid::ShapeAt;
-use crate::model::Model;
+use crate::grid::{BilinearShape, Support};
+use crate::model::{Model, PointRemap};
 use crate::profile::{Profile, Stage, Work};
 use crate::scene::{FieldError, SceneError};
 use crate::transfer;
@@ -54,6 +54,16 @@ const BODY: usize = 5;
 struct Workspace {
     /// Shape functions and bins of the step.
     setup: StepSetup,
+    /// The points' shape functions in compact form, when they apply
+    /// ([`StepSetup::compact_applies`]; `setup.shapes` is then empty).
+    compact: Vec<BilinearShape>,
+    /// The nodal and per-point arrays of the step.
+    buffers: Buffers,
+}
+
+/// The nodal and per-point arrays of the explicit step.
+#[derive(Default)]
+struct Buffers {
     /// Patch sums of the active cells, P2G pass.
     p2g_cells: Vec<P2gSums>,
     /// Nodal sums of the P2G pass.
@@ -135,35 +145,84 @@ impl ExplicitIntegrator {
     pub fn step(&mut self, model: &mut Model, profile: &Profile) -> Result<StepReport, StepError> {
         let t = model.time;
         let work = &mut *self.work;
-        profile.time(Stage::Setup, || work.setup.refresh(model))?;
-        let mut nonlocal = NonlocalStep::start(model, true, profile)?;
-        profile.time(Stage::P2G, || work.map_to_grid(model, t, profile));
+        let compact = profile.time(Stage::Setup, || work.refresh(model))?;
+        let Workspace {
+            setup,
+            compact: compact_shapes,
+            buffers,
+        } = work;
         let usage = &mut self.usage;
+        let (dt, removed) = if compact {
+            buffers.advance(model, setup, compact_shapes.as_slice(), usage, profile)
+        } else {
+            buffers.advance(model, setup, &setup.shapes, usage, profile)
+        }?;
+        model.step += 1;
+        model.time = t + dt;
+        Ok(StepReport {
+            step: model.step,
+            time: model.time,
+            dt,
+            iterations: 0,
+            substeps: 1,
+            removed_points: removed.into_iter().collect(),
+        })
+    }
+}
+
+impl Workspace {
+    /// The step's shape functions and bins at the start-of-step positions;
+    /// returns whether the points' shapes are the compact ones.
+    fn refresh(&mut self, model: &Model) -> Result<bool, StepError> {
+        if StepSetup::compact_applies(model) {
+            self.setup.refresh_compact(model, &mut self.compact)?;
+            Ok(true)
+        } else {
+            self.compact.clear();
+            self.setup.refresh(model)?;
+            Ok(false)
+        }
+    }
+}
+
+impl Buffers {
+    /// The stages of the step after the setup (points' shape functions
+    /// `shapes`): P2G, time step and momentum update, G2P, re-map, stress
+    /// update, stresses, commit. Returns Δt and the index remap of the
+    /// points removed.
+    fn advance<S: Support>(
+        &mut self,
+        model: &mut Model,
+        setup: &StepSetup,
+        shapes: &[S],
+        usage: &mut SolverUsage,
+        profile: &Profile,
+    ) -> Result<(f64, Option<PointRemap>), StepError> {
+        let t = model.time;
+        let mut nonlocal = NonlocalStep::start(model, true, profile)?;
+        profile.time(Stage::P2G, || {
+            self.map_to_grid(model, setup, shapes, t, profile)
+        });
         let dt = profile.time(Stage::TimeStep, || {
-            let dt = time_step(usage, model, &work.setup, &work.grid.mass)?;
-            work.grid.update_momentum(model, dt);
+            let dt = time_step(usage, model, setup, &self.grid.mass)?;
+            self.grid.update_momentum(model, dt);
             Ok::<_, StepError>(dt)
         })?;
         profile.time(Stage::G2P, || {
-            g2p(
-                &mut model.particles,
-                &work.setup.shapes,
-                &work.grid.motion(dt),
-            )
+            g2p(&mut model.particles, shapes, &self.grid.motion(dt))
         });
-        profile.time(Stage::Remap, || work.remap(model, dt));
+        profile.time(Stage::Remap, || self.remap(model, setup, shapes, dt));
         profile.time(Stage::StressUpdate, || {
-            work.stress_update(model, nonlocal.as_ref(), profile)
+            self.stress_update(model, setup, shapes, nonlocal.as_ref(), profile)
         })?;
-        let Workspace {
-            setup,
+        let Buffers {
             grid,
             increment,
             contact_motion,
             trial,
             converged,
             ..
-        } = work;
+        } = self;
         profile.time(Stage::Stresses, || {
             converged_stresses_into(model, setup, trial, nonlocal.as_mut(), profile, converged)
         })?;
@@ -176,16 +235,7 @@ impl ExplicitIntegrator {
             };
             commit_swapping(model, setup, trial, converged, nodal)
         })?;
-        model.step += 1;
-        model.time = t + dt;
-        Ok(StepReport {
-            step: model.step,
-            time: model.time,
-            dt,
-            iterations: 0,
-            substeps: 1,
-            removed_points: removed.into_iter().collect(),
-        })
+        Ok((dt, removed))
     }
 }
 
@@ -223,21 +273,28 @@ fn time_step(
     Ok(dt)
 }
 
-impl Workspace {
+impl Buffers {
     /// P2G: m_i, p_i = Σ N_ip m_p v_p, f_i = f_ext + f_pen − f_int at t
     /// (DESIGN D10–D11), the point sums in one pass; the nodal mass is
     /// counted in `profile`.
-    fn map_to_grid(&mut self, model: &Model, t: f64, profile: &Profile) {
-        let (setup, p) = (&self.setup, &model.particles);
+    fn map_to_grid<S: Support>(
+        &mut self,
+        model: &Model,
+        setup: &StepSetup,
+        shapes: &[S],
+        t: f64,
+        profile: &Profile,
+    ) {
+        let p = &model.particles;
         let stress = model.force_stresses(&setup.bins, &p.stress);
         let g = model.scene.loads.gravity_at(t);
         let (mass, velocity, volume) = (&p.mass, &p.velocity, &p.volume);
-        let add = |p: usize, s: &ShapeAt, patch: &mut [P2gSums]| {
+        let add = |p: usize, s: &S, patch: &mut [P2gSums]| {
             let (m, v, vol, sig) = (mass[p], velocity[p], volume[p], &stress[p]);
-            for a in s.support() {
-                let nm = s.n[a] * m;
-                let [dx, dy] = s.dn[a];
-                let sum = &mut patch[s.local[a] as usize];
+            for a in 0..s.support_size() {
+                let nm = s.value(a) * m;
+                let [dx, dy] = s.gradient(a);
+                let sum = &mut patch[s.place(a)];
                 sum[MASS] += nm;
                 sum[MOMENTUM] += nm * v[0];
                 sum[MOMENTUM + 1] += nm * v[1];
@@ -249,7 +306,7 @@ impl Workspace {
         transfer::scatter_into(
             &model.grid,
             &setup.bins,
-            &setup.shapes,
+            shapes,
             add,
             &mut self.p2g_cells,
             &mut self.p2g,
@@ -296,14 +353,14 @@ impl Workspace {
     /// MUSL re-map (DESIGN §4 step 4): p_i = Σ_p N_ip m_p v_p of the updated
     /// point velocities, Dirichlet again; Δu_i = Δt p_i / m_i into
     /// `self.increment`.
-    fn remap(&mut self, model: &Model, dt: f64) {
-        let (setup, p) = (&self.setup, &model.particles);
+    fn remap<S: Support>(&mut self, model: &Model, setup: &StepSetup, shapes: &[S], dt: f64) {
+        let p = &model.particles;
         let (mass, velocity) = (&p.mass, &p.velocity);
-        let add = |p: usize, s: &ShapeAt, patch: &mut [[f64; 2]]| {
+        let add = |p: usize, s: &S, patch: &mut [[f64; 2]]| {
             let (m, v) = (mass[p], velocity[p]);
-            for a in s.support() {
-                let nm = s.n[a] * m;
-                let sum = &mut patch[s.local[a] as usize];
+            for a in 0..s.support_size() {
+                let nm = s.value(a) * m;
+                let sum = &mut patch[s.place(a)];
                 sum[0] += nm * v[0];
                 sum[1] += nm * v[1];
             }
@@ -311,7 +368,7 @@ impl Workspace {
         transfer::scatter_into(
             &model.grid,
             &setup.bins,
-            &setup.shapes,
+            shapes,
             add,
             &mut self.remap_cells,
             &mut self.remapped,
@@ -338,15 +395,18 @@ impl Workspace {
     /// Δε from the re-mapped increment and the stress update (DESIGN §4
     /// step 5) into `self.trial`, strengths at κ̄(n); the updates are
     /// counted in `profile`. No tangent is formed.
-    fn stress_update(
+    fn stress_update<S: Support>(
         &mut self,
         model: &Model,
+        setup: &StepSetup,
+        shapes: &[S],
         nonlocal: Option<&NonlocalStep>,
         profile: &Profile,
     ) -> Result<(), StepError> {
         evaluate_stresses_without_tangent(
             model,
-            &self.setup,
+            setup,
+            shapes,
             &self.increment,
             nonlocal.map(|n| n.strength()),
             &mut self.trial,

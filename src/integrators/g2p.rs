@@ -5,7 +5,7 @@
 
 use rayon::prelude::*;
 
-use crate::grid::ShapeAt;
+use crate::grid::Support;
 use crate::particles::Particles;
 use crate::transfer::interpolate;
 
@@ -38,7 +38,7 @@ pub struct GridMotion<'a> {
 /// x_p += scale Σ_i N_ip u_i; with accelerations, a_p = Σ_i N_ip a_i and v_p
 /// by the velocity rule (in parallel over the points: each point's update
 /// reads only its own state and the nodal fields).
-pub fn g2p(particles: &mut Particles, shapes: &[ShapeAt], motion: &GridMotion) {
+pub fn g2p<S: Support>(particles: &mut Particles, shapes: &[S], motion: &GridMotion) {
     let Particles {
         position,
         velocity,
@@ -59,8 +59,8 @@ const POINTS_PER_TASK: usize = 256;
 
 /// The G2P update of one point with shape functions `shape`.
 #[inline]
-fn move_point(
-    shape: &ShapeAt,
+fn move_point<S: Support>(
+    shape: &S,
     motion: &GridMotion,
     position: &mut [f64; 2],
     velocity: &mut [f64; 2],

@@ -4,8 +4,9 @@
 //! points, rigid bodies' contact points).
 
 use crate::error::{BoundaryPointKind, StepError};
-use crate::grid::ShapeAt;
+use crate::grid::{BilinearShape, ShapeAt, ShapeFunctions};
 use crate::model::Model;
+use crate::scene::DoubleMapping;
 use crate::transfer::{self, ParticleBins, ShapeScratch};
 
 /// The start-of-step interpolation of one (sub-)step.
@@ -40,13 +41,43 @@ impl StepSetup {
     pub fn refresh(&mut self, model: &Model) -> Result<(), StepError> {
         let grid = &model.grid;
         let positions = &model.particles.position;
-        transfer::shapes_into(grid, positions, &mut self.scratch, &mut self.shapes).map_err(
-            |o| StepError::ParticleLeftGrid {
-                particle: o.particle,
-                position: o.position,
-            },
-        )?;
+        transfer::shapes_into(grid, positions, &mut self.scratch, &mut self.shapes)
+            .map_err(point_left_grid)?;
         self.bins.rebuild(grid, &self.shapes, &mut self.reached);
+        self.boundary_shapes(model)
+    }
+
+    /// Whether the points of `model` may take the compact form of their
+    /// shape functions ([`Self::refresh_compact`]): bilinear shape functions,
+    /// no rigid body (its tied points take the points' full shapes) and no
+    /// double mapping (it reads them).
+    pub fn compact_applies(model: &Model) -> bool {
+        model.grid.shape_functions == ShapeFunctions::Bilinear
+            && model.driven.is_empty()
+            && model.double_mapping() == DoubleMapping::Off
+    }
+
+    /// [`Self::refresh`] with the material points' shape functions in
+    /// compact form, into `shapes` (when [`Self::compact_applies`]): the
+    /// bins and the boundary points' shapes, `self.shapes` left empty.
+    pub fn refresh_compact(
+        &mut self,
+        model: &Model,
+        shapes: &mut Vec<BilinearShape>,
+    ) -> Result<(), StepError> {
+        debug_assert!(Self::compact_applies(model));
+        let grid = &model.grid;
+        transfer::bilinear_shapes_into(grid, &model.particles.position, shapes)
+            .map_err(point_left_grid)?;
+        self.shapes.clear();
+        self.bins.rebuild(grid, shapes, &mut self.reached);
+        self.boundary_shapes(model)
+    }
+
+    /// Shape functions of the traction points and the rigid bodies' tied
+    /// points, with the bins of the material points.
+    fn boundary_shapes(&mut self, model: &Model) -> Result<(), StepError> {
+        let grid = &model.grid;
         let min_points = model.traction_min_points();
         let boundary = |kind: BoundaryPointKind| {
             move |o: transfer::OutsideGrid| StepError::BoundaryPointLeftGrid {
@@ -64,5 +95,13 @@ impl StepSetup {
             .shapes(grid, &self.bins, min_points, &self.shapes)
             .map_err(boundary(BoundaryPointKind::Contact))?;
         Ok(())
+    }
+}
+
+/// The error of a material point outside the grid.
+fn point_left_grid(o: transfer::OutsideGrid) -> StepError {
+    StepError::ParticleLeftGrid {
+        particle: o.particle,
+        position: o.position,
     }
 }
