@@ -99,8 +99,37 @@ impl ConstitutiveModel for LinearElastic {
         state_n: &PointState,
         _strength: StrengthVariable,
     ) -> Result<StressUpdate, ConstitutiveError> {
-        let d = &self.stiffness;
-        let increment = mat4_mul_vec(d, strain_increment);
+        Ok(StressUpdate {
+            stress: self.stress_after(stress_rotated, strain_increment)?,
+            state: *state_n,
+            tangent: self.stiffness,
+            yielded: false,
+        })
+    }
+
+    fn update_stress(
+        &self,
+        stress_rotated: &Voigt,
+        strain_increment: &Voigt,
+        state_n: &PointState,
+        _strength: StrengthVariable,
+        (stress, state): (&mut Voigt, &mut PointState),
+    ) -> Result<bool, ConstitutiveError> {
+        *stress = self.stress_after(stress_rotated, strain_increment)?;
+        *state = *state_n;
+        Ok(false)
+    }
+}
+
+impl LinearElastic {
+    /// σ^R + D Δε (DESIGN D22), refused when not finite.
+    #[inline]
+    fn stress_after(
+        &self,
+        stress_rotated: &Voigt,
+        strain_increment: &Voigt,
+    ) -> Result<Voigt, ConstitutiveError> {
+        let increment = mat4_mul_vec(&self.stiffness, strain_increment);
         let mut stress = *stress_rotated;
         for (s, ds) in stress.iter_mut().zip(increment) {
             *s += ds;
@@ -110,12 +139,7 @@ impl ConstitutiveModel for LinearElastic {
                 "elastic stress {stress:?}"
             )));
         }
-        Ok(StressUpdate {
-            stress,
-            state: *state_n,
-            tangent: *d,
-            yielded: false,
-        })
+        Ok(stress)
     }
 }
 

@@ -15,7 +15,7 @@ use rayon::prelude::*;
 
 use super::commit::{commit_swapping, NodalResults};
 use super::g2p::{g2p, GridMotion, VelocityUpdate};
-use super::stresses::{converged_stresses_into, ConvergedStresses};
+use super::stresses::{converged_stresses_taking, ConvergedStresses};
 use super::time_step::StableTimeStep;
 use super::{
     evaluate_stresses_without_tangent, NonlocalStep, SolverUsage, StepReport, StepSetup,
@@ -224,7 +224,7 @@ impl Buffers {
             ..
         } = self;
         profile.time(Stage::Stresses, || {
-            converged_stresses_into(model, setup, trial, nonlocal.as_mut(), profile, converged)
+            converged_stresses_taking(model, setup, trial, nonlocal.as_mut(), profile, converged)
         })?;
         let removed = profile.time(Stage::Commit, || {
             grid.contact_motion(model, dt, contact_motion);

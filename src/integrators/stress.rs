@@ -161,7 +161,21 @@ fn evaluate<S: Support>(
         let strength = strength.map_or(StrengthVariable::Local, |s| s.at(p));
         tally.updates += 1;
         tally.yield_checks += u64::from(!material.is_elastic());
-        match material.update(&rotated, &strain_increment, &particles.state[p], strength) {
+        let state_n = &particles.state[p];
+        if tangents == Tangents::None {
+            match material.update_stress(
+                &rotated,
+                &strain_increment,
+                state_n,
+                strength,
+                (stress, state),
+            ) {
+                Ok(yielded) => tally.return_mappings += u64::from(yielded),
+                Err(e) => tally.fail(p, e),
+            }
+            return None;
+        }
+        match material.update(&rotated, &strain_increment, state_n, strength) {
             Ok(update) => {
                 tally.return_mappings += u64::from(update.yielded);
                 *stress = update.stress;

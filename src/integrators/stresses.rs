@@ -40,15 +40,36 @@ pub fn converged_stresses(
     nonlocal: Option<&mut NonlocalStep>,
     profile: &Profile,
 ) -> Result<ConvergedStresses, StepError> {
-    let mut converged = ConvergedStresses::default();
-    converged_stresses_into(model, setup, trial, nonlocal, profile, &mut converged)?;
+    let mut converged = ConvergedStresses {
+        stress: trial.stress.clone(),
+        state: trial.state.clone(),
+        ..ConvergedStresses::default()
+    };
+    converge(model, setup, trial, nonlocal, profile, &mut converged)?;
     Ok(converged)
 }
 
-/// [`converged_stresses`] into `converged`, whose arrays are reused (no
-/// allocation once they have grown to the number of points, unless the
-/// step is nonlocal or double-mapped).
-pub fn converged_stresses_into(
+/// [`converged_stresses`] that takes the trial stresses and states over
+/// instead of copying them: `trial.stress` and `trial.state` are swapped
+/// with the arrays of `converged` (a step that reuses its arrays allocates
+/// none; the trial's other fields are kept).
+pub fn converged_stresses_taking(
+    model: &Model,
+    setup: &StepSetup,
+    trial: &mut TrialStresses,
+    nonlocal: Option<&mut NonlocalStep>,
+    profile: &Profile,
+    converged: &mut ConvergedStresses,
+) -> Result<(), StepError> {
+    std::mem::swap(&mut trial.stress, &mut converged.stress);
+    std::mem::swap(&mut trial.state, &mut converged.state);
+    converge(model, setup, trial, nonlocal, profile, converged)
+}
+
+/// The converged step from `converged`'s stresses and states, which hold
+/// the trial ones (the trial's own may not): the energies, κ̄(n+1) and the
+/// double mapping.
+fn converge(
     model: &Model,
     setup: &StepSetup,
     trial: &TrialStresses,
@@ -56,18 +77,17 @@ pub fn converged_stresses_into(
     profile: &Profile,
     converged: &mut ConvergedStresses,
 ) -> Result<(), StepError> {
-    (converged.internal_work, converged.dissipation) =
-        step_energies(model, trial, &mut converged.point_work);
-    let state = &mut converged.state;
-    state.clear();
-    state.extend_from_slice(&trial.state);
+    let ConvergedStresses {
+        stress,
+        state,
+        internal_work,
+        dissipation,
+        point_work,
+    } = converged;
+    (*internal_work, *dissipation) = step_energies(model, trial, stress, point_work);
     let kappa_bar = match nonlocal {
         Some(nl) => Some(profile.time(Stage::Nonlocal, || {
-            nl.committed(
-                &model.particles,
-                |p| trial.state[p].plastic_strain_eq,
-                profile,
-            )
+            nl.committed(&model.particles, |p| state[p].plastic_strain_eq, profile)
         })?),
         None => None,
     };
@@ -76,9 +96,6 @@ pub fn converged_stresses_into(
             s.plastic_strain_eq_nonlocal = *k;
         }
     }
-    let stress = &mut converged.stress;
-    stress.clear();
-    stress.extend_from_slice(&trial.stress);
     let mode = model.double_mapping();
     if mode != DoubleMapping::Off {
         let restored = profile.time(Stage::DoubleMapping, || {
@@ -150,14 +167,20 @@ fn smooth(
 /// - plastic dissipation (DESIGN D43) Σ_p V_p(n) · ½(σ_p(n+1) + σ_p^R(n)) · Δε^p_p
 ///   with Δε^p = Δε − C(σ(n+1) − σ^R(n)); elastic materials contribute nothing.
 ///
-/// The points' work is formed in parallel into `point_work` and summed in
-/// point order (the same sum whatever the number of threads).
-fn step_energies(model: &Model, trial: &TrialStresses, point_work: &mut Vec<f64>) -> (f64, f64) {
+/// The constitutive stresses are `stress` (the trial's). The points' work
+/// is formed in parallel into `point_work` and summed in point order (the
+/// same sum whatever the number of threads).
+fn step_energies(
+    model: &Model,
+    trial: &TrialStresses,
+    stress: &[Voigt],
+    point_work: &mut Vec<f64>,
+) -> (f64, f64) {
     let p = &model.particles;
     point_work.clear();
     point_work.par_extend((0..p.len()).into_par_iter().with_min_len(1024).map(|i| {
         let strain = trial.strain_increment(i);
-        let (now, before) = (&trial.stress[i], &trial.rotated[i]);
+        let (now, before) = (&stress[i], &trial.rotated[i]);
         let work: f64 = (0..4).map(|k| 0.5 * (now[k] + before[k]) * strain[k]).sum();
         p.volume[i] * work
     }));
@@ -183,7 +206,7 @@ fn step_energies(model: &Model, trial: &TrialStresses, point_work: &mut Vec<f64>
         .collect();
     let dissipation = dissipation_increment(
         &volumes,
-        &trial.stress,
+        stress,
         &trial.rotated,
         &strain,
         ComplianceSource::PerPoint(&compliance),
