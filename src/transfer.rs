@@ -117,22 +117,26 @@ pub fn shapes_into(
 }
 
 /// The compact bilinear shape functions ([`BilinearShape`]) of every point
-/// of a bilinear grid into `shapes`: the values [`shapes_into`] gives, in
-/// 120 rather than 272 bytes a point.
+/// of a bilinear grid into `shapes`, and its holding cell into `cells`: the
+/// values [`shapes_into`] gives, in 120 rather than 272 bytes a point.
 pub fn bilinear_shapes_into(
     grid: &Grid,
     positions: &[[f64; 2]],
     shapes: &mut Vec<BilinearShape>,
+    cells: &mut Vec<u32>,
 ) -> Result<(), OutsideGrid> {
     debug_assert_eq!(grid.patch_side(), 2, "a bilinear grid");
     shapes.resize(positions.len(), BilinearShape::default());
+    cells.resize(positions.len(), 0);
     let outside = shapes
         .par_iter_mut()
+        .zip(cells.par_iter_mut())
         .zip(positions)
         .with_min_len(1024)
-        .map(|(shape, &x)| match grid.locate(x) {
+        .map(|((shape, cell), &x)| match grid.locate(x) {
             Some((ci, cj)) => {
                 *shape = grid.bilinear_shape(ci, cj, x);
+                *cell = shape.cell;
                 false
             }
             None => true,
@@ -190,28 +194,7 @@ impl ParticleBins {
     /// [`Self::new`] gives, without allocating once the arrays have grown.
     pub fn rebuild<S: Support>(&mut self, grid: &Grid, shapes: &[S], reached: &mut Vec<bool>) {
         let n_cells = grid.cell_count();
-        // counting sort, stable: cell_start counts, then `next` places
-        let cell_start = &mut self.cell_start;
-        cell_start.clear();
-        cell_start.resize(n_cells + 1, 0);
-        for s in shapes {
-            cell_start[s.holding_cell() as usize + 1] += 1;
-        }
-        for c in 0..n_cells {
-            cell_start[c + 1] += cell_start[c];
-        }
-        self.order.clear();
-        self.order.resize(shapes.len(), 0);
-        // `next[c]` is kept in `cell_slot` until the slots are numbered below
-        let next = &mut self.cell_slot;
-        next.clear();
-        next.extend_from_slice(&cell_start[..n_cells]);
-        for (p, s) in shapes.iter().enumerate() {
-            let c = s.holding_cell() as usize;
-            self.order[next[c] as usize] = p as u32;
-            next[c] += 1;
-        }
-        // a bilinear support never leaves the holding cell
+        self.sort_points(n_cells, shapes.len(), |p| shapes[p].holding_cell());
         reached.clear();
         reached.resize(n_cells, false);
         if grid.patch_side() > 2 {
@@ -219,6 +202,46 @@ impl ParticleBins {
                 mark_cells_reached(grid, s, reached);
             }
         }
+        self.number_cells(grid, reached);
+    }
+
+    /// [`Self::rebuild`] for bilinear shape functions (whose support never
+    /// leaves the holding cell) from the holding cell of every point.
+    pub fn rebuild_bilinear(&mut self, grid: &Grid, cells: &[u32]) {
+        debug_assert_eq!(grid.patch_side(), 2, "a bilinear grid");
+        self.sort_points(grid.cell_count(), cells.len(), |p| cells[p]);
+        self.number_cells(grid, &[]);
+    }
+
+    /// `cell_start` and `order`: the points of every cell in index order
+    /// (a stable counting sort), point `p` in cell `cell_of(p)`.
+    fn sort_points(&mut self, n_cells: usize, n_points: usize, cell_of: impl Fn(usize) -> u32) {
+        let cell_start = &mut self.cell_start;
+        cell_start.clear();
+        cell_start.resize(n_cells + 1, 0);
+        for p in 0..n_points {
+            cell_start[cell_of(p) as usize + 1] += 1;
+        }
+        for c in 0..n_cells {
+            cell_start[c + 1] += cell_start[c];
+        }
+        self.order.clear();
+        self.order.resize(n_points, 0);
+        // `next[c]` is kept in `cell_slot` until the slots are numbered
+        let next = &mut self.cell_slot;
+        next.clear();
+        next.extend_from_slice(&cell_start[..n_cells]);
+        for p in 0..n_points {
+            let c = cell_of(p) as usize;
+            self.order[next[c] as usize] = p as u32;
+            next[c] += 1;
+        }
+    }
+
+    /// The active and reached cells (`reached[c]`: some support reaches
+    /// cell `c`; empty when none can), their slots and the active nodes.
+    fn number_cells(&mut self, grid: &Grid, reached: &[bool]) {
+        let n_cells = grid.cell_count();
         self.active_cells.clear();
         self.reached_cells.clear();
         self.cell_slot.clear();
@@ -227,13 +250,14 @@ impl ParticleBins {
         self.node_active.resize(grid.node_count(), false);
         for c in 0..n_cells {
             let holds_points = self.cell_start[c + 1] > self.cell_start[c];
+            let is_reached = reached.get(c).copied().unwrap_or(false);
             if holds_points {
                 self.cell_slot[c] = self.active_cells.len() as u32;
                 self.active_cells.push(c as u32);
-            } else if reached[c] {
+            } else if is_reached {
                 self.reached_cells.push(c as u32);
             }
-            if holds_points || reached[c] {
+            if holds_points || is_reached {
                 let (ci, cj) = grid.cell_ij(c);
                 for n in grid.cell_nodes(ci, cj) {
                     self.node_active[n as usize] = true;

@@ -43,6 +43,9 @@ pub struct ExplicitIntegrator {
 /// component Σ N m (−g) (its x component is zero).
 type P2gSums = [f64; 6];
 
+/// Nodes handed to one rayon task at least.
+const NODES_PER_TASK: usize = 512;
+
 /// Places of the quantities in [`P2gSums`].
 const MASS: usize = 0;
 const MOMENTUM: usize = 1;
@@ -313,41 +316,54 @@ impl Buffers {
         );
         profile.count(Work::ExplicitNodalMass, 1);
         let nodes = self.p2g.len();
-        // f_ext: body force (when gravity is on), follower pressures, springs
+        // f_ext of the boundary devices: follower pressures, springs
+        let devices = !model.traction.is_empty() || !model.driven.is_empty();
         self.external.clear();
-        self.external.extend(self.p2g.iter().map(|sums| {
-            if g != 0.0 {
-                [0.0, sums[BODY]]
-            } else {
-                [0.0; 2]
-            }
-        }));
-        model
-            .traction
-            .add_forces(&setup.traction_shapes, &mut self.external);
-        if !model.driven.is_empty() {
-            self.zero.clear();
-            self.zero.resize(nodes, [0.0; 2]);
+        if devices {
+            self.external.extend(self.p2g.iter().map(|sums| {
+                if g != 0.0 {
+                    [0.0, sums[BODY]]
+                } else {
+                    [0.0; 2]
+                }
+            }));
             model
-                .driven
-                .add_forces(p, &setup.driven_shapes, &self.zero, t, &mut self.external);
+                .traction
+                .add_forces(&setup.traction_shapes, &mut self.external);
+            if !model.driven.is_empty() {
+                self.zero.clear();
+                self.zero.resize(nodes, [0.0; 2]);
+                model
+                    .driven
+                    .add_forces(p, &setup.driven_shapes, &self.zero, t, &mut self.external);
+            }
         }
+        // m_i, p_i and f_i = f_ext − f_int, f_ext the body force alone
+        // without devices
+        let (sums, external) = (&self.p2g, &self.external);
         let grid = &mut self.grid;
-        grid.mass.clear();
-        grid.mass.extend(self.p2g.iter().map(|sums| sums[MASS]));
-        grid.momentum.clear();
-        grid.momentum.extend(
-            self.p2g
-                .iter()
-                .map(|sums| [sums[MOMENTUM], sums[MOMENTUM + 1]]),
-        );
-        grid.force.clear();
-        grid.force.extend(
-            self.external
-                .iter()
-                .zip(&self.p2g)
-                .map(|(e, sums)| [e[0] - sums[INTERNAL], e[1] - sums[INTERNAL + 1]]),
-        );
+        grid.mass.resize(nodes, 0.0);
+        grid.momentum.resize(nodes, [0.0; 2]);
+        grid.force.resize(nodes, [0.0; 2]);
+        grid.mass
+            .par_iter_mut()
+            .zip(grid.momentum.par_iter_mut())
+            .zip(grid.force.par_iter_mut())
+            .enumerate()
+            .with_min_len(NODES_PER_TASK)
+            .for_each(|(node, ((mass, momentum), force))| {
+                let s = &sums[node];
+                let e = if devices {
+                    external[node]
+                } else if g != 0.0 {
+                    [0.0, s[BODY]]
+                } else {
+                    [0.0; 2]
+                };
+                *mass = s[MASS];
+                *momentum = [s[MOMENTUM], s[MOMENTUM + 1]];
+                *force = [e[0] - s[INTERNAL], e[1] - s[INTERNAL + 1]];
+            });
     }
 
     /// MUSL re-map (DESIGN §4 step 4): p_i = Σ_p N_ip m_p v_p of the updated
@@ -421,7 +437,8 @@ impl UpdatedGrid {
     /// then the accelerations, velocities and reactions of the nodes.
     fn update_momentum(&mut self, model: &Model, dt: f64) {
         let n_nodes = self.mass.len();
-        self.tiny_mass = 1e-12 * self.mass.iter().cloned().fold(0.0, f64::max);
+        // a maximum: the same whatever the order
+        self.tiny_mass = 1e-12 * self.mass.par_iter().cloned().reduce(|| 0.0, f64::max);
         let damping = model.scene.solver.damping;
         let (tiny_mass, mass, force) = (self.tiny_mass, &self.mass, &self.force);
         for field in [
@@ -438,6 +455,7 @@ impl UpdatedGrid {
             .zip(self.velocity.par_iter_mut())
             .zip(self.reaction.par_iter_mut())
             .enumerate()
+            .with_min_len(NODES_PER_TASK)
             .for_each(|(node, (((momentum, acceleration), velocity), reaction))| {
                 let m = mass[node];
                 if m <= tiny_mass {

@@ -24,6 +24,8 @@ pub struct StepSetup {
     scratch: ShapeScratch,
     /// Cells some GIMP domain reaches (binning buffer).
     reached: Vec<bool>,
+    /// The cell of every point (binning buffer, compact shapes).
+    cells: Vec<u32>,
 }
 
 impl StepSetup {
@@ -67,10 +69,11 @@ impl StepSetup {
     ) -> Result<(), StepError> {
         debug_assert!(Self::compact_applies(model));
         let grid = &model.grid;
-        transfer::bilinear_shapes_into(grid, &model.particles.position, shapes)
+        let cells = &mut self.cells;
+        transfer::bilinear_shapes_into(grid, &model.particles.position, shapes, cells)
             .map_err(point_left_grid)?;
         self.shapes.clear();
-        self.bins.rebuild(grid, shapes, &mut self.reached);
+        self.bins.rebuild_bilinear(grid, cells);
         self.boundary_shapes(model)
     }
 
