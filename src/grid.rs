@@ -114,22 +114,32 @@ impl Support for ShapeAt {
     }
 }
 
-/// Bilinear shape functions of a point (DESIGN D9) in compact form: the
-/// four entries of its [`ShapeAt`] (nodes, places, N, ∇N, same order) in
-/// 120 bytes instead of 272, for the kernels that stream every point's
-/// shape functions several times a step.
+/// Bilinear shape functions of a point (DESIGN D9) in compact form: what
+/// they are evaluated from (the holding cell, its first node, the natural
+/// coordinates ξ, η), in 40 bytes instead of the 272 of a [`ShapeAt`]. N_a
+/// and ∇N_a are formed where a kernel reads them, by the expressions of
+/// [`shape::values`] and [`shape::gradients`]: the same numbers, nodes and
+/// order as the point's [`ShapeAt`]. For the kernels that stream every
+/// point's shape functions several times a step, the few operations cost
+/// less than the memory traffic they save.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct BilinearShape {
     /// Index of the cell that holds the point.
     pub cell: u32,
-    /// Global node indices, local order of [`shape::NODE_SIGNS`].
-    pub nodes: [u32; 4],
-    /// Place of each node in the cell's patch.
-    pub local: [u8; 4],
-    /// N_a(x).
-    pub n: [f64; 4],
-    /// ∇N_a(x), 1/m.
-    pub dn: [[f64; 2]; 4],
+    /// Global index of the cell's lower-left node.
+    pub first_node: u32,
+    /// Nodes per grid row (the upper nodes are one row above).
+    pub row: u32,
+    /// Natural coordinates (ξ, η) ∈ [−1, 1]² in the cell.
+    pub xi_eta: [f64; 2],
+    /// (2/h)·¼: ∇N_a = this × (ξ_a(1 + η_a η), η_a(1 + ξ_a ξ)).
+    pub quarter_scale: f64,
+}
+
+impl BilinearShape {
+    /// Places in the cell's 2 × 2 node patch of the nodes in the order of
+    /// [`shape::NODE_SIGNS`].
+    const PLACES: [usize; 4] = [0, 1, 3, 2];
 }
 
 impl Support for BilinearShape {
@@ -143,34 +153,27 @@ impl Support for BilinearShape {
     }
     #[inline]
     fn node(&self, a: usize) -> usize {
-        self.nodes[a] as usize
+        let (first, row) = (self.first_node as usize, self.row as usize);
+        [first, first + 1, first + 1 + row, first + row][a]
     }
     #[inline]
     fn place(&self, a: usize) -> usize {
-        self.local[a] as usize
+        Self::PLACES[a]
     }
     #[inline]
     fn value(&self, a: usize) -> f64 {
-        self.n[a]
+        let [xi, eta] = self.xi_eta;
+        let sign = shape::NODE_SIGNS[a];
+        0.25 * (1.0 + sign[0] * xi) * (1.0 + sign[1] * eta)
     }
     #[inline]
     fn gradient(&self, a: usize) -> [f64; 2] {
-        self.dn[a]
-    }
-}
-
-impl From<BilinearShape> for ShapeAt {
-    fn from(b: BilinearShape) -> Self {
-        let mut s = ShapeAt {
-            cell: b.cell,
-            count: 4,
-            ..ShapeAt::default()
-        };
-        s.nodes[..4].copy_from_slice(&b.nodes);
-        s.local[..4].copy_from_slice(&b.local);
-        s.n[..4].copy_from_slice(&b.n);
-        s.dn[..4].copy_from_slice(&b.dn);
-        s
+        let [xi, eta] = self.xi_eta;
+        let sign = shape::NODE_SIGNS[a];
+        [
+            self.quarter_scale * sign[0] * (1.0 + sign[1] * eta),
+            self.quarter_scale * sign[1] * (1.0 + sign[0] * xi),
+        ]
     }
 }
 
@@ -305,7 +308,24 @@ impl Grid {
     /// (DESIGN D9), whatever the grid's point shape functions (traction
     /// points use these: they are boundary quadrature points, not volumes).
     pub fn shape_in_cell(&self, ci: usize, cj: usize, x: [f64; 2]) -> ShapeAt {
-        self.bilinear_shape(ci, cj, x).into()
+        let h = self.cell_size;
+        let [xi, eta] = self.bilinear_shape(ci, cj, x).xi_eta;
+        let n = shape::values(xi, eta);
+        let dn = shape::gradients(xi, eta, h);
+        let nodes = self.cell_nodes(ci, cj);
+        let mut s = ShapeAt {
+            cell: (cj * self.cells[0] + ci) as u32,
+            count: 4,
+            ..ShapeAt::default()
+        };
+        for (a, sign) in shape::NODE_SIGNS.iter().enumerate() {
+            let (i, j) = (ci + (sign[0] > 0.0) as usize, cj + (sign[1] > 0.0) as usize);
+            s.nodes[a] = nodes[a];
+            s.local[a] = self.patch_place(ci, cj, i, j);
+            s.n[a] = n[a];
+            s.dn[a] = dn[a];
+        }
+        s
     }
 
     /// [`Self::shape_in_cell`] in compact form.
@@ -313,20 +333,14 @@ impl Grid {
         let h = self.cell_size;
         let xc = self.origin[0] + (ci as f64 + 0.5) * h;
         let yc = self.origin[1] + (cj as f64 + 0.5) * h;
-        let xi = 2.0 * (x[0] - xc) / h;
-        let eta = 2.0 * (x[1] - yc) / h;
-        let mut s = BilinearShape {
+        let row = self.cells[0] + 1;
+        BilinearShape {
             cell: (cj * self.cells[0] + ci) as u32,
-            nodes: self.cell_nodes(ci, cj),
-            n: shape::values(xi, eta),
-            dn: shape::gradients(xi, eta, h),
-            ..BilinearShape::default()
-        };
-        for (a, sign) in shape::NODE_SIGNS.iter().enumerate() {
-            let (i, j) = (ci + (sign[0] > 0.0) as usize, cj + (sign[1] > 0.0) as usize);
-            s.local[a] = self.patch_place(ci, cj, i, j);
+            first_node: (cj * row + ci) as u32,
+            row: row as u32,
+            xi_eta: [2.0 * (x[0] - xc) / h, 2.0 * (x[1] - yc) / h],
+            quarter_scale: 2.0 / h * 0.25,
         }
-        s
     }
 
     /// uGIMP shape functions at `x` of the cell `(ci, cj)` that holds it: the

@@ -118,7 +118,7 @@ pub fn shapes_into(
 
 /// The compact bilinear shape functions ([`BilinearShape`]) of every point
 /// of a bilinear grid into `shapes`, and its holding cell into `cells`: the
-/// values [`shapes_into`] gives, in 120 rather than 272 bytes a point.
+/// values [`shapes_into`] gives, from 40 rather than 272 bytes a point.
 pub fn bilinear_shapes_into(
     grid: &Grid,
     positions: &[[f64; 2]],
