@@ -340,13 +340,14 @@ pub fn scatter_into<const K: usize, S: Support, F>(
     F: Fn(usize, &S, &mut [[f64; K]]) + Sync,
 {
     let patch = grid.patch_side().pow(2);
-    cell_sums.clear();
+    // each patch is zeroed by the task that sums it (not all in one serial pass)
     cell_sums.resize(bins.active_cells.len() * patch, [0.0; K]);
     cell_sums
         .par_chunks_mut(patch)
         .zip(bins.active_cells.par_iter())
         .with_min_len(CELLS_PER_TASK)
         .for_each(|(sum, &c)| {
+            sum.fill([0.0; K]);
             for &p in bins.particles_in(c as usize) {
                 let p = p as usize;
                 add(p, &shapes[p], sum);

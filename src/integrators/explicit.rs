@@ -441,12 +441,12 @@ impl UpdatedGrid {
         self.tiny_mass = 1e-12 * self.mass.par_iter().cloned().reduce(|| 0.0, f64::max);
         let damping = model.scene.solver.damping;
         let (tiny_mass, mass, force) = (self.tiny_mass, &self.mass, &self.force);
+        // every node's values are set below (in parallel, not zeroed first)
         for field in [
             &mut self.acceleration,
             &mut self.velocity,
             &mut self.reaction,
         ] {
-            field.clear();
             field.resize(n_nodes, [0.0; 2]);
         }
         self.momentum
@@ -457,6 +457,9 @@ impl UpdatedGrid {
             .enumerate()
             .with_min_len(NODES_PER_TASK)
             .for_each(|(node, (((momentum, acceleration), velocity), reaction))| {
+                *acceleration = [0.0; 2];
+                *velocity = [0.0; 2];
+                *reaction = [0.0; 2];
                 let m = mass[node];
                 if m <= tiny_mass {
                     *momentum = [0.0; 2];
