@@ -1,15 +1,18 @@
 //! Explicit integrator (DESIGN §4): MUSL central difference, matrix-free,
 //! with the same transfer kernels and stages as the implicit one.
 //!
-//! The integrator owns every buffer of its step ([`Workspace`]): shape
+//! The integrator owns every buffer of its step (its workspace): shape
 //! functions and bins, nodal fields, per-point increments and trial
 //! stresses are refilled in place each step, so that a step allocates
 //! nothing once the buffers have grown to the run's size (the kernel would
-//! otherwise map fresh pages for them every step). The P2G sums of a step
-//! (mass, momentum, internal and body forces) are formed in one pass over
-//! the points, and each stage runs in parallel over points or nodes with
-//! its sums in the fixed order of [`crate::transfer`]: the results do not
-//! depend on the number of threads.
+//! otherwise map fresh pages for them every step). With bilinear shape
+//! functions and neither rigid bodies nor double mapping, the points' shape
+//! functions are kept in compact form ([`crate::grid::BilinearShape`]), which
+//! the stages stream several times a step. The P2G sums of a step (mass,
+//! momentum, internal and body forces) are formed in one pass over the
+//! points, and each stage runs in parallel over points or nodes with its
+//! sums in the fixed order of [`crate::transfer`]: the results do not depend
+//! on the number of threads, and are those of the full shape functions.
 
 use rayon::prelude::*;
 
