@@ -5,6 +5,8 @@
 
 use std::sync::Arc;
 
+use rayon::prelude::*;
+
 use crate::bc::{Constraints, DrivenPoints, TractionPoints};
 use crate::constitutive::{
     invert4, ConstitutiveModel, Hmc, LinearElastic, Mat4, ParameterProblem, VonMises,
@@ -343,10 +345,11 @@ impl Model {
             return Ok(None);
         }
         let p = &self.particles;
-        let keep: Vec<bool> = p.position.iter().map(|&x| self.grid.contains(x)).collect();
-        if keep.iter().all(|&k| k) {
+        let grid = &self.grid;
+        if p.position.par_iter().all(|&x| grid.contains(x)) {
             return Ok(None);
         }
+        let keep: Vec<bool> = p.position.iter().map(|&x| grid.contains(x)).collect();
         let held =
             |i: usize| self.driven.particle.contains(&Some(i)) || self.pinned_points.contains(&i);
         // A run with no material left has nothing to compute: report the first point out.

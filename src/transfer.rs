@@ -9,7 +9,7 @@
 use rayon::prelude::*;
 
 use crate::constitutive::Voigt;
-use crate::grid::{Grid, ShapeAt, MAX_SUPPORT};
+use crate::grid::{BilinearShape, Grid, ShapeAt, Support, MAX_SUPPORT};
 
 /// Sentinel for "no slot" in index maps.
 pub const NONE: u32 = u32::MAX;
@@ -35,24 +35,50 @@ pub struct OutsideGrid {
 /// of order ε/h from the surface stress, and move by O(h/ε): measured, a
 /// local biaxial run throws corner points off the grid.
 pub fn shapes_at(grid: &Grid, positions: &[[f64; 2]]) -> Result<Vec<ShapeAt>, OutsideGrid> {
-    // indexed collects (an unindexed `Result` collect would copy every shape twice)
-    let located: Vec<Option<(usize, usize)>> =
-        positions.par_iter().map(|&x| grid.locate(x)).collect();
+    let mut shapes = Vec::new();
+    shapes_into(grid, positions, &mut ShapeScratch::default(), &mut shapes)?;
+    Ok(shapes)
+}
+
+/// Reusable buffers of [`shapes_into`]: the cell of every point and which
+/// cells hold points.
+#[derive(Clone, Debug, Default)]
+pub struct ShapeScratch {
+    /// Cell `(ci, cj)` of every point, `None` outside the grid.
+    located: Vec<Option<(usize, usize)>>,
+    /// Whether each cell holds points (GIMP only: it clips the domains).
+    holds_points: Vec<bool>,
+}
+
+/// [`shapes_at`] into `shapes` (resized to one entry per point), with the
+/// buffers of `scratch`: no allocation once they have grown to the run's size.
+pub fn shapes_into(
+    grid: &Grid,
+    positions: &[[f64; 2]],
+    scratch: &mut ShapeScratch,
+    shapes: &mut Vec<ShapeAt>,
+) -> Result<(), OutsideGrid> {
+    let ShapeScratch {
+        located,
+        holds_points,
+    } = scratch;
+    located.clear();
+    located.par_extend(positions.par_iter().map(|&x| grid.locate(x)));
     if let Some(p) = located.iter().position(Option::is_none) {
         return Err(OutsideGrid {
             particle: p,
             position: positions[p],
         });
     }
-    let cells: Vec<(usize, usize)> = located.into_iter().flatten().collect();
     // which cells hold points (needed only to clip GIMP domains)
-    let mut holds_points = Vec::new();
+    holds_points.clear();
     if grid.patch_side() > 2 {
-        holds_points = vec![false; grid.cell_count()];
-        for &(ci, cj) in &cells {
+        holds_points.resize(grid.cell_count(), false);
+        for &(ci, cj) in located.iter().flatten() {
             holds_points[cj * grid.cells[0] + ci] = true;
         }
     }
+    let holds_points = &*holds_points;
     let bounds = |ci: usize, cj: usize| {
         let h = grid.cell_size;
         let filled = |i: isize, j: isize| {
@@ -76,11 +102,59 @@ pub fn shapes_at(grid: &Grid, positions: &[[f64; 2]]) -> Result<Vec<ShapeAt>, Ou
             extent(1, j, filled(i, j - 1), filled(i, j + 1)),
         ]
     };
-    Ok(positions
-        .par_iter()
-        .zip(&cells)
-        .map(|(&x, &cell)| grid.shape_in(cell, x, bounds))
-        .collect())
+    shapes.resize(positions.len(), ShapeAt::default());
+    shapes
+        .par_iter_mut()
+        .zip(positions)
+        .zip(located.par_iter())
+        .for_each(|((shape, &x), cell)| {
+            // every point is located (checked above)
+            if let Some(cell) = *cell {
+                *shape = grid.shape_in(cell, x, bounds);
+            }
+        });
+    Ok(())
+}
+
+/// The compact bilinear shape functions ([`BilinearShape`]) of every point
+/// of a bilinear grid into `shapes`, and its holding cell into `cells`: the
+/// values [`shapes_into`] gives, from 40 rather than 272 bytes a point.
+pub fn bilinear_shapes_into(
+    grid: &Grid,
+    positions: &[[f64; 2]],
+    shapes: &mut Vec<BilinearShape>,
+    cells: &mut Vec<u32>,
+) -> Result<(), OutsideGrid> {
+    debug_assert_eq!(grid.patch_side(), 2, "a bilinear grid");
+    shapes.resize(positions.len(), BilinearShape::default());
+    cells.resize(positions.len(), 0);
+    let outside = shapes
+        .par_iter_mut()
+        .zip(cells.par_iter_mut())
+        .zip(positions)
+        .with_min_len(1024)
+        .map(|((shape, cell), &x)| match grid.locate(x) {
+            Some((ci, cj)) => {
+                *shape = grid.bilinear_shape(ci, cj, x);
+                *cell = shape.cell;
+                false
+            }
+            None => true,
+        })
+        .any(|out| out);
+    match outside {
+        true => {
+            let p = positions
+                .iter()
+                .position(|&x| grid.locate(x).is_none())
+                .unwrap_or_default();
+            Err(OutsideGrid {
+                particle: p,
+                position: positions[p],
+            })
+        }
+        false => Ok(()),
+    }
 }
 
 /// Largest node patch of a cell (4 × 4 for GIMP).
@@ -110,55 +184,85 @@ pub struct ParticleBins {
 impl ParticleBins {
     /// Bin the particles whose shapes are `shapes`.
     pub fn new(grid: &Grid, shapes: &[ShapeAt]) -> Self {
+        let mut bins = Self::default();
+        bins.rebuild(grid, shapes, &mut Vec::new());
+        bins
+    }
+
+    /// Bin the particles whose shapes are `shapes` again, reusing the
+    /// arrays (and `reached`, a buffer of one flag per cell): what
+    /// [`Self::new`] gives, without allocating once the arrays have grown.
+    pub fn rebuild<S: Support>(&mut self, grid: &Grid, shapes: &[S], reached: &mut Vec<bool>) {
         let n_cells = grid.cell_count();
-        let mut counts = vec![0u32; n_cells + 1];
-        for s in shapes {
-            counts[s.cell as usize + 1] += 1;
-        }
-        for c in 0..n_cells {
-            counts[c + 1] += counts[c];
-        }
-        let cell_start = counts.clone();
-        let mut next = counts;
-        let mut order = vec![0u32; shapes.len()];
-        for (p, s) in shapes.iter().enumerate() {
-            let c = s.cell as usize;
-            order[next[c] as usize] = p as u32;
-            next[c] += 1;
-        }
-        // a bilinear support never leaves the holding cell
-        let mut reached = vec![false; n_cells];
+        self.sort_points(n_cells, shapes.len(), |p| shapes[p].holding_cell());
+        reached.clear();
+        reached.resize(n_cells, false);
         if grid.patch_side() > 2 {
             for s in shapes {
-                mark_cells_reached(grid, s, &mut reached);
+                mark_cells_reached(grid, s, reached);
             }
         }
-        let mut active_cells = Vec::new();
-        let mut reached_cells = Vec::new();
-        let mut cell_slot = vec![NONE; n_cells];
-        let mut node_active = vec![false; grid.node_count()];
+        self.number_cells(grid, reached);
+    }
+
+    /// [`Self::rebuild`] for bilinear shape functions (whose support never
+    /// leaves the holding cell) from the holding cell of every point.
+    pub fn rebuild_bilinear(&mut self, grid: &Grid, cells: &[u32]) {
+        debug_assert_eq!(grid.patch_side(), 2, "a bilinear grid");
+        self.sort_points(grid.cell_count(), cells.len(), |p| cells[p]);
+        self.number_cells(grid, &[]);
+    }
+
+    /// `cell_start` and `order`: the points of every cell in index order
+    /// (a stable counting sort), point `p` in cell `cell_of(p)`.
+    fn sort_points(&mut self, n_cells: usize, n_points: usize, cell_of: impl Fn(usize) -> u32) {
+        let cell_start = &mut self.cell_start;
+        cell_start.clear();
+        cell_start.resize(n_cells + 1, 0);
+        for p in 0..n_points {
+            cell_start[cell_of(p) as usize + 1] += 1;
+        }
         for c in 0..n_cells {
-            let holds_points = cell_start[c + 1] > cell_start[c];
+            cell_start[c + 1] += cell_start[c];
+        }
+        self.order.clear();
+        self.order.resize(n_points, 0);
+        // `next[c]` is kept in `cell_slot` until the slots are numbered
+        let next = &mut self.cell_slot;
+        next.clear();
+        next.extend_from_slice(&cell_start[..n_cells]);
+        for p in 0..n_points {
+            let c = cell_of(p) as usize;
+            self.order[next[c] as usize] = p as u32;
+            next[c] += 1;
+        }
+    }
+
+    /// The active and reached cells (`reached[c]`: some support reaches
+    /// cell `c`; empty when none can), their slots and the active nodes.
+    fn number_cells(&mut self, grid: &Grid, reached: &[bool]) {
+        let n_cells = grid.cell_count();
+        self.active_cells.clear();
+        self.reached_cells.clear();
+        self.cell_slot.clear();
+        self.cell_slot.resize(n_cells, NONE);
+        self.node_active.clear();
+        self.node_active.resize(grid.node_count(), false);
+        for c in 0..n_cells {
+            let holds_points = self.cell_start[c + 1] > self.cell_start[c];
+            let is_reached = reached.get(c).copied().unwrap_or(false);
             if holds_points {
-                cell_slot[c] = active_cells.len() as u32;
-                active_cells.push(c as u32);
-            } else if reached[c] {
-                reached_cells.push(c as u32);
+                self.cell_slot[c] = self.active_cells.len() as u32;
+                self.active_cells.push(c as u32);
+            } else if is_reached {
+                self.reached_cells.push(c as u32);
             }
-            if holds_points || reached[c] {
+            if holds_points || is_reached {
                 let (ci, cj) = grid.cell_ij(c);
                 for n in grid.cell_nodes(ci, cj) {
-                    node_active[n as usize] = true;
+                    self.node_active[n as usize] = true;
                 }
             }
-        }
-        Self {
-            cell_start,
-            order,
-            active_cells,
-            reached_cells,
-            cell_slot,
-            node_active,
         }
     }
 
@@ -170,10 +274,10 @@ impl ParticleBins {
 
 /// Mark the cells spanned by the support of `s` (the cells between its lowest
 /// and highest node indices along each direction).
-fn mark_cells_reached(grid: &Grid, s: &ShapeAt, reached: &mut [bool]) {
+fn mark_cells_reached<S: Support>(grid: &Grid, s: &S, reached: &mut [bool]) {
     let (mut lo, mut hi) = ([usize::MAX; 2], [0usize; 2]);
-    for a in s.support() {
-        let (i, j) = grid.node_ij(s.nodes[a] as usize);
+    for a in 0..s.support_size() {
+        let (i, j) = grid.node_ij(s.node(a));
         lo = [lo[0].min(i), lo[1].min(j)];
         hi = [hi[0].max(i), hi[1].max(j)];
     }
@@ -202,68 +306,97 @@ pub fn scatter<const K: usize, F>(
 where
     F: Fn(usize) -> Contribution<K> + Sync,
 {
-    let cell_sums: Vec<[[f64; K]; MAX_PATCH]> = bins
-        .active_cells
-        .par_iter()
-        .map(|&c| {
-            let mut sum = [[0.0; K]; MAX_PATCH];
-            for &p in bins.particles_in(c as usize) {
-                let p = p as usize;
-                let contrib = contribution(p);
-                let s = &shapes[p];
-                for a in s.support() {
-                    let place = s.local[a] as usize;
-                    for k in 0..K {
-                        sum[place][k] += contrib[a][k];
-                    }
-                }
+    let mut nodal = Vec::new();
+    let add = |p: usize, s: &ShapeAt, patch: &mut [[f64; K]]| {
+        let contrib = contribution(p);
+        for a in s.support() {
+            let place = s.local[a] as usize;
+            for k in 0..K {
+                patch[place][k] += contrib[a][k];
             }
-            sum
-        })
-        .collect();
-    gather_cells_to_nodes(grid, bins, &cell_sums)
+        }
+    };
+    scatter_into(grid, bins, shapes, add, &mut Vec::new(), &mut nodal);
+    nodal
 }
 
-/// Add per-active-cell patch sums into node values, each node summing the
-/// patches that hold it, cells in increasing (row-major) order.
+/// Cells handed to one rayon task at least, in the per-cell loops.
+const CELLS_PER_TASK: usize = 64;
+
+/// [`scatter`] into `nodal` (one `[f64; K]` per grid node), with `cell_sums`
+/// as the buffer of the active cells' patch sums: no allocation once both
+/// have grown to the run's size. `add(p, shape_p, patch)` adds the
+/// contributions of particle `p` to the places of its support in its cell's
+/// node patch (`patch[shape_p.place(a)]`), once per place, so that every
+/// nodal sum is formed in the order [`scatter`] documents.
+pub fn scatter_into<const K: usize, S: Support, F>(
+    grid: &Grid,
+    bins: &ParticleBins,
+    shapes: &[S],
+    add: F,
+    cell_sums: &mut Vec<[f64; K]>,
+    nodal: &mut Vec<[f64; K]>,
+) where
+    F: Fn(usize, &S, &mut [[f64; K]]) + Sync,
+{
+    let patch = grid.patch_side().pow(2);
+    // each patch is zeroed by the task that sums it (not all in one serial pass)
+    cell_sums.resize(bins.active_cells.len() * patch, [0.0; K]);
+    cell_sums
+        .par_chunks_mut(patch)
+        .zip(bins.active_cells.par_iter())
+        .with_min_len(CELLS_PER_TASK)
+        .for_each(|(sum, &c)| {
+            sum.fill([0.0; K]);
+            for &p in bins.particles_in(c as usize) {
+                let p = p as usize;
+                add(p, &shapes[p], sum);
+            }
+        });
+    gather_cells_to_nodes(grid, bins, cell_sums, nodal);
+}
+
+/// Add per-active-cell patch sums (`side²` places per cell, in the order of
+/// `bins.active_cells`) into node values, each node summing the patches that
+/// hold it, cells in increasing (row-major) order.
 fn gather_cells_to_nodes<const K: usize>(
     grid: &Grid,
     bins: &ParticleBins,
-    cell_sums: &[[[f64; K]; MAX_PATCH]],
-) -> Vec<[f64; K]> {
+    cell_sums: &[[f64; K]],
+    nodal: &mut Vec<[f64; K]>,
+) {
     let (ncx, ncy) = (grid.cells[0] as isize, grid.cells[1] as isize);
     let nx = grid.cells[0] + 1;
     let side = grid.patch_side() as isize;
+    let patch = (side * side) as usize;
     let (offset, _) = grid.patch_origin(0, 0);
     let offset = -offset;
-    (0..grid.node_count())
-        .into_par_iter()
-        .map(|node| {
-            let mut value = [0.0; K];
-            if !bins.node_active[node] {
-                return value;
-            }
-            let (i, j) = ((node % nx) as isize, (node / nx) as isize);
-            // the patch of cell c starts at node c − offset and spans `side` nodes
-            for cj in (j + offset - side + 1)..=(j + offset) {
-                for ci in (i + offset - side + 1)..=(i + offset) {
-                    if ci < 0 || cj < 0 || ci >= ncx || cj >= ncy {
-                        continue;
-                    }
-                    let slot = bins.cell_slot[(cj * ncx + ci) as usize];
-                    if slot == NONE {
-                        continue;
-                    }
-                    let place = ((j - (cj - offset)) * side + (i - (ci - offset))) as usize;
-                    let contrib = &cell_sums[slot as usize][place];
-                    for k in 0..K {
-                        value[k] += contrib[k];
-                    }
+    nodal.clear();
+    nodal.par_extend((0..grid.node_count()).into_par_iter().map(|node| {
+        let mut value = [0.0; K];
+        if !bins.node_active[node] {
+            return value;
+        }
+        let (i, j) = ((node % nx) as isize, (node / nx) as isize);
+        // the patch of cell c starts at node c − offset and spans `side` nodes
+        for cj in (j + offset - side + 1)..=(j + offset) {
+            for ci in (i + offset - side + 1)..=(i + offset) {
+                if ci < 0 || cj < 0 || ci >= ncx || cj >= ncy {
+                    continue;
+                }
+                let slot = bins.cell_slot[(cj * ncx + ci) as usize];
+                if slot == NONE {
+                    continue;
+                }
+                let place = ((j - (cj - offset)) * side + (i - (ci - offset))) as usize;
+                let contrib = &cell_sums[slot as usize * patch + place];
+                for k in 0..K {
+                    value[k] += contrib[k];
                 }
             }
-            value
-        })
-        .collect()
+        }
+        value
+    }));
 }
 
 /// Lumped nodal mass m_i = Σ_p N_ip m_p (DESIGN D10).
@@ -338,12 +471,13 @@ pub fn internal_force(
 
 /// Interpolate a nodal vector field at a particle: g_p = Σ_i N_ip g_i.
 #[inline]
-pub fn interpolate(shape: &ShapeAt, nodal: &[[f64; 2]]) -> [f64; 2] {
+pub fn interpolate<S: Support>(shape: &S, nodal: &[[f64; 2]]) -> [f64; 2] {
     let mut g = [0.0; 2];
-    for a in shape.support() {
-        let gi = nodal[shape.nodes[a] as usize];
-        g[0] += shape.n[a] * gi[0];
-        g[1] += shape.n[a] * gi[1];
+    for a in 0..shape.support_size() {
+        let gi = nodal[shape.node(a)];
+        let n = shape.value(a);
+        g[0] += n * gi[0];
+        g[1] += n * gi[1];
     }
     g
 }
@@ -351,11 +485,11 @@ pub fn interpolate(shape: &ShapeAt, nodal: &[[f64; 2]]) -> [f64; 2] {
 /// Gradient of a nodal vector field at a particle, L = Σ_i g_i ⊗ ∇N_ip,
 /// row-major `[L11, L12, L21, L22]` with `L_ij = ∂g_i/∂x_j` (DESIGN D12).
 #[inline]
-pub fn gradient(shape: &ShapeAt, nodal: &[[f64; 2]]) -> [f64; 4] {
+pub fn gradient<S: Support>(shape: &S, nodal: &[[f64; 2]]) -> [f64; 4] {
     let mut l = [0.0; 4];
-    for a in shape.support() {
-        let gi = nodal[shape.nodes[a] as usize];
-        let [dx, dy] = shape.dn[a];
+    for a in 0..shape.support_size() {
+        let gi = nodal[shape.node(a)];
+        let [dx, dy] = shape.gradient(a);
         l[0] += gi[0] * dx;
         l[1] += gi[0] * dy;
         l[2] += gi[1] * dx;

@@ -6,22 +6,27 @@ use super::{
 };
 
 /// Isotropic linear elasticity with Young's modulus `youngs_modulus` (kPa) and
-/// Poisson's ratio `poisson_ratio`.
+/// Poisson's ratio `poisson_ratio`, fixed at construction ([`Self::new`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LinearElastic {
     /// Young's modulus E, kPa.
     pub youngs_modulus: f64,
     /// Poisson's ratio ν, in (−1, 0.5).
     pub poisson_ratio: f64,
+    /// D of E and ν (DESIGN D22), formed once: every stress update uses it.
+    stiffness: Mat4,
 }
 
 impl LinearElastic {
     /// New elastic law; the caller (scene validation) guarantees E > 0 and −1 < ν < 0.5.
     pub fn new(youngs_modulus: f64, poisson_ratio: f64) -> Self {
-        Self {
+        let mut law = Self {
             youngs_modulus,
             poisson_ratio,
-        }
+            stiffness: [[0.0; 4]; 4],
+        };
+        law.stiffness = law.stiffness_of_moduli();
+        law
     }
 
     /// Bulk modulus K = E / (3(1 − 2ν)), kPa.
@@ -36,6 +41,11 @@ impl LinearElastic {
 
     /// The 4×4 plane-strain stiffness D of DESIGN D22 (zz row kept: σzz evolves).
     pub fn stiffness(&self) -> Mat4 {
+        self.stiffness
+    }
+
+    /// D formed from E and ν (DESIGN D22).
+    fn stiffness_of_moduli(&self) -> Mat4 {
         let g = self.shear_modulus();
         let lambda = self.bulk_modulus() - 2.0 * g / 3.0;
         let d = lambda + 2.0 * g;
@@ -89,8 +99,37 @@ impl ConstitutiveModel for LinearElastic {
         state_n: &PointState,
         _strength: StrengthVariable,
     ) -> Result<StressUpdate, ConstitutiveError> {
-        let d = self.stiffness();
-        let increment = mat4_mul_vec(&d, strain_increment);
+        Ok(StressUpdate {
+            stress: self.stress_after(stress_rotated, strain_increment)?,
+            state: *state_n,
+            tangent: self.stiffness,
+            yielded: false,
+        })
+    }
+
+    fn update_stress(
+        &self,
+        stress_rotated: &Voigt,
+        strain_increment: &Voigt,
+        state_n: &PointState,
+        _strength: StrengthVariable,
+        (stress, state): (&mut Voigt, &mut PointState),
+    ) -> Result<bool, ConstitutiveError> {
+        *stress = self.stress_after(stress_rotated, strain_increment)?;
+        *state = *state_n;
+        Ok(false)
+    }
+}
+
+impl LinearElastic {
+    /// σ^R + D Δε (DESIGN D22), refused when not finite.
+    #[inline]
+    fn stress_after(
+        &self,
+        stress_rotated: &Voigt,
+        strain_increment: &Voigt,
+    ) -> Result<Voigt, ConstitutiveError> {
+        let increment = mat4_mul_vec(&self.stiffness, strain_increment);
         let mut stress = *stress_rotated;
         for (s, ds) in stress.iter_mut().zip(increment) {
             *s += ds;
@@ -100,12 +139,7 @@ impl ConstitutiveModel for LinearElastic {
                 "elastic stress {stress:?}"
             )));
         }
-        Ok(StressUpdate {
-            stress,
-            state: *state_n,
-            tangent: d,
-            yielded: false,
-        })
+        Ok(stress)
     }
 }
 

@@ -116,6 +116,24 @@ pub trait ConstitutiveModel: Send + Sync + Debug {
         strength: StrengthVariable,
     ) -> Result<StressUpdate, ConstitutiveError>;
 
+    /// The stress update of [`Self::update`] without its tangent (a step
+    /// that forms none: explicit), written into `stress` and `state` (left
+    /// as they were on error); returns whether the point yielded. A law
+    /// whose tangent costs work of its own may form only the stress.
+    fn update_stress(
+        &self,
+        stress_rotated: &Voigt,
+        strain_increment: &Voigt,
+        state_n: &PointState,
+        strength: StrengthVariable,
+        (stress, state): (&mut Voigt, &mut PointState),
+    ) -> Result<bool, ConstitutiveError> {
+        let update = self.update(stress_rotated, strain_increment, state_n, strength)?;
+        *stress = update.stress;
+        *state = update.state;
+        Ok(update.yielded)
+    }
+
     /// True when the strength can decrease with plastic strain (softening):
     /// double mapping is then on by default (DESIGN §7).
     fn can_soften(&self) -> bool {

@@ -3,9 +3,13 @@
 //! stresses and states), the boundary points follow the grid motion, and
 //! points that left the grid stop the run or are removed.
 
+use rayon::prelude::*;
+
 use super::stresses::ConvergedStresses;
 use super::{StepSetup, TrialStresses};
+use crate::constitutive::Voigt;
 use crate::error::StepError;
+use crate::grid::Grid;
 use crate::model::{Model, PointRemap};
 use crate::particles::Particles;
 use crate::scene::LostPointPolicy;
@@ -32,18 +36,33 @@ pub fn commit(
     converged: ConvergedStresses,
     nodal: NodalResults,
 ) -> Result<Option<PointRemap>, StepError> {
+    let mut converged = converged;
+    commit_swapping(model, setup, trial, &mut converged, nodal)
+}
+
+/// [`commit`] that swaps the converged stresses and states into the points:
+/// `converged` is left with the arrays of the previous step (to be reused,
+/// so that a step allocates none), and the model's nodal results are
+/// copied into its arrays.
+pub fn commit_swapping(
+    model: &mut Model,
+    setup: &StepSetup,
+    trial: &TrialStresses,
+    converged: &mut ConvergedStresses,
+    nodal: NodalResults,
+) -> Result<Option<PointRemap>, StepError> {
     model.internal_work += converged.internal_work;
     model.dissipated_energy += converged.dissipation;
     let p = &mut model.particles;
-    for i in 0..p.len() {
-        deform(p, i, &trial.gradient[i]);
+    std::mem::swap(&mut p.stress, &mut converged.stress);
+    std::mem::swap(&mut p.state, &mut converged.state);
+    let first = deform_and_check(p, &trial.gradient, &model.grid);
+    if let Some(i) = first.non_finite {
+        return Err(non_finite_point(p, i));
     }
-    p.stress = converged.stress;
-    p.state = converged.state;
-    check_finite_points(p)?;
     check_finite_nodes(&model.grid, &nodal)?;
     if model.scene.grid.lost_points == LostPointPolicy::Stop {
-        if let Some(i) = (0..p.len()).find(|&i| !model.grid.contains(p.position[i])) {
+        if let Some(i) = first.outside {
             return Err(StepError::ParticleLeftGrid {
                 particle: i,
                 position: p.position[i],
@@ -57,55 +76,134 @@ pub fn commit(
     model
         .driven
         .advect(&setup.driven_shapes, nodal.contact_motion);
-    model.reaction = nodal.reaction.to_vec();
-    model.last_increment = nodal.increment.to_vec();
+    copy_into(&mut model.reaction, nodal.reaction);
+    copy_into(&mut model.last_increment, nodal.increment);
     model.drop_lost_points()
 }
 
-/// The one pass over the committed point state: the first point with a NaN
-/// or infinite variable stops the run, naming it.
-fn check_finite_points(p: &Particles) -> Result<(), StepError> {
-    let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
-    for i in 0..p.len() {
-        if !finite(&p.stress[i]) {
-            return Err(StepError::NonFiniteStress { particle: i });
+/// `to = from`, reusing the array of `to`.
+fn copy_into<T: Copy>(to: &mut Vec<T>, from: &[T]) {
+    to.clear();
+    to.extend_from_slice(from);
+}
+
+/// The lowest-index points that fail the checks of the committed state.
+#[derive(Clone, Copy, Default)]
+struct FirstFailures {
+    /// The first point with a NaN or infinite variable (or a volume that is
+    /// not positive).
+    non_finite: Option<usize>,
+    /// The first point outside the grid.
+    outside: Option<usize>,
+}
+
+impl FirstFailures {
+    /// The lower indices of two sets of points.
+    fn merge(self, other: Self) -> Self {
+        let lower = |a: Option<usize>, b: Option<usize>| match (a, b) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            _ => a.or(b),
+        };
+        Self {
+            non_finite: lower(self.non_finite, other.non_finite),
+            outside: lower(self.outside, other.outside),
         }
-        let quantity = if !finite(&p.position[i]) {
-            "position"
-        } else if !finite(&p.velocity[i]) {
-            "velocity"
-        } else if !finite(&p.acceleration[i]) {
-            "acceleration"
-        } else if !(p.volume[i].is_finite() && p.volume[i] > 0.0) {
-            "volume (non-finite or not positive)"
-        } else if !finite(&p.def_grad[i]) {
-            "deformation gradient"
-        } else if !finite(&p.strain[i]) {
-            "strain"
-        } else if !(p.state[i].plastic_strain_eq.is_finite()
-            && p.state[i].plastic_strain_eq_nonlocal.is_finite()
-            && finite(&p.state[i].plastic_strain))
-        {
-            "plastic strain"
-        } else {
-            continue;
-        };
-        let position = if finite(&p.position[i]) {
-            p.position[i]
-        } else {
-            p.position0[i]
-        };
-        return Err(StepError::NonFinitePoint {
-            particle: i,
-            quantity,
-            position,
-        });
     }
-    Ok(())
+}
+
+/// The one pass over the committed point state, in parallel: F, V and ε of
+/// every point from its increment gradient (DESIGN D14), then the point
+/// checked; returns the lowest-index points with a non-finite variable and
+/// outside the grid (the same whatever the number of threads).
+fn deform_and_check(p: &mut Particles, gradient: &[[f64; 4]], grid: &Grid) -> FirstFailures {
+    let Particles {
+        position,
+        velocity,
+        acceleration,
+        volume,
+        def_grad,
+        stress,
+        strain,
+        state,
+        ..
+    } = p;
+    let (position, velocity, acceleration) = (&*position, &*velocity, &*acceleration);
+    let (stress, state) = (&*stress, &*state);
+    def_grad
+        .par_iter_mut()
+        .zip(volume.par_iter_mut())
+        .zip(strain.par_iter_mut())
+        .zip(gradient.par_iter())
+        .enumerate()
+        .with_min_len(1024)
+        .fold(
+            FirstFailures::default,
+            |mut first, (i, (((f, v), e), l))| {
+                deform(f, v, e, l);
+                let finite = |x: &[f64]| x.iter().all(|c| c.is_finite());
+                let point_finite = finite(&stress[i])
+                    && finite(&position[i])
+                    && finite(&velocity[i])
+                    && finite(&acceleration[i])
+                    && volume_is_valid(*v)
+                    && finite(f)
+                    && finite(e)
+                    && state[i].plastic_strain_eq.is_finite()
+                    && state[i].plastic_strain_eq_nonlocal.is_finite()
+                    && finite(&state[i].plastic_strain);
+                if !point_finite && first.non_finite.is_none() {
+                    first.non_finite = Some(i);
+                }
+                if first.outside.is_none() && !grid.contains(position[i]) {
+                    first.outside = Some(i);
+                }
+                first
+            },
+        )
+        .reduce(FirstFailures::default, FirstFailures::merge)
+}
+
+/// The error of point `i`, the first with a non-finite variable: its
+/// stress, or the first non-finite quantity in the order of the checks.
+fn non_finite_point(p: &Particles, i: usize) -> StepError {
+    let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
+    if !finite(&p.stress[i]) {
+        return StepError::NonFiniteStress { particle: i };
+    }
+    let quantity = if !finite(&p.position[i]) {
+        "position"
+    } else if !finite(&p.velocity[i]) {
+        "velocity"
+    } else if !finite(&p.acceleration[i]) {
+        "acceleration"
+    } else if !volume_is_valid(p.volume[i]) {
+        "volume (non-finite or not positive)"
+    } else if !finite(&p.def_grad[i]) {
+        "deformation gradient"
+    } else if !finite(&p.strain[i]) {
+        "strain"
+    } else {
+        "plastic strain"
+    };
+    let position = if finite(&p.position[i]) {
+        p.position[i]
+    } else {
+        p.position0[i]
+    };
+    StepError::NonFinitePoint {
+        particle: i,
+        quantity,
+        position,
+    }
+}
+
+/// A committed volume must be finite and positive.
+fn volume_is_valid(volume: f64) -> bool {
+    volume.is_finite() && volume > 0.0
 }
 
 /// The nodal results the model keeps must be finite.
-fn check_finite_nodes(grid: &crate::grid::Grid, nodal: &NodalResults) -> Result<(), StepError> {
+fn check_finite_nodes(grid: &Grid, nodal: &NodalResults) -> Result<(), StepError> {
     for (quantity, values) in [
         ("reaction", nodal.reaction),
         ("displacement increment", nodal.increment),
@@ -124,19 +222,19 @@ fn check_finite_nodes(grid: &crate::grid::Grid, nodal: &NodalResults) -> Result<
     Ok(())
 }
 
-/// F_p ← (I + L) F_p; V_p ← det(I + L) V_p; accumulate Δε (DESIGN D14).
-fn deform(p: &mut Particles, i: usize, l: &[f64; 4]) {
+/// F ← (I + L) F; V ← det(I + L) V; ε += Δε of one point (DESIGN D14).
+fn deform(def_grad: &mut [f64; 4], volume: &mut f64, strain: &mut Voigt, l: &[f64; 4]) {
     let df = [1.0 + l[0], l[1], l[2], 1.0 + l[3]];
-    let f = p.def_grad[i];
-    p.def_grad[i] = [
+    let f = *def_grad;
+    *def_grad = [
         df[0] * f[0] + df[1] * f[2],
         df[0] * f[1] + df[1] * f[3],
         df[2] * f[0] + df[3] * f[2],
         df[2] * f[1] + df[3] * f[3],
     ];
-    p.volume[i] *= df[0] * df[3] - df[1] * df[2];
+    *volume *= df[0] * df[3] - df[1] * df[2];
     let (de, _) = strain_and_spin(l);
     for k in 0..4 {
-        p.strain[i][k] += de[k];
+        strain[k] += de[k];
     }
 }

@@ -1,15 +1,33 @@
 //! Explicit integrator (DESIGN §4): MUSL central difference, matrix-free,
 //! with the same transfer kernels and stages as the implicit one.
+//!
+//! The integrator owns every buffer of its step (its workspace): shape
+//! functions and bins, nodal fields, per-point increments and trial
+//! stresses are refilled in place each step, so that a step allocates
+//! nothing once the buffers have grown to the run's size (the kernel would
+//! otherwise map fresh pages for them every step). With bilinear shape
+//! functions and neither rigid bodies nor double mapping, the points' shape
+//! functions are kept in compact form ([`crate::grid::BilinearShape`]), which
+//! the stages stream several times a step. The P2G sums of a step (mass,
+//! momentum, internal and body forces) are formed in one pass over the
+//! points, and each stage runs in parallel over points or nodes with its
+//! sums in the fixed order of [`crate::transfer`]: the results do not depend
+//! on the number of threads, and are those of the full shape functions.
 
-use super::commit::{commit, NodalResults};
+use rayon::prelude::*;
+
+use super::commit::{commit_swapping, NodalResults};
 use super::g2p::{g2p, GridMotion, VelocityUpdate};
-use super::p2g::external_force;
-use super::stresses::converged_stresses;
+use super::stresses::{converged_stresses_taking, ConvergedStresses};
 use super::time_step::StableTimeStep;
-use super::{evaluate_stresses, NonlocalStep, SolverUsage, StepReport, StepSetup, TrialStresses};
+use super::{
+    evaluate_stresses_without_tangent, NonlocalStep, SolverUsage, StepReport, StepSetup,
+    TrialStresses,
+};
 use crate::bc::DofConstraint;
 use crate::error::StepError;
-use crate::model::Model;
+use crate::grid::{BilinearShape, Support};
+use crate::model::{Model, PointRemap};
 use crate::profile::{Profile, Stage, Work};
 use crate::scene::{FieldError, SceneError};
 use crate::transfer;
@@ -19,19 +37,74 @@ use crate::transfer;
 pub struct ExplicitIntegrator {
     /// Time steps taken and what limited them.
     pub usage: SolverUsage,
+    /// The step's buffers, reused from step to step (boxed: they are many).
+    work: Box<Workspace>,
 }
 
-/// P2G of a step: nodal mass, momentum and total force at t (DESIGN §4 step 1).
-struct NodalMomentum {
-    mass: Vec<f64>,
-    momentum: Vec<[f64; 2]>,
-    force: Vec<[f64; 2]>,
+/// Nodal sums of the step's one P2G pass, per node (DESIGN §4 step 1):
+/// m_i, p_i = Σ N m v (x, y), f_i^int (x, y) and the body force's y
+/// component Σ N m (−g) (its x component is zero).
+type P2gSums = [f64; 6];
+
+/// Nodes handed to one rayon task at least.
+const NODES_PER_TASK: usize = 512;
+
+/// Places of the quantities in [`P2gSums`].
+const MASS: usize = 0;
+const MOMENTUM: usize = 1;
+const INTERNAL: usize = 3;
+const BODY: usize = 5;
+
+/// Every buffer of the explicit step, owned by the integrator.
+#[derive(Default)]
+struct Workspace {
+    /// Shape functions and bins of the step.
+    setup: StepSetup,
+    /// The points' shape functions in compact form, when they apply
+    /// ([`StepSetup::compact_applies`]; `setup.shapes` is then empty).
+    compact: Vec<BilinearShape>,
+    /// The nodal and per-point arrays of the step.
+    buffers: Buffers,
 }
 
-/// The grid after the momentum update (DESIGN §4 step 2).
+/// The nodal and per-point arrays of the explicit step.
+#[derive(Default)]
+struct Buffers {
+    /// Patch sums of the active cells, P2G pass.
+    p2g_cells: Vec<P2gSums>,
+    /// Nodal sums of the P2G pass.
+    p2g: Vec<P2gSums>,
+    /// The grid after the momentum update.
+    grid: UpdatedGrid,
+    /// f_ext per node (body force, follower pressures, penalty springs).
+    external: Vec<[f64; 2]>,
+    /// Zero per node: the penalty springs' increment in an explicit step.
+    zero: Vec<[f64; 2]>,
+    /// Patch sums of the active cells, re-map pass.
+    remap_cells: Vec<[f64; 2]>,
+    /// Σ_p N_ip m_p v_p of the updated point velocities (MUSL re-map).
+    remapped: Vec<[f64; 2]>,
+    /// Δu_i of the step.
+    increment: Vec<[f64; 2]>,
+    /// Δt v_i at the nodes: moves the rigid bodies' surface points.
+    contact_motion: Vec<[f64; 2]>,
+    /// Trial stresses of the step.
+    trial: TrialStresses,
+    /// Converged stresses of the step; after the commit, the arrays of the
+    /// step before.
+    converged: ConvergedStresses,
+}
+
+/// The grid of a step: P2G results, then their momentum update (DESIGN §4
+/// steps 1–2).
+#[derive(Default)]
 struct UpdatedGrid {
     /// Nodal mass m_i.
     mass: Vec<f64>,
+    /// Nodal momentum p_i, then p_i + Δt f_i (with Dirichlet conditions).
+    momentum: Vec<[f64; 2]>,
+    /// Total nodal force f_ext + f_pen − f_int at t.
+    force: Vec<[f64; 2]>,
     /// Nodal acceleration f_i / m_i (with Dirichlet conditions).
     acceleration: Vec<[f64; 2]>,
     /// Nodal velocity p_i / m_i after the update.
@@ -51,7 +124,12 @@ impl ExplicitIntegrator {
             let Ok(setup) = StepSetup::new(model) else {
                 return Ok(Self::default()); // points outside the grid are reported by the validation
             };
-            let mass = nodal_mass(model, &setup);
+            let mass = transfer::nodal_mass(
+                &model.grid,
+                &setup.bins,
+                &setup.shapes,
+                &model.particles.mass,
+            );
             let stable = StableTimeStep::of(model, &mass, &setup.driven_shapes, false);
             if dt > stable.limit {
                 return Err(SceneError::Invalid {
@@ -72,33 +150,19 @@ impl ExplicitIntegrator {
     /// One MUSL step (DESIGN §4), in the order of paper Fig. 1.
     pub fn step(&mut self, model: &mut Model, profile: &Profile) -> Result<StepReport, StepError> {
         let t = model.time;
-        let setup = profile.time(Stage::Setup, || StepSetup::new(model))?;
-        let mut nonlocal = NonlocalStep::start(model, true, profile)?;
-        let nodal = profile.time(Stage::P2G, || map_to_grid(model, &setup, t, profile));
-        let (dt, grid) = profile.time(Stage::TimeStep, || {
-            let dt = self.time_step(model, &setup, &nodal)?;
-            Ok::<_, StepError>((dt, update_momentum(model, nodal, dt)))
-        })?;
-        let motion = grid.motion(dt);
-        profile.time(Stage::G2P, || {
-            g2p(&mut model.particles, &setup.shapes, &motion)
-        });
-        let du = profile.time(Stage::Remap, || remap(model, &setup, &grid, dt));
-        let trial = profile.time(Stage::StressUpdate, || {
-            stress_update(model, &setup, &du, nonlocal.as_ref(), profile)
-        })?;
-        let converged = profile.time(Stage::Stresses, || {
-            converged_stresses(model, &setup, &trial, nonlocal.as_mut(), profile)
-        })?;
-        let removed = profile.time(Stage::Commit, || {
-            let contact_motion = contact_motion(model, &grid, dt);
-            let nodal = NodalResults {
-                reaction: &grid.reaction,
-                increment: &du,
-                contact_motion: &contact_motion,
-            };
-            commit(model, &setup, &trial, converged, nodal)
-        })?;
+        let work = &mut *self.work;
+        let compact = profile.time(Stage::Setup, || work.refresh(model))?;
+        let Workspace {
+            setup,
+            compact: compact_shapes,
+            buffers,
+        } = work;
+        let usage = &mut self.usage;
+        let (dt, removed) = if compact {
+            buffers.advance(model, setup, compact_shapes.as_slice(), usage, profile)
+        } else {
+            buffers.advance(model, setup, &setup.shapes, usage, profile)
+        }?;
         model.step += 1;
         model.time = t + dt;
         Ok(StepReport {
@@ -110,44 +174,329 @@ impl ExplicitIntegrator {
             removed_points: removed.into_iter().collect(),
         })
     }
+}
 
-    /// Δt of the step: α_CFL times the stable limit (DESIGN D20), or the
-    /// scene's fixed `dt` if it is still below the limit; the last step ends
-    /// at `end_time`.
-    fn time_step(
+impl Workspace {
+    /// The step's shape functions and bins at the start-of-step positions;
+    /// returns whether the points' shapes are the compact ones.
+    fn refresh(&mut self, model: &Model) -> Result<bool, StepError> {
+        if StepSetup::compact_applies(model) {
+            self.setup.refresh_compact(model, &mut self.compact)?;
+            Ok(true)
+        } else {
+            self.compact.clear();
+            self.setup.refresh(model)?;
+            Ok(false)
+        }
+    }
+}
+
+impl Buffers {
+    /// The stages of the step after the setup (points' shape functions
+    /// `shapes`): P2G, time step and momentum update, G2P, re-map, stress
+    /// update, stresses, commit. Returns Δt and the index remap of the
+    /// points removed.
+    fn advance<S: Support>(
+        &mut self,
+        model: &mut Model,
+        setup: &StepSetup,
+        shapes: &[S],
+        usage: &mut SolverUsage,
+        profile: &Profile,
+    ) -> Result<(f64, Option<PointRemap>), StepError> {
+        let t = model.time;
+        let mut nonlocal = NonlocalStep::start(model, true, profile)?;
+        profile.time(Stage::P2G, || {
+            self.map_to_grid(model, setup, shapes, t, profile)
+        });
+        let dt = profile.time(Stage::TimeStep, || {
+            let dt = time_step(usage, model, setup, &self.grid.mass)?;
+            self.grid.update_momentum(model, dt);
+            Ok::<_, StepError>(dt)
+        })?;
+        profile.time(Stage::G2P, || {
+            g2p(&mut model.particles, shapes, &self.grid.motion(dt))
+        });
+        profile.time(Stage::Remap, || self.remap(model, setup, shapes, dt));
+        profile.time(Stage::StressUpdate, || {
+            self.stress_update(model, setup, shapes, nonlocal.as_ref(), profile)
+        })?;
+        let Buffers {
+            grid,
+            increment,
+            contact_motion,
+            trial,
+            converged,
+            ..
+        } = self;
+        profile.time(Stage::Stresses, || {
+            converged_stresses_taking(model, setup, trial, nonlocal.as_mut(), profile, converged)
+        })?;
+        let removed = profile.time(Stage::Commit, || {
+            grid.contact_motion(model, dt, contact_motion);
+            let nodal = NodalResults {
+                reaction: &grid.reaction,
+                increment,
+                contact_motion,
+            };
+            commit_swapping(model, setup, trial, converged, nodal)
+        })?;
+        Ok((dt, removed))
+    }
+}
+
+/// Δt of the step: α_CFL times the stable limit (DESIGN D20), or the
+/// scene's fixed `dt` if it is still below the limit; the last step ends
+/// at `end_time`. Recorded in `usage`.
+fn time_step(
+    usage: &mut SolverUsage,
+    model: &Model,
+    setup: &StepSetup,
+    nodal_mass: &[f64],
+) -> Result<f64, StepError> {
+    let stable = StableTimeStep::of(model, nodal_mass, &setup.driven_shapes, true);
+    let dt = match model.scene.scene.dt {
+        Some(fixed) if fixed > stable.limit => {
+            return Err(StepError::UnstableTimeStep {
+                dt: fixed,
+                limit: stable.limit,
+                limited_by: stable.limited_by,
+            })
+        }
+        Some(fixed) => fixed,
+        None => stable.with_cfl(model.scene.solver.cfl),
+    };
+    usage.explicit_time_step = Some(match usage.explicit_time_step {
+        Some((lo, hi)) => (lo.min(dt), hi.max(dt)),
+        None => (dt, dt),
+    });
+    usage.time_step_limited_by = Some(stable.limited_by);
+    let end = model.scene.scene.end_time.unwrap_or(f64::INFINITY);
+    let dt = dt.min(end - model.time).max(0.0);
+    if dt <= 0.0 || !dt.is_finite() {
+        return Err(StepError::InvalidTimeStep { dt });
+    }
+    Ok(dt)
+}
+
+impl Buffers {
+    /// P2G: m_i, p_i = Σ N_ip m_p v_p, f_i = f_ext + f_pen − f_int at t
+    /// (DESIGN D10–D11), the point sums in one pass; the nodal mass is
+    /// counted in `profile`.
+    fn map_to_grid<S: Support>(
         &mut self,
         model: &Model,
         setup: &StepSetup,
-        nodal: &NodalMomentum,
-    ) -> Result<f64, StepError> {
-        let stable = StableTimeStep::of(model, &nodal.mass, &setup.driven_shapes, true);
-        let dt = match model.scene.scene.dt {
-            Some(fixed) if fixed > stable.limit => {
-                return Err(StepError::UnstableTimeStep {
-                    dt: fixed,
-                    limit: stable.limit,
-                    limited_by: stable.limited_by,
-                })
+        shapes: &[S],
+        t: f64,
+        profile: &Profile,
+    ) {
+        let p = &model.particles;
+        let stress = model.force_stresses(&setup.bins, &p.stress);
+        let g = model.scene.loads.gravity_at(t);
+        let (mass, velocity, volume) = (&p.mass, &p.velocity, &p.volume);
+        let add = |p: usize, s: &S, patch: &mut [P2gSums]| {
+            let (m, v, vol, sig) = (mass[p], velocity[p], volume[p], &stress[p]);
+            for a in 0..s.support_size() {
+                let nm = s.value(a) * m;
+                let [dx, dy] = s.gradient(a);
+                let sum = &mut patch[s.place(a)];
+                sum[MASS] += nm;
+                sum[MOMENTUM] += nm * v[0];
+                sum[MOMENTUM + 1] += nm * v[1];
+                sum[INTERNAL] += vol * (dx * sig[0] + dy * sig[3]);
+                sum[INTERNAL + 1] += vol * (dy * sig[1] + dx * sig[3]);
+                sum[BODY] += nm * -g;
             }
-            Some(fixed) => fixed,
-            None => stable.with_cfl(model.scene.solver.cfl),
         };
-        let usage = &mut self.usage;
-        usage.explicit_time_step = Some(match usage.explicit_time_step {
-            Some((lo, hi)) => (lo.min(dt), hi.max(dt)),
-            None => (dt, dt),
-        });
-        usage.time_step_limited_by = Some(stable.limited_by);
-        let end = model.scene.scene.end_time.unwrap_or(f64::INFINITY);
-        let dt = dt.min(end - model.time).max(0.0);
-        if dt <= 0.0 || !dt.is_finite() {
-            return Err(StepError::InvalidTimeStep { dt });
+        transfer::scatter_into(
+            &model.grid,
+            &setup.bins,
+            shapes,
+            add,
+            &mut self.p2g_cells,
+            &mut self.p2g,
+        );
+        profile.count(Work::ExplicitNodalMass, 1);
+        let nodes = self.p2g.len();
+        // f_ext of the boundary devices: follower pressures, springs
+        let devices = !model.traction.is_empty() || !model.driven.is_empty();
+        self.external.clear();
+        if devices {
+            self.external.extend(self.p2g.iter().map(|sums| {
+                if g != 0.0 {
+                    [0.0, sums[BODY]]
+                } else {
+                    [0.0; 2]
+                }
+            }));
+            model
+                .traction
+                .add_forces(&setup.traction_shapes, &mut self.external);
+            if !model.driven.is_empty() {
+                self.zero.clear();
+                self.zero.resize(nodes, [0.0; 2]);
+                model
+                    .driven
+                    .add_forces(p, &setup.driven_shapes, &self.zero, t, &mut self.external);
+            }
         }
-        Ok(dt)
+        // m_i, p_i and f_i = f_ext − f_int, f_ext the body force alone
+        // without devices
+        let (sums, external) = (&self.p2g, &self.external);
+        let grid = &mut self.grid;
+        grid.mass.resize(nodes, 0.0);
+        grid.momentum.resize(nodes, [0.0; 2]);
+        grid.force.resize(nodes, [0.0; 2]);
+        grid.mass
+            .par_iter_mut()
+            .zip(grid.momentum.par_iter_mut())
+            .zip(grid.force.par_iter_mut())
+            .enumerate()
+            .with_min_len(NODES_PER_TASK)
+            .for_each(|(node, ((mass, momentum), force))| {
+                let s = &sums[node];
+                let e = if devices {
+                    external[node]
+                } else if g != 0.0 {
+                    [0.0, s[BODY]]
+                } else {
+                    [0.0; 2]
+                };
+                *mass = s[MASS];
+                *momentum = [s[MOMENTUM], s[MOMENTUM + 1]];
+                *force = [e[0] - s[INTERNAL], e[1] - s[INTERNAL + 1]];
+            });
+    }
+
+    /// MUSL re-map (DESIGN §4 step 4): p_i = Σ_p N_ip m_p v_p of the updated
+    /// point velocities, Dirichlet again; Δu_i = Δt p_i / m_i into
+    /// `self.increment`.
+    fn remap<S: Support>(&mut self, model: &Model, setup: &StepSetup, shapes: &[S], dt: f64) {
+        let p = &model.particles;
+        let (mass, velocity) = (&p.mass, &p.velocity);
+        let add = |p: usize, s: &S, patch: &mut [[f64; 2]]| {
+            let (m, v) = (mass[p], velocity[p]);
+            for a in 0..s.support_size() {
+                let nm = s.value(a) * m;
+                let sum = &mut patch[s.place(a)];
+                sum[0] += nm * v[0];
+                sum[1] += nm * v[1];
+            }
+        };
+        transfer::scatter_into(
+            &model.grid,
+            &setup.bins,
+            shapes,
+            add,
+            &mut self.remap_cells,
+            &mut self.remapped,
+        );
+        let (grid, remapped) = (&self.grid, &self.remapped);
+        let dof = &model.constraints.dof;
+        self.increment.clear();
+        self.increment
+            .par_extend((0..grid.mass.len()).into_par_iter().map(|node| {
+                let mut u = [0.0; 2];
+                if grid.mass[node] > grid.tiny_mass {
+                    for (c, uc) in u.iter_mut().enumerate() {
+                        *uc = match dof[2 * node + c] {
+                            DofConstraint::Fixed => 0.0,
+                            DofConstraint::Prescribed { .. } => dt * grid.velocity[node][c],
+                            DofConstraint::Free => dt * remapped[node][c] / grid.mass[node],
+                        };
+                    }
+                }
+                u
+            }));
+    }
+
+    /// Δε from the re-mapped increment and the stress update (DESIGN §4
+    /// step 5) into `self.trial`, strengths at κ̄(n); the updates are
+    /// counted in `profile`. No tangent is formed.
+    fn stress_update<S: Support>(
+        &mut self,
+        model: &Model,
+        setup: &StepSetup,
+        shapes: &[S],
+        nonlocal: Option<&NonlocalStep>,
+        profile: &Profile,
+    ) -> Result<(), StepError> {
+        evaluate_stresses_without_tangent(
+            model,
+            setup,
+            shapes,
+            &self.increment,
+            nonlocal.map(|n| n.strength()),
+            &mut self.trial,
+        )
+        .counted(profile)
+        .map_err(|(particle, source)| StepError::Constitutive { particle, source })
     }
 }
 
 impl UpdatedGrid {
+    /// p_i ← p_i + Δt f_i with local damping (D21) and Dirichlet conditions;
+    /// then the accelerations, velocities and reactions of the nodes.
+    fn update_momentum(&mut self, model: &Model, dt: f64) {
+        let n_nodes = self.mass.len();
+        // a maximum: the same whatever the order
+        self.tiny_mass = 1e-12 * self.mass.par_iter().cloned().reduce(|| 0.0, f64::max);
+        let damping = model.scene.solver.damping;
+        let (tiny_mass, mass, force) = (self.tiny_mass, &self.mass, &self.force);
+        // every node's values are set below (in parallel, not zeroed first)
+        for field in [
+            &mut self.acceleration,
+            &mut self.velocity,
+            &mut self.reaction,
+        ] {
+            field.resize(n_nodes, [0.0; 2]);
+        }
+        self.momentum
+            .par_iter_mut()
+            .zip(self.acceleration.par_iter_mut())
+            .zip(self.velocity.par_iter_mut())
+            .zip(self.reaction.par_iter_mut())
+            .enumerate()
+            .with_min_len(NODES_PER_TASK)
+            .for_each(|(node, (((momentum, acceleration), velocity), reaction))| {
+                *acceleration = [0.0; 2];
+                *velocity = [0.0; 2];
+                *reaction = [0.0; 2];
+                let m = mass[node];
+                if m <= tiny_mass {
+                    *momentum = [0.0; 2];
+                    return;
+                }
+                for c in 0..2 {
+                    let v = momentum[c] / m;
+                    let mut f = force[node][c];
+                    match model.constraints.dof[2 * node + c] {
+                        DofConstraint::Fixed => {
+                            reaction[c] = -f;
+                            momentum[c] = 0.0;
+                            acceleration[c] = -v / dt;
+                        }
+                        DofConstraint::Prescribed { rate, gradient } => {
+                            let x = model.grid.node_position(node);
+                            let target = rate + gradient[0] * x[0] + gradient[1] * x[1];
+                            reaction[c] = -f;
+                            acceleration[c] = (target - v) / dt;
+                            momentum[c] = m * target;
+                        }
+                        DofConstraint::Free => {
+                            if v != 0.0 {
+                                f -= damping * f.abs() * v.signum();
+                            }
+                            momentum[c] += dt * f;
+                            acceleration[c] = f / m;
+                        }
+                    }
+                }
+                *velocity = [momentum[0] / m, momentum[1] / m];
+            });
+    }
+
     /// G2P of the updated grid (DESIGN §4 step 3): v_p += Δt Σ N a_i,
     /// x_p += Δt Σ N p_i/m_i.
     fn motion(&self, dt: f64) -> GridMotion<'_> {
@@ -158,169 +507,15 @@ impl UpdatedGrid {
             acceleration: Some((&self.acceleration, VelocityUpdate::Forward)),
         }
     }
-}
 
-fn nodal_mass(model: &Model, setup: &StepSetup) -> Vec<f64> {
-    transfer::nodal_mass(
-        &model.grid,
-        &setup.bins,
-        &setup.shapes,
-        &model.particles.mass,
-    )
-}
-
-/// P2G: m_i, p_i = Σ N_ip m_p v_p, f_i = f_ext + f_pen − f_int at t (the
-/// nodal mass counted in `profile`).
-fn map_to_grid(model: &Model, setup: &StepSetup, t: f64, profile: &Profile) -> NodalMomentum {
-    let (grid, p) = (&model.grid, &model.particles);
-    let (bins, shapes) = (&setup.bins, &setup.shapes);
-    let mass = nodal_mass(model, setup);
-    profile.count(Work::ExplicitNodalMass, 1);
-    let momentum = transfer::nodal_mass_weighted(grid, bins, shapes, &p.mass, &p.velocity);
-    let stress = model.force_stresses(bins, &p.stress);
-    let internal = transfer::internal_force(grid, bins, shapes, &p.volume, &stress);
-    let mut external = external_force(model, setup, t);
-    let no_increment = vec![[0.0; 2]; grid.node_count()];
-    model
-        .driven
-        .add_forces(p, &setup.driven_shapes, &no_increment, t, &mut external);
-    let force = external
-        .iter()
-        .zip(&internal)
-        .map(|(e, i)| [e[0] - i[0], e[1] - i[1]])
-        .collect();
-    NodalMomentum {
-        mass,
-        momentum,
-        force,
-    }
-}
-
-/// p_i ← p_i + Δt f_i with local damping (D21) and Dirichlet conditions.
-fn update_momentum(model: &Model, nodal: NodalMomentum, dt: f64) -> UpdatedGrid {
-    let NodalMomentum {
-        mass,
-        mut momentum,
-        force,
-    } = nodal;
-    let n_nodes = mass.len();
-    let tiny_mass = 1e-12 * mass.iter().cloned().fold(0.0, f64::max);
-    let damping = model.scene.solver.damping;
-    let mut acceleration = vec![[0.0; 2]; n_nodes];
-    let mut reaction = vec![[0.0; 2]; n_nodes];
-    for node in 0..n_nodes {
-        if mass[node] <= tiny_mass {
-            momentum[node] = [0.0; 2];
-            continue;
-        }
-        for c in 0..2 {
-            let v = momentum[node][c] / mass[node];
-            let mut f = force[node][c];
-            match model.constraints.dof[2 * node + c] {
-                DofConstraint::Fixed => {
-                    reaction[node][c] = -f;
-                    momentum[node][c] = 0.0;
-                    acceleration[node][c] = -v / dt;
-                }
-                DofConstraint::Prescribed { rate, gradient } => {
-                    let x = model.grid.node_position(node);
-                    let target = rate + gradient[0] * x[0] + gradient[1] * x[1];
-                    reaction[node][c] = -f;
-                    acceleration[node][c] = (target - v) / dt;
-                    momentum[node][c] = mass[node] * target;
-                }
-                DofConstraint::Free => {
-                    if v != 0.0 {
-                        f -= damping * f.abs() * v.signum();
-                    }
-                    momentum[node][c] += dt * f;
-                    acceleration[node][c] = f / mass[node];
-                }
-            }
+    /// Surface contact points move with the nodal velocity that moved the
+    /// material points (G2P), not with the re-mapped increment: measured,
+    /// following the re-mapped increment they drift off the surface and the
+    /// platen load swings by ±8 %. Left empty without rigid bodies.
+    fn contact_motion(&self, model: &Model, dt: f64, motion: &mut Vec<[f64; 2]>) {
+        motion.clear();
+        if !model.driven.is_empty() {
+            motion.extend(self.velocity.iter().map(|v| [dt * v[0], dt * v[1]]));
         }
     }
-    let velocity = momentum
-        .iter()
-        .zip(&mass)
-        .map(|(q, &m)| {
-            if m > tiny_mass {
-                [q[0] / m, q[1] / m]
-            } else {
-                [0.0; 2]
-            }
-        })
-        .collect();
-    UpdatedGrid {
-        mass,
-        acceleration,
-        velocity,
-        reaction,
-        tiny_mass,
-    }
-}
-
-/// MUSL re-map (DESIGN §4 step 4): p_i = Σ_p N_ip m_p v_p of the updated
-/// point velocities, Dirichlet again; returns Δu_i = Δt p_i / m_i.
-fn remap(model: &Model, setup: &StepSetup, grid: &UpdatedGrid, dt: f64) -> Vec<[f64; 2]> {
-    let p = &model.particles;
-    let mass = &grid.mass;
-    let remapped = transfer::nodal_mass_weighted(
-        &model.grid,
-        &setup.bins,
-        &setup.shapes,
-        &p.mass,
-        &p.velocity,
-    );
-    (0..mass.len())
-        .map(|node| {
-            let mut u = [0.0; 2];
-            if mass[node] > grid.tiny_mass {
-                for (c, uc) in u.iter_mut().enumerate() {
-                    *uc = match model.constraints.dof[2 * node + c] {
-                        DofConstraint::Fixed => 0.0,
-                        DofConstraint::Prescribed { .. } => dt * grid.velocity[node][c],
-                        DofConstraint::Free => dt * remapped[node][c] / mass[node],
-                    };
-                }
-            }
-            u
-        })
-        .collect()
-}
-
-/// Δε from the re-mapped increment and the stress update (DESIGN §4 step 5),
-/// strengths at κ̄(n); the updates are counted in `profile`.
-fn stress_update(
-    model: &Model,
-    setup: &StepSetup,
-    du: &[[f64; 2]],
-    nonlocal: Option<&NonlocalStep>,
-    profile: &Profile,
-) -> Result<TrialStresses, StepError> {
-    let mut trial = TrialStresses::default();
-    evaluate_stresses(
-        model,
-        setup,
-        du,
-        nonlocal.map(|n| n.strength()),
-        false,
-        &mut trial,
-    )
-    .counted(profile)
-    .map_err(|(particle, source)| StepError::Constitutive { particle, source })?;
-    Ok(trial)
-}
-
-/// Surface contact points move with the nodal velocity that moved the
-/// material points (G2P), not with the re-mapped increment: measured,
-/// following the re-mapped increment they drift off the surface and the
-/// platen load swings by ±8 %.
-fn contact_motion(model: &Model, grid: &UpdatedGrid, dt: f64) -> Vec<[f64; 2]> {
-    if model.driven.is_empty() {
-        return Vec::new();
-    }
-    grid.velocity
-        .iter()
-        .map(|v| [dt * v[0], dt * v[1]])
-        .collect()
 }

@@ -3,7 +3,9 @@
 //! step's nodal solution. Deformation gradients, volumes and stresses follow
 //! in the commit stage.
 
-use crate::grid::ShapeAt;
+use rayon::prelude::*;
+
+use crate::grid::Support;
 use crate::particles::Particles;
 use crate::transfer::interpolate;
 
@@ -34,29 +36,55 @@ pub struct GridMotion<'a> {
 }
 
 /// x_p += scale Σ_i N_ip u_i; with accelerations, a_p = Σ_i N_ip a_i and v_p
-/// by the velocity rule.
-pub fn g2p(particles: &mut Particles, shapes: &[ShapeAt], motion: &GridMotion) {
+/// by the velocity rule (in parallel over the points: each point's update
+/// reads only its own state and the nodal fields).
+pub fn g2p<S: Support>(particles: &mut Particles, shapes: &[S], motion: &GridMotion) {
+    let Particles {
+        position,
+        velocity,
+        acceleration,
+        ..
+    } = particles;
+    position
+        .par_iter_mut()
+        .zip(velocity.par_iter_mut())
+        .zip(acceleration.par_iter_mut())
+        .zip(shapes.par_iter())
+        .with_min_len(POINTS_PER_TASK)
+        .for_each(|(((x, v), a), shape)| move_point(shape, motion, x, v, a));
+}
+
+/// Points handed to one rayon task at least.
+const POINTS_PER_TASK: usize = 256;
+
+/// The G2P update of one point with shape functions `shape`.
+#[inline]
+fn move_point<S: Support>(
+    shape: &S,
+    motion: &GridMotion,
+    position: &mut [f64; 2],
+    velocity: &mut [f64; 2],
+    acceleration: &mut [f64; 2],
+) {
     let dt = motion.dt;
-    for (i, shape) in shapes.iter().enumerate() {
-        if let Some((nodal_acceleration, rule)) = motion.acceleration {
-            let a = interpolate(shape, nodal_acceleration);
-            let v = &mut particles.velocity[i];
-            match rule {
-                VelocityUpdate::Forward => {
-                    v[0] += dt * a[0];
-                    v[1] += dt * a[1];
-                }
-                VelocityUpdate::Newmark { gamma } => {
-                    let before = particles.acceleration[i];
-                    for c in 0..2 {
-                        v[c] += dt * ((1.0 - gamma) * before[c] + gamma * a[c]);
-                    }
+    if let Some((nodal_acceleration, rule)) = motion.acceleration {
+        let a = interpolate(shape, nodal_acceleration);
+        let v = velocity;
+        match rule {
+            VelocityUpdate::Forward => {
+                v[0] += dt * a[0];
+                v[1] += dt * a[1];
+            }
+            VelocityUpdate::Newmark { gamma } => {
+                let before = *acceleration;
+                for c in 0..2 {
+                    v[c] += dt * ((1.0 - gamma) * before[c] + gamma * a[c]);
                 }
             }
-            particles.acceleration[i] = a;
         }
-        let u = interpolate(shape, motion.displacement);
-        particles.position[i][0] += motion.scale * u[0];
-        particles.position[i][1] += motion.scale * u[1];
+        *acceleration = a;
     }
+    let u = interpolate(shape, motion.displacement);
+    position[0] += motion.scale * u[0];
+    position[1] += motion.scale * u[1];
 }

@@ -33,7 +33,7 @@ pub use explicit::ExplicitIntegrator;
 pub use implicit::ImplicitIntegrator;
 pub(crate) use regularisation::NonlocalStep;
 pub use setup::StepSetup;
-pub(crate) use stress::{evaluate_stresses, TrialStresses};
+pub(crate) use stress::{evaluate_stresses, evaluate_stresses_without_tangent, TrialStresses};
 
 use mpm_solvers::SolverStats;
 

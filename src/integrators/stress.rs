@@ -9,6 +9,7 @@ use super::StepSetup;
 use crate::constitutive::{
     mat4_mul_vec, ConstitutiveError, Mat4, PointState, StrengthVariable, Voigt,
 };
+use crate::grid::Support;
 use crate::model::Model;
 use crate::profile::{Profile, Work};
 use crate::transfer;
@@ -65,58 +66,162 @@ pub fn evaluate_stresses(
     spin_term: bool,
     trial: &mut TrialStresses,
 ) -> UpdateTally {
-    let (particles, materials, shapes) = (&model.particles, &model.materials, &setup.shapes);
-    let compliances = spin_term.then_some(model.compliances.as_slice());
+    let tangents = if spin_term {
+        Tangents::WithSpinTerm
+    } else {
+        Tangents::Kept
+    };
+    evaluate(model, setup, &setup.shapes, du, strength, tangents, trial)
+}
+
+/// [`evaluate_stresses`] for a step that builds no tangent (explicit), with
+/// the points' shape functions `shapes` (those of `setup`, or their compact
+/// form): the same stresses, states, gradients and rotated stresses, with
+/// `trial.tangent` and `trial.spin_sensitivity` left empty.
+pub fn evaluate_stresses_without_tangent<S: Support>(
+    model: &Model,
+    setup: &StepSetup,
+    shapes: &[S],
+    du: &[[f64; 2]],
+    strength: Option<NonlocalStrength<'_>>,
+    trial: &mut TrialStresses,
+) -> UpdateTally {
+    evaluate(model, setup, shapes, du, strength, Tangents::None, trial)
+}
+
+/// Which tangents a stress evaluation keeps.
+#[derive(Clone, Copy, PartialEq)]
+enum Tangents {
+    /// None (explicit steps).
+    None,
+    /// The algorithmic tangents dσ/dΔε.
+    Kept,
+    /// The tangents and dσ/dω (unsymmetric tangents with the spin term).
+    WithSpinTerm,
+}
+
+/// The stress update of every point for the increment `du` (interpolated
+/// with `shapes`), with the tangents `tangents` asks for
+/// ([`evaluate_stresses`]). Without B-bar each point's gradient is formed in
+/// the same pass as its update.
+fn evaluate<S: Support>(
+    model: &Model,
+    setup: &StepSetup,
+    shapes: &[S],
+    du: &[[f64; 2]],
+    strength: Option<NonlocalStrength<'_>>,
+    tangents: Tangents,
+    trial: &mut TrialStresses,
+) -> UpdateTally {
+    let (particles, materials) = (&model.particles, &model.materials);
+    let compliances = (tangents == Tangents::WithSpinTerm).then_some(model.compliances.as_slice());
     let b_bar = model.b_bar().then_some(&setup.bins);
     let n = particles.len();
     trial.stress.resize(n, [0.0; 4]);
     trial.state.resize(n, PointState::default());
-    trial.tangent.resize(n, [[0.0; 4]; 4]);
     trial.rotated.resize(n, [0.0; 4]);
-    trial.gradient.clear();
-    trial
-        .gradient
-        .par_extend(shapes.par_iter().map(|s| transfer::gradient(s, du)));
-    // B-bar: the cell-averaged dilatation of every point ([B1]–[B2])
+    trial.gradient.resize(n, [0.0; 4]);
+    // B-bar: the cell-averaged dilatation of every point ([B1]–[B2]), from
+    // all the gradients first
     trial.volumetric_correction = match b_bar {
-        Some(bins) => volumetric::dilatation_corrections(bins, &particles.volume, &trial.gradient),
+        Some(bins) => {
+            trial
+                .gradient
+                .par_iter_mut()
+                .zip(shapes)
+                .for_each(|(l, s)| *l = transfer::gradient(s, du));
+            volumetric::dilatation_corrections(bins, &particles.volume, &trial.gradient)
+        }
         None => Vec::new(),
     };
-    let (gradient, correction) = (&trial.gradient, &trial.volumetric_correction);
-    let tally = trial
+    let gradient_known = b_bar.is_some();
+    let correction = &trial.volumetric_correction;
+    // the update of point p: its gradient (unless known), trial stress,
+    // state and rotated stress stored, its tangent returned
+    let update_point = |tally: &mut UpdateTally,
+                        p: usize,
+                        (stress, state, rotated_out, l): (
+        &mut Voigt,
+        &mut PointState,
+        &mut Voigt,
+        &mut [f64; 4],
+    )|
+     -> Option<Mat4> {
+        if !gradient_known {
+            *l = transfer::gradient(&shapes[p], du);
+        }
+        let (strain, spin) = transfer::strain_and_spin(l);
+        let strain_increment = match correction.get(p) {
+            Some(&c) => volumetric::corrected_strain(&strain, c),
+            None => strain,
+        };
+        let rotated = transfer::rotate_stress(&particles.stress[p], spin);
+        *rotated_out = rotated;
+        let material = &materials[particles.material[p] as usize];
+        let strength = strength.map_or(StrengthVariable::Local, |s| s.at(p));
+        tally.updates += 1;
+        tally.yield_checks += u64::from(!material.is_elastic());
+        let state_n = &particles.state[p];
+        if tangents == Tangents::None {
+            match material.update_stress(
+                &rotated,
+                &strain_increment,
+                state_n,
+                strength,
+                (stress, state),
+            ) {
+                Ok(yielded) => tally.return_mappings += u64::from(yielded),
+                Err(e) => tally.fail(p, e),
+            }
+            return None;
+        }
+        match material.update(&rotated, &strain_increment, state_n, strength) {
+            Ok(update) => {
+                tally.return_mappings += u64::from(update.yielded);
+                *stress = update.stress;
+                *state = update.state;
+                Some(update.tangent)
+            }
+            Err(e) => {
+                tally.fail(p, e);
+                None
+            }
+        }
+    };
+    let points = trial
         .stress
         .par_iter_mut()
         .zip(trial.state.par_iter_mut())
-        .zip(trial.tangent.par_iter_mut())
         .zip(trial.rotated.par_iter_mut())
+        .zip(trial.gradient.par_iter_mut())
         .enumerate()
-        .fold(
-            UpdateTally::default,
-            |mut tally, (p, (((stress, state), tangent), rotated_out))| {
-                let (strain, spin) = transfer::strain_and_spin(&gradient[p]);
-                let strain_increment = match correction.get(p) {
-                    Some(&c) => volumetric::corrected_strain(&strain, c),
-                    None => strain,
-                };
-                let rotated = transfer::rotate_stress(&particles.stress[p], spin);
-                *rotated_out = rotated;
-                let material = &materials[particles.material[p] as usize];
-                let strength = strength.map_or(StrengthVariable::Local, |s| s.at(p));
-                tally.updates += 1;
-                tally.yield_checks += u64::from(!material.is_elastic());
-                match material.update(&rotated, &strain_increment, &particles.state[p], strength) {
-                    Ok(update) => {
-                        tally.return_mappings += u64::from(update.yielded);
-                        *stress = update.stress;
-                        *state = update.state;
-                        *tangent = update.tangent;
+        .with_min_len(POINTS_PER_TASK);
+    let tally = if tangents == Tangents::None {
+        trial.tangent.clear();
+        points
+            .fold(
+                UpdateTally::default,
+                |mut tally, (p, (((stress, state), rotated), l))| {
+                    update_point(&mut tally, p, (stress, state, rotated, l));
+                    tally
+                },
+            )
+            .reduce(UpdateTally::default, UpdateTally::merge)
+    } else {
+        trial.tangent.resize(n, [[0.0; 4]; 4]);
+        points
+            .zip(trial.tangent.par_iter_mut())
+            .fold(
+                UpdateTally::default,
+                |mut tally, ((p, (((stress, state), rotated), l)), tangent)| {
+                    if let Some(t) = update_point(&mut tally, p, (stress, state, rotated, l)) {
+                        *tangent = t;
                     }
-                    Err(e) => tally.fail(p, e),
-                }
-                tally
-            },
-        )
-        .reduce(UpdateTally::default, UpdateTally::merge);
+                    tally
+                },
+            )
+            .reduce(UpdateTally::default, UpdateTally::merge)
+    };
     if let Some(compliances) = compliances {
         trial.spin_sensitivity.resize(n, [0.0; 4]);
         trial
@@ -134,6 +239,9 @@ pub fn evaluate_stresses(
     }
     tally
 }
+
+/// Points handed to one rayon task at least.
+const POINTS_PER_TASK: usize = 256;
 
 /// What the parallel stress-update loop of [`evaluate_stresses`] did, summed
 /// over the points, and its first failure.

@@ -3,6 +3,8 @@
 //! the nonlocal variable κ̄(n+1) (DESIGN D35) and the double-mapped stresses
 //! (D37–D39).
 
+use rayon::prelude::*;
+
 use super::{NonlocalStep, StepSetup, TrialStresses};
 use crate::constitutive::{Mat4, PointState, Voigt};
 use crate::dofs::DofMap;
@@ -14,6 +16,7 @@ use crate::scene::DoubleMapping;
 use crate::smoothing::{double_map, Equilibrium, MappingFrame};
 
 /// Stresses, states and energies of a converged step, ready to commit.
+#[derive(Default)]
 pub struct ConvergedStresses {
     /// σ(n+1) after double mapping, kPa.
     pub stress: Vec<Voigt>,
@@ -23,6 +26,8 @@ pub struct ConvergedStresses {
     pub internal_work: f64,
     /// Plastic dissipation of the step (DESIGN D43), kJ/m.
     pub dissipation: f64,
+    /// Internal work of each point, kJ/m (buffer of [`step_energies`]).
+    point_work: Vec<f64>,
 }
 
 /// The converged step's stresses and states to commit (times its nonlocal
@@ -35,15 +40,54 @@ pub fn converged_stresses(
     nonlocal: Option<&mut NonlocalStep>,
     profile: &Profile,
 ) -> Result<ConvergedStresses, StepError> {
-    let (internal_work, dissipation) = step_energies(model, trial);
-    let mut state = trial.state.clone();
+    let mut converged = ConvergedStresses {
+        stress: trial.stress.clone(),
+        state: trial.state.clone(),
+        ..ConvergedStresses::default()
+    };
+    converge(model, setup, trial, nonlocal, profile, &mut converged)?;
+    Ok(converged)
+}
+
+/// [`converged_stresses`] that takes the trial stresses and states over
+/// instead of copying them: `trial.stress` and `trial.state` are swapped
+/// with the arrays of `converged` (a step that reuses its arrays allocates
+/// none; the trial's other fields are kept).
+pub fn converged_stresses_taking(
+    model: &Model,
+    setup: &StepSetup,
+    trial: &mut TrialStresses,
+    nonlocal: Option<&mut NonlocalStep>,
+    profile: &Profile,
+    converged: &mut ConvergedStresses,
+) -> Result<(), StepError> {
+    std::mem::swap(&mut trial.stress, &mut converged.stress);
+    std::mem::swap(&mut trial.state, &mut converged.state);
+    converge(model, setup, trial, nonlocal, profile, converged)
+}
+
+/// The converged step from `converged`'s stresses and states, which hold
+/// the trial ones (the trial's own may not): the energies, κ̄(n+1) and the
+/// double mapping.
+fn converge(
+    model: &Model,
+    setup: &StepSetup,
+    trial: &TrialStresses,
+    nonlocal: Option<&mut NonlocalStep>,
+    profile: &Profile,
+    converged: &mut ConvergedStresses,
+) -> Result<(), StepError> {
+    let ConvergedStresses {
+        stress,
+        state,
+        internal_work,
+        dissipation,
+        point_work,
+    } = converged;
+    (*internal_work, *dissipation) = step_energies(model, trial, stress, point_work);
     let kappa_bar = match nonlocal {
         Some(nl) => Some(profile.time(Stage::Nonlocal, || {
-            nl.committed(
-                &model.particles,
-                |p| trial.state[p].plastic_strain_eq,
-                profile,
-            )
+            nl.committed(&model.particles, |p| state[p].plastic_strain_eq, profile)
         })?),
         None => None,
     };
@@ -52,7 +96,6 @@ pub fn converged_stresses(
             s.plastic_strain_eq_nonlocal = *k;
         }
     }
-    let mut stress = trial.stress.clone();
     let mode = model.double_mapping();
     if mode != DoubleMapping::Off {
         let restored = profile.time(Stage::DoubleMapping, || {
@@ -61,20 +104,15 @@ pub fn converged_stresses(
                 setup,
                 trial,
                 mode,
-                &state,
+                state,
                 kappa_bar.as_deref(),
-                &mut stress,
+                stress,
             )
         })?;
         profile.count(Work::SmoothingPasses, 1);
         profile.count(Work::ForceRestorations, u64::from(restored));
     }
-    Ok(ConvergedStresses {
-        stress,
-        state,
-        internal_work,
-        dissipation,
-    })
+    Ok(())
 }
 
 /// Double mapping of the step's stresses (DESIGN D37–D39), with the
@@ -128,21 +166,29 @@ fn smooth(
 ///   energy stored plus dissipation);
 /// - plastic dissipation (DESIGN D43) Σ_p V_p(n) · ½(σ_p(n+1) + σ_p^R(n)) · Δε^p_p
 ///   with Δε^p = Δε − C(σ(n+1) − σ^R(n)); elastic materials contribute nothing.
-fn step_energies(model: &Model, trial: &TrialStresses) -> (f64, f64) {
+///
+/// The constitutive stresses are `stress` (the trial's). The points' work
+/// is formed in parallel into `point_work` and summed in point order (the
+/// same sum whatever the number of threads).
+fn step_energies(
+    model: &Model,
+    trial: &TrialStresses,
+    stress: &[Voigt],
+    point_work: &mut Vec<f64>,
+) -> (f64, f64) {
     let p = &model.particles;
-    let strain: Vec<Voigt> = (0..p.len()).map(|i| trial.strain_increment(i)).collect();
-    let internal_work = (0..p.len())
-        .map(|i| {
-            let (now, before) = (&trial.stress[i], &trial.rotated[i]);
-            let work: f64 = (0..4)
-                .map(|k| 0.5 * (now[k] + before[k]) * strain[i][k])
-                .sum();
-            p.volume[i] * work
-        })
-        .sum();
+    point_work.clear();
+    point_work.par_extend((0..p.len()).into_par_iter().with_min_len(1024).map(|i| {
+        let strain = trial.strain_increment(i);
+        let (now, before) = (&stress[i], &trial.rotated[i]);
+        let work: f64 = (0..4).map(|k| 0.5 * (now[k] + before[k]) * strain[k]).sum();
+        p.volume[i] * work
+    }));
+    let internal_work = point_work.iter().sum();
     if model.materials.iter().all(|m| m.is_elastic()) {
         return (internal_work, 0.0);
     }
+    let strain: Vec<Voigt> = (0..p.len()).map(|i| trial.strain_increment(i)).collect();
     // elastic points dissipate nothing: give them zero weight
     let volumes: Vec<f64> = (0..p.len())
         .map(|i| {
@@ -160,7 +206,7 @@ fn step_energies(model: &Model, trial: &TrialStresses) -> (f64, f64) {
         .collect();
     let dissipation = dissipation_increment(
         &volumes,
-        &trial.stress,
+        stress,
         &trial.rotated,
         &strain,
         ComplianceSource::PerPoint(&compliance),
