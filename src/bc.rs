@@ -517,7 +517,8 @@ impl DrivenPoints {
     }
 
     /// Add K_pen = Σ k N Nᵀ ⊗ I₂ (DESIGN D41) into the patch blocks of the
-    /// active cells (indexed by cell slot, `dofs` per block row). A surface
+    /// active cells (one flat array, block `slot` at `slot · dofs²`, `dofs`
+    /// per block row). A surface
     /// point whose cell holds no material point (its nodes carry no unknowns)
     /// adds nothing.
     pub fn add_stiffness(
@@ -525,14 +526,15 @@ impl DrivenPoints {
         shapes: &[ShapeAt],
         bins: &ParticleBins,
         dofs: usize,
-        blocks: &mut [Vec<f64>],
+        blocks: &mut [f64],
     ) {
         for (k, s) in shapes.iter().enumerate() {
             let slot = bins.cell_slot[s.cell as usize];
             if slot == NONE {
                 continue;
             }
-            let block = &mut blocks[slot as usize];
+            let size = dofs * dofs;
+            let block = &mut blocks[slot as usize * size..(slot as usize + 1) * size];
             for a in s.support() {
                 let row = 2 * s.local[a] as usize;
                 for b in s.support() {

@@ -62,11 +62,19 @@ impl DofMap {
 
 /// The free-dof entries of a nodal field, in system order.
 pub fn gather_free(dofs: &DofMap, nodal: &[[f64; 2]]) -> Vec<f64> {
-    let mut out = vec![0.0; dofs.n_free];
+    let mut out = Vec::new();
+    gather_free_into(dofs, nodal, &mut out);
+    out
+}
+
+/// [`gather_free`] into `out` (resized to the unknowns; no allocation once
+/// it has grown).
+pub fn gather_free_into(dofs: &DofMap, nodal: &[[f64; 2]], out: &mut Vec<f64>) {
+    out.clear();
+    out.resize(dofs.n_free, 0.0);
     for (d, &index) in dofs.index.iter().enumerate() {
         if index != NONE {
             out[index as usize] = nodal[d / 2][d % 2];
         }
     }
-    out
 }

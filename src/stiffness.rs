@@ -85,36 +85,80 @@ pub fn cell_stiffness_blocks(
     spin_sensitivity: Option<&[Voigt]>,
     b_bar: Option<&CellMeanGradients>,
 ) -> Vec<Vec<f64>> {
+    let mut blocks = Vec::new();
+    let points = PointStiffness {
+        shapes,
+        volume,
+        tangent,
+        spin_sensitivity,
+        b_bar,
+    };
+    cell_stiffness_blocks_into(grid, bins, &points, &mut blocks);
+    let size = patch_dofs(grid).pow(2);
+    blocks.chunks(size).map(<[f64]>::to_vec).collect()
+}
+
+/// What the stiffness of the material points is formed from
+/// ([`cell_stiffness_blocks`]).
+pub struct PointStiffness<'a> {
+    /// N_ip, ∇N_ip of every point.
+    pub shapes: &'a [ShapeAt],
+    /// V_p.
+    pub volume: &'a [f64],
+    /// D_p (the algorithmic tangents).
+    pub tangent: &'a [Mat4],
+    /// dσ/dω per point, for the spin term (unsymmetric tangents).
+    pub spin_sensitivity: Option<&'a [Voigt]>,
+    /// The cells' b̄ (B-bar).
+    pub b_bar: Option<&'a CellMeanGradients>,
+}
+
+/// [`cell_stiffness_blocks`] into one flat array `blocks`: `dofs²` values a
+/// block, one block per active cell in the order of `bins.active_cells`,
+/// each zeroed and summed by the task that forms it. The same values; no
+/// allocation once `blocks` has grown (GIMP: 8 KB a cell).
+pub fn cell_stiffness_blocks_into(
+    grid: &Grid,
+    bins: &ParticleBins,
+    points: &PointStiffness,
+    blocks: &mut Vec<f64>,
+) {
     let dofs = patch_dofs(grid);
-    bins.active_cells
-        .par_iter()
+    let PointStiffness {
+        shapes,
+        volume,
+        tangent,
+        spin_sensitivity,
+        b_bar,
+    } = *points;
+    blocks.resize(bins.active_cells.len() * dofs * dofs, 0.0);
+    blocks
+        .par_chunks_mut(dofs * dofs)
+        .zip(bins.active_cells.par_iter())
         .enumerate()
-        .map(|(slot, &c)| {
-            let mut block = vec![0.0; dofs * dofs];
-            let mut b_bar_p = Vec::new();
+        .for_each_init(Vec::new, |b_bar_p, (slot, (block, &c))| {
+            block.fill(0.0);
             for &p in bins.particles_in(c as usize) {
                 let p = p as usize;
                 let spin = spin_sensitivity.map(|s| &s[p]);
                 if let Some(means) = b_bar {
-                    volumetric::b_bar_matrix(&shapes[p], means.of_slot(slot), &mut b_bar_p);
+                    volumetric::b_bar_matrix(&shapes[p], means.of_slot(slot), b_bar_p);
                     volumetric::add_particle_stiffness_b_bar(
-                        &mut block,
+                        block,
                         &shapes[p],
-                        &b_bar_p,
+                        b_bar_p,
                         volume[p],
                         &tangent[p],
                         spin,
                     );
                     continue;
                 }
-                add_particle_stiffness(&mut block, dofs, &shapes[p], volume[p], &tangent[p]);
+                add_particle_stiffness(block, dofs, &shapes[p], volume[p], &tangent[p]);
                 if let Some(s) = spin {
-                    add_spin_stiffness(&mut block, dofs, &shapes[p], volume[p], s);
+                    add_spin_stiffness(block, dofs, &shapes[p], volume[p], s);
                 }
             }
-            block
-        })
-        .collect()
+        });
 }
 
 /// The elements of the linear system: every active cell's patch block (with
@@ -129,25 +173,31 @@ pub fn system_blocks(
     mut patch_blocks: Vec<Vec<f64>>,
     cell_block: Option<&[f64; 64]>,
 ) -> Vec<Vec<f64>> {
-    let dofs = patch_dofs(grid);
-    let side = grid.patch_side();
-    let own = side / 2 - 1;
     if let Some(extra) = cell_block {
-        let dof_of = |k: usize| {
-            let (node, dir) = (k / 2, k % 2);
-            2 * ((node / 2 + own) * side + node % 2 + own) + dir
-        };
         for block in patch_blocks.iter_mut() {
-            for r in 0..8 {
-                for c in 0..8 {
-                    block[dof_of(r) * dofs + dof_of(c)] += extra[8 * r + c];
-                }
-            }
+            add_own_cell_block(grid, block, extra);
         }
     }
     let reached = cell_block.copied().unwrap_or([0.0; 64]).to_vec();
     patch_blocks.extend(bins.reached_cells.iter().map(|_| reached.clone()));
     patch_blocks
+}
+
+/// Add the 8×8 `cell_block` (over the cell's nodes in row-major order) on
+/// a cell's own 2 × 2 nodes of its patch block `block` ([`system_blocks`]).
+pub fn add_own_cell_block(grid: &Grid, block: &mut [f64], cell_block: &[f64; 64]) {
+    let dofs = patch_dofs(grid);
+    let side = grid.patch_side();
+    let own = side / 2 - 1;
+    let dof_of = |k: usize| {
+        let (node, dir) = (k / 2, k % 2);
+        2 * ((node / 2 + own) * side + node % 2 + own) + dir
+    };
+    for r in 0..8 {
+        for c in 0..8 {
+            block[dof_of(r) * dofs + dof_of(c)] += cell_block[8 * r + c];
+        }
+    }
 }
 
 /// Force `cell_block · Δu` of the GIMP-reached cells' elements (see

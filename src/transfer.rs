@@ -454,19 +454,41 @@ pub fn internal_force(
     volume: &[f64],
     stress: &[Voigt],
 ) -> Vec<[f64; 2]> {
-    scatter::<2, _>(grid, bins, shapes, |p| {
-        let s = &shapes[p];
+    let mut nodal = Vec::new();
+    internal_force_into(
+        grid,
+        bins,
+        shapes,
+        volume,
+        stress,
+        &mut Vec::new(),
+        &mut nodal,
+    );
+    nodal
+}
+
+/// [`internal_force`] into `nodal` (one entry per grid node), with
+/// `cell_sums` as the buffer of the patch sums ([`scatter_into`]): the same
+/// values, no allocation once both buffers have grown to the run's size.
+pub fn internal_force_into(
+    grid: &Grid,
+    bins: &ParticleBins,
+    shapes: &[ShapeAt],
+    volume: &[f64],
+    stress: &[Voigt],
+    cell_sums: &mut Vec<[f64; 2]>,
+    nodal: &mut Vec<[f64; 2]>,
+) {
+    let add = |p: usize, s: &ShapeAt, patch: &mut [[f64; 2]]| {
         let (v, sig) = (volume[p], &stress[p]);
-        let mut c = [[0.0; 2]; MAX_SUPPORT];
         for a in s.support() {
             let [dx, dy] = s.dn[a];
-            c[a] = [
-                v * (dx * sig[0] + dy * sig[3]),
-                v * (dy * sig[1] + dx * sig[3]),
-            ];
+            let place = s.local[a] as usize;
+            patch[place][0] += v * (dx * sig[0] + dy * sig[3]);
+            patch[place][1] += v * (dy * sig[1] + dx * sig[3]);
         }
-        c
-    })
+    };
+    scatter_into(grid, bins, shapes, add, cell_sums, nodal);
 }
 
 /// Interpolate a nodal vector field at a particle: g_p = Σ_i N_ip g_i.

@@ -155,6 +155,12 @@ impl Assembler {
         })
     }
 
+    /// Whether `k` was built by this assembler (shares its pattern), so that
+    /// [`Assembler::reassemble`] may overwrite it.
+    pub fn built(&self, k: &SparseMatrix) -> bool {
+        Arc::ptr_eq(&k.pattern, &self.pattern)
+    }
+
     /// Number of unknowns (dimension of K).
     pub fn n_dofs(&self) -> usize {
         self.pattern.n()

@@ -119,6 +119,20 @@ impl ConstitutiveModel for LinearElastic {
         *state = *state_n;
         Ok(false)
     }
+
+    fn update_into(
+        &self,
+        stress_rotated: &Voigt,
+        strain_increment: &Voigt,
+        state_n: &PointState,
+        _strength: StrengthVariable,
+        (stress, state, tangent): (&mut Voigt, &mut PointState, &mut Mat4),
+    ) -> Result<bool, ConstitutiveError> {
+        *stress = self.stress_after(stress_rotated, strain_increment)?;
+        *state = *state_n;
+        *tangent = self.stiffness;
+        Ok(false)
+    }
 }
 
 impl LinearElastic {

@@ -134,6 +134,25 @@ pub trait ConstitutiveModel: Send + Sync + Debug {
         Ok(update.yielded)
     }
 
+    /// [`Self::update`] written into `stress`, `state` and `tangent` (left
+    /// as they were on error); returns whether the point yielded. The
+    /// implicit stress update's form: a law may write its result in place
+    /// rather than return it by value.
+    fn update_into(
+        &self,
+        stress_rotated: &Voigt,
+        strain_increment: &Voigt,
+        state_n: &PointState,
+        strength: StrengthVariable,
+        (stress, state, tangent): (&mut Voigt, &mut PointState, &mut Mat4),
+    ) -> Result<bool, ConstitutiveError> {
+        let update = self.update(stress_rotated, strain_increment, state_n, strength)?;
+        *stress = update.stress;
+        *state = update.state;
+        *tangent = update.tangent;
+        Ok(update.yielded)
+    }
+
     /// True when the strength can decrease with plastic strain (softening):
     /// double mapping is then on by default (DESIGN §7).
     fn can_soften(&self) -> bool {

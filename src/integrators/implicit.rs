@@ -31,6 +31,9 @@ pub struct ImplicitIntegrator {
     tangent: Tangent,
     /// ε_bg · K_cell^el (DESIGN D19).
     background_block: [f64; 64],
+    /// The step setup, refreshed in place each (sub-)step (its shape
+    /// functions and bins reuse the previous step's arrays).
+    setup: StepSetup,
     /// Factorisations, Newton iterations, halvings.
     pub usage: SolverUsage,
     /// ‖R‖ per Newton iteration of the last converged (sub-)step, kN/m, and the
@@ -47,6 +50,7 @@ impl ImplicitIntegrator {
             newmark: dynamic.then(|| Newmark::with_gamma(model.scene.solver.newmark_gamma)),
             tangent: Tangent::new(model)?,
             background_block: background_block(&model.scene, &model.grid),
+            setup: StepSetup::default(),
             usage: SolverUsage::default(),
             last_residuals: (Vec::new(), 0.0),
         })
@@ -120,7 +124,8 @@ impl ImplicitIntegrator {
     }
 
     /// One (sub-)step from `t` to `t + dt`, in the order of paper Fig. 1;
-    /// returns the Newton iterations.
+    /// returns the Newton iterations. The step setup is the integrator's,
+    /// refreshed in place.
     fn substep(
         &mut self,
         model: &mut Model,
@@ -129,12 +134,29 @@ impl ImplicitIntegrator {
         dt: f64,
         report: &mut StepReport,
     ) -> Result<usize, NewtonError> {
-        let (setup, dofs) = profile.time(Stage::Setup, || step_setup(model))?;
+        let mut setup = std::mem::take(&mut self.setup);
+        let result = self.substep_with(model, profile, t, dt, report, &mut setup);
+        self.setup = setup;
+        result
+    }
+
+    /// [`Self::substep`] with the step setup `setup` (refreshed here).
+    fn substep_with(
+        &mut self,
+        model: &mut Model,
+        profile: &Profile,
+        t: f64,
+        dt: f64,
+        report: &mut StepReport,
+        setup: &mut StepSetup,
+    ) -> Result<usize, NewtonError> {
+        let dofs = profile.time(Stage::Setup, || refresh_setup(model, setup))?;
+        let setup = &*setup;
         let nodal = profile.time(Stage::P2G, || {
-            self.map_to_grid(model, &setup, t + dt, profile)
+            self.map_to_grid(model, setup, t + dt, profile)
         });
         let mut nonlocal = NonlocalStep::start(model, false, profile).map_err(StepError::from)?;
-        let system = self.system(model, &setup, dofs, nodal, t, dt);
+        let system = self.system(model, setup, dofs, nodal, t, dt);
         let solution = profile.time(Stage::Newton, || {
             newton::solve(
                 &system,
@@ -151,7 +173,7 @@ impl ImplicitIntegrator {
             g2p(&mut model.particles, &setup.shapes, &motion)
         });
         let converged = profile.time(Stage::Stresses, || {
-            converged_stresses(model, &setup, &grid.trial, nonlocal.as_mut(), profile)
+            converged_stresses(model, setup, &grid.trial, nonlocal.as_mut(), profile)
         })?;
         let removed = profile.time(Stage::Commit, || {
             let nodal = NodalResults {
@@ -159,7 +181,7 @@ impl ImplicitIntegrator {
                 increment: &grid.du,
                 contact_motion: &grid.du,
             };
-            commit(model, &setup, &grid.trial, converged, nodal)
+            commit(model, setup, &grid.trial, converged, nodal)
         })?;
         report.removed_points.extend(removed);
         model.time = t + dt;
@@ -316,9 +338,16 @@ impl ConvergedGrid {
 
 /// The shared step setup and the numbering of the unknowns.
 fn step_setup(model: &Model) -> Result<(StepSetup, DofMap), StepError> {
-    let setup = StepSetup::new(model)?;
-    let dofs = DofMap::new(&setup.bins, &model.constraints);
+    let mut setup = StepSetup::default();
+    let dofs = refresh_setup(model, &mut setup)?;
     Ok((setup, dofs))
+}
+
+/// [`step_setup`] into `setup` (reusing its arrays); returns the numbering
+/// of the unknowns.
+fn refresh_setup(model: &Model, setup: &mut StepSetup) -> Result<DofMap, StepError> {
+    setup.refresh(model)?;
+    Ok(DofMap::new(&setup.bins, &model.constraints))
 }
 
 fn divide_by_mass(weighted: &[[f64; 2]], mass: &[f64]) -> Vec<[f64; 2]> {

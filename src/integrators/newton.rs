@@ -9,7 +9,7 @@ use super::tangent::Tangent;
 use super::{evaluate_stresses, NonlocalStep, SolverUsage, StepSetup, TrialStresses};
 use crate::bc::DofConstraint;
 use crate::constitutive::ConstitutiveError;
-use crate::dofs::{gather_free, DofMap};
+use crate::dofs::{gather_free_into, DofMap};
 use crate::error::{Criterion, NewtonFailure, StepError};
 use crate::model::Model;
 use crate::profile::{Profile, Stage};
@@ -70,6 +70,7 @@ pub struct StepSystem<'a> {
 }
 
 /// Residual-side quantities of one Newton iterate.
+#[derive(Default)]
 pub struct Residual {
     /// R = f_ext + f_pen − f_int − M a, per grid node.
     pub residual: Vec<[f64; 2]>,
@@ -77,6 +78,18 @@ pub struct Residual {
     pub norm: f64,
     /// Reference force of DESIGN D18.
     pub reference: f64,
+}
+
+/// Node-sized buffers of the residual evaluation, reused by every
+/// evaluation of a Newton solve (no allocation once they have grown).
+#[derive(Default)]
+pub struct ResidualScratch {
+    /// f_int per grid node.
+    internal: Vec<[f64; 2]>,
+    /// Patch sums of the internal force (`transfer::internal_force_into`).
+    cell_sums: Vec<[f64; 2]>,
+    /// f_pen per grid node.
+    penalty: Vec<[f64; 2]>,
 }
 
 /// Why an attempt at a (sub-)step failed.
@@ -180,6 +193,23 @@ impl StepSystem<'_> {
         trial: &mut TrialStresses,
         profile: &Profile,
     ) -> Result<Residual, NewtonError> {
+        let mut res = Residual::default();
+        let mut scratch = ResidualScratch::default();
+        self.evaluate_into(du, nonlocal, trial, &mut scratch, &mut res, profile)?;
+        Ok(res)
+    }
+
+    /// [`Self::evaluate`] into `res`, with the buffers of `scratch` (the
+    /// Newton loop's form: no allocation once the buffers have grown).
+    pub fn evaluate_into(
+        &self,
+        du: &[[f64; 2]],
+        nonlocal: Option<&NonlocalStep>,
+        trial: &mut TrialStresses,
+        scratch: &mut ResidualScratch,
+        res: &mut Residual,
+        profile: &Profile,
+    ) -> Result<(), NewtonError> {
         let model = self.model;
         // compliances for the spin term of the tangent (`stiffness::add_spin_stiffness`),
         // included when the tangent is unsymmetric anyway (LU); symmetric
@@ -199,7 +229,8 @@ impl StepSystem<'_> {
                 .counted(profile)
             })
             .map_err(|(p, e)| NewtonError::Constitutive(p, e))?;
-        Ok(self.residual(trial, du, profile))
+        self.residual(trial, du, scratch, res, profile);
+        Ok(())
     }
 
     /// Newmark acceleration at grid dof (`node`, `c`):
@@ -226,35 +257,41 @@ impl StepSystem<'_> {
         a
     }
 
-    /// Residual R = f_ext + f_pen − f_int − M a (DESIGN D16) and its norms (D18).
-    fn residual(&self, trial: &TrialStresses, du: &[[f64; 2]], profile: &Profile) -> Residual {
+    /// Residual R = f_ext + f_pen − f_int − M a (DESIGN D16) and its norms
+    /// (D18), into `res`.
+    fn residual(
+        &self,
+        trial: &TrialStresses,
+        du: &[[f64; 2]],
+        scratch: &mut ResidualScratch,
+        res: &mut Residual,
+        profile: &Profile,
+    ) {
         let model = self.model;
         let (grid, p, bins) = (&model.grid, &model.particles, &self.setup.bins);
-        let mut internal = profile.time(Stage::P2G, || {
-            transfer::internal_force(
+        let ResidualScratch {
+            internal,
+            cell_sums,
+            penalty,
+        } = scratch;
+        profile.time(Stage::P2G, || {
+            transfer::internal_force_into(
                 grid,
                 bins,
                 &self.setup.shapes,
                 &p.volume,
                 &model.force_stresses(bins, &trial.stress),
+                cell_sums,
+                internal,
             )
         });
-        crate::stiffness::add_reached_cells_force(
-            grid,
-            bins,
-            &self.background_block,
-            du,
-            &mut internal,
-        );
-        let mut penalty = vec![[0.0; 2]; grid.node_count()];
-        model.driven.add_forces(
-            p,
-            &self.setup.driven_shapes,
-            du,
-            self.t + self.dt,
-            &mut penalty,
-        );
-        let mut residual = vec![[0.0; 2]; grid.node_count()];
+        crate::stiffness::add_reached_cells_force(grid, bins, &self.background_block, du, internal);
+        zeroed(penalty, grid.node_count());
+        model
+            .driven
+            .add_forces(p, &self.setup.driven_shapes, du, self.t + self.dt, penalty);
+        let residual = &mut res.residual;
+        zeroed(residual, grid.node_count());
         let (mut norm2, mut ext2, mut int2, mut inertia2) = (0.0, 0.0, 0.0, 0.0);
         for node in 0..grid.node_count() {
             if !bins.node_active[node] {
@@ -279,12 +316,8 @@ impl StepSystem<'_> {
             }
         }
         let floor = 1e-6 * model.max_youngs_modulus() * grid.cell_size;
-        let reference = ext2.sqrt().max(int2.sqrt()).max(inertia2.sqrt()).max(floor);
-        Residual {
-            residual,
-            norm: norm2.sqrt(),
-            reference,
-        }
+        res.reference = ext2.sqrt().max(int2.sqrt()).max(inertia2.sqrt()).max(floor);
+        res.norm = norm2.sqrt();
     }
 
     /// DESIGN §3 motion limit (dynamic): no point may move more than half a
@@ -323,7 +356,11 @@ enum Verdict {
     Iterate,
 }
 
-/// One line-search candidate: increment, its stresses and residual, step length α.
+/// One Newton iterate or line-search candidate: increment, its stresses and
+/// residual, step length α. The loop keeps three (current, best candidate,
+/// candidate being evaluated) and swaps them, so that their buffers serve
+/// every iteration of the solve.
+#[derive(Default)]
 struct Candidate {
     du: Vec<[f64; 2]>,
     trial: TrialStresses,
@@ -433,41 +470,47 @@ impl Convergence {
     /// Backtracking on ‖R(Δu + α δu)‖ < (1 − 10⁻⁴ α) ‖R(Δu)‖ for α = 1, ½, … ⅟₆₄:
     /// the first length that reduces the residual is taken, else the one with
     /// the smallest residual (softening makes the tangent indefinite and full
-    /// Newton steps can overshoot). `evaluate(α)` gives `None` where the stress
-    /// update fails at that length (it is then shortened). Records the
-    /// correction applied for the energy criterion.
+    /// Newton steps can overshoot), into `best`. `evaluate(α, slot)` fills
+    /// `slot` and gives `false` where the stress update fails at that length
+    /// (it is then shortened); `slot` is `spare`, swapped with `best` when
+    /// better. Records the correction applied for the energy criterion.
     fn line_search(
         &mut self,
         correction: &[f64],
         reference_norm: f64,
-        mut evaluate: impl FnMut(f64) -> Result<Option<Candidate>, NewtonError>,
-    ) -> Result<Candidate, NewtonError> {
-        let mut best: Option<Candidate> = None;
+        (best, spare): (&mut Candidate, &mut Candidate),
+        mut evaluate: impl FnMut(f64, &mut Candidate) -> Result<bool, NewtonError>,
+    ) -> Result<(), NewtonError> {
+        let mut found = false;
         let mut alpha = 1.0;
         for _ in 0..7 {
-            let Some(candidate) = evaluate(alpha)? else {
+            if !evaluate(alpha, spare)? {
                 alpha *= 0.5;
                 continue;
-            };
-            let norm = candidate.residual.norm;
+            }
+            let norm = spare.residual.norm;
             let accepted = norm < (1.0 - 1e-4 * alpha) * reference_norm;
-            if accepted || best.as_ref().is_none_or(|b| norm < b.residual.norm) {
-                best = Some(candidate);
+            if accepted || !found || norm < best.residual.norm {
+                std::mem::swap(best, spare);
+                found = true;
             }
             if accepted {
                 break;
             }
             alpha *= 0.5;
         }
-        let best = best.ok_or_else(|| {
-            NewtonError::failed(
+        if !found {
+            return Err(NewtonError::failed(
                 NewtonFailure::NonFinite("stress update at every line-search step"),
                 &[],
-            )
-        })?;
+            ));
+        }
         // the energy norm uses the correction actually applied
-        self.last_correction = correction.iter().map(|c| best.alpha * c).collect();
-        Ok(best)
+        self.last_correction.clear();
+        let alpha = best.alpha;
+        self.last_correction
+            .extend(correction.iter().map(|c| alpha * c));
+        Ok(())
     }
 }
 
@@ -485,13 +528,38 @@ pub fn solve(
     let model = system.model;
     let mut convergence = Convergence::new(&model.scene.solver, model.scene.max_iterations());
     tangent.begin_newton(system);
-    let mut du = system.initial_increment(&vec![0.0; system.dofs.n_free]);
-    let mut trial = TrialStresses::default();
-    let mut res = system.evaluate(&du, nonlocal.as_deref(), &mut trial, profile)?;
+    let mut scratch = ResidualScratch::default();
+    // the iterate, the line search's best candidate and its spare slot
+    let mut current = Candidate {
+        du: system.initial_increment(&vec![0.0; system.dofs.n_free]),
+        ..Candidate::default()
+    };
+    let (mut best, mut spare) = (Candidate::default(), Candidate::default());
+    let Candidate {
+        du,
+        trial,
+        residual,
+        ..
+    } = &mut current;
+    system.evaluate_into(
+        du,
+        nonlocal.as_deref(),
+        trial,
+        &mut scratch,
+        residual,
+        profile,
+    )?;
+    let mut free_residual = Vec::new();
     // `judge` ends the loop: at convergence, or with an error at the iteration limit
     let mut iteration = 0;
     loop {
-        let free_residual = gather_free(&system.dofs, &res.residual);
+        let Candidate {
+            du,
+            trial,
+            residual: res,
+            ..
+        } = &current;
+        gather_free_into(&system.dofs, &res.residual, &mut free_residual);
         let kappa_settled = || match nonlocal.as_deref_mut() {
             Some(nl) => Ok(profile.time(Stage::Nonlocal, || {
                 nl.iterate(
@@ -503,22 +571,22 @@ pub fn solve(
             None => Ok(true),
         };
         if let Verdict::Converged { stagnated } =
-            convergence.judge(iteration, &res, &free_residual, kappa_settled)?
+            convergence.judge(iteration, res, &free_residual, kappa_settled)?
         {
             usage.stagnated_steps += usize::from(stagnated);
             let history = convergence.history;
             system
-                .check_motion(&du)
+                .check_motion(du)
                 .map_err(|cause| NewtonError::failed(cause, &[]))?;
             return Ok(Solution {
-                du,
-                trial,
-                residual: res,
+                du: current.du,
+                trial: current.trial,
+                residual: current.residual,
                 iterations: iteration,
                 history,
             });
         }
-        let correction = tangent.solve(system, &trial, &free_residual, usage, profile)?;
+        let correction = tangent.solve(system, trial, &free_residual, usage, profile)?;
         if correction.iter().any(|v| !v.is_finite()) {
             let cause = NewtonFailure::NonFinite("solution of the linear system");
             return Err(NewtonError::failed(cause, &convergence.history));
@@ -528,37 +596,49 @@ pub fn solve(
         // the residual at the current κ̄, so re-evaluate the reference first.
         let reference_norm = match nonlocal.as_deref() {
             Some(nl) if iteration > 0 => {
-                system
-                    .evaluate(&du, Some(nl), &mut TrialStresses::default(), profile)?
-                    .norm
+                // evaluated in the spare slot, whose contents are not kept
+                let Candidate {
+                    trial, residual, ..
+                } = &mut spare;
+                system.evaluate_into(du, Some(nl), trial, &mut scratch, residual, profile)?;
+                residual.norm
             }
             _ => res.norm,
         };
-        let candidate = convergence.line_search(&correction, reference_norm, |alpha| {
-            let mut candidate = du.clone();
+        let slots = (&mut best, &mut spare);
+        convergence.line_search(&correction, reference_norm, slots, |alpha, slot| {
+            slot.alpha = alpha;
+            slot.du.clear();
+            slot.du.extend_from_slice(du);
             for (d, &index) in system.dofs.index.iter().enumerate() {
                 if index != NONE {
-                    candidate[d / 2][d % 2] += alpha * correction[index as usize];
+                    slot.du[d / 2][d % 2] += alpha * correction[index as usize];
                 }
             }
-            let mut trial = TrialStresses::default();
-            match system.evaluate(&candidate, nonlocal.as_deref(), &mut trial, profile) {
-                Ok(r) if r.norm.is_finite() => Ok(Some(Candidate {
-                    du: candidate,
-                    trial,
-                    residual: r,
-                    alpha,
-                })),
+            let Candidate {
+                du,
+                trial,
+                residual,
+                ..
+            } = slot;
+            let nl = nonlocal.as_deref();
+            match system.evaluate_into(du, nl, trial, &mut scratch, residual, profile) {
+                Ok(()) => Ok(residual.norm.is_finite()),
                 // a failed stress update at a too-long step: shorten it
-                Ok(_) | Err(NewtonError::Constitutive(..)) => Ok(None),
+                Err(NewtonError::Constitutive(..)) => Ok(false),
                 Err(e) => Err(e),
             }
         })?;
-        du = candidate.du;
-        trial = candidate.trial;
-        res = candidate.residual;
+        std::mem::swap(&mut current, &mut best);
         iteration += 1;
     }
+}
+
+/// Clear `values` and fill it with `n` zeros (in place: no allocation once
+/// it has grown).
+fn zeroed(values: &mut Vec<[f64; 2]>, n: usize) {
+    values.clear();
+    values.resize(n, [0.0; 2]);
 }
 
 /// True when each of the last three iterations changed the residual norm by

@@ -137,7 +137,7 @@ fn evaluate<S: Support>(
     let gradient_known = b_bar.is_some();
     let correction = &trial.volumetric_correction;
     // the update of point p: its gradient (unless known), trial stress,
-    // state and rotated stress stored, its tangent returned
+    // state, rotated stress and (when asked for) tangent stored in place
     let update_point = |tally: &mut UpdateTally,
                         p: usize,
                         (stress, state, rotated_out, l): (
@@ -145,8 +145,8 @@ fn evaluate<S: Support>(
         &mut PointState,
         &mut Voigt,
         &mut [f64; 4],
-    )|
-     -> Option<Mat4> {
+    ),
+                        tangent: Option<&mut Mat4>| {
         if !gradient_known {
             *l = transfer::gradient(&shapes[p], du);
         }
@@ -161,31 +161,20 @@ fn evaluate<S: Support>(
         let strength = strength.map_or(StrengthVariable::Local, |s| s.at(p));
         tally.updates += 1;
         tally.yield_checks += u64::from(!material.is_elastic());
-        let state_n = &particles.state[p];
-        if tangents == Tangents::None {
-            match material.update_stress(
+        let (state_n, strain) = (&particles.state[p], &strain_increment);
+        let updated = match tangent {
+            None => material.update_stress(&rotated, strain, state_n, strength, (stress, state)),
+            Some(tangent) => material.update_into(
                 &rotated,
-                &strain_increment,
+                strain,
                 state_n,
                 strength,
-                (stress, state),
-            ) {
-                Ok(yielded) => tally.return_mappings += u64::from(yielded),
-                Err(e) => tally.fail(p, e),
-            }
-            return None;
-        }
-        match material.update(&rotated, &strain_increment, state_n, strength) {
-            Ok(update) => {
-                tally.return_mappings += u64::from(update.yielded);
-                *stress = update.stress;
-                *state = update.state;
-                Some(update.tangent)
-            }
-            Err(e) => {
-                tally.fail(p, e);
-                None
-            }
+                (stress, state, tangent),
+            ),
+        };
+        match updated {
+            Ok(yielded) => tally.return_mappings += u64::from(yielded),
+            Err(e) => tally.fail(p, e),
         }
     };
     let points = trial
@@ -202,7 +191,7 @@ fn evaluate<S: Support>(
             .fold(
                 UpdateTally::default,
                 |mut tally, (p, (((stress, state), rotated), l))| {
-                    update_point(&mut tally, p, (stress, state, rotated, l));
+                    update_point(&mut tally, p, (stress, state, rotated, l), None);
                     tally
                 },
             )
@@ -214,9 +203,8 @@ fn evaluate<S: Support>(
             .fold(
                 UpdateTally::default,
                 |mut tally, ((p, (((stress, state), rotated), l)), tangent)| {
-                    if let Some(t) = update_point(&mut tally, p, (stress, state, rotated, l)) {
-                        *tangent = t;
-                    }
+                    let point = (stress, state, rotated, l);
+                    update_point(&mut tally, p, point, Some(tangent));
                     tally
                 },
             )

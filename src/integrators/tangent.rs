@@ -3,6 +3,8 @@
 //! cell blocks, and the sparse direct factorisation and solve (faer
 //! Cholesky or LU).
 
+use rayon::prelude::*;
+
 use mpm_solvers::{Assembler, LinearSolver, SolverStats, SparseMatrix, Used};
 
 use super::export::SystemExport;
@@ -30,6 +32,11 @@ pub struct Tangent {
     pattern_current: bool,
     /// Every material's tangent is symmetric: Cholesky allowed.
     symmetric: bool,
+    /// The active cells' patch blocks, flat (reused by every assembly).
+    blocks: Vec<f64>,
+    /// The last matrix assembled, whose values the next assembly of the
+    /// same pattern overwrites.
+    matrix: Option<SparseMatrix>,
 }
 
 impl Tangent {
@@ -68,6 +75,8 @@ impl Tangent {
             pattern: None,
             pattern_current: false,
             symmetric,
+            blocks: Vec::new(),
+            matrix: None,
         })
     }
 
@@ -118,6 +127,19 @@ impl Tangent {
         trial: &TrialStresses,
         profile: &Profile,
     ) -> Result<SparseMatrix, StepError> {
+        self.assemble_reusing(system, trial, profile).cloned()
+    }
+
+    /// [`Self::assemble`] into the matrix kept from the previous assembly
+    /// when it has this step's pattern (its values overwritten: no
+    /// allocation), else into a new one; the cell blocks are formed in the
+    /// reused flat array [`Self::blocks`].
+    fn assemble_reusing(
+        &mut self,
+        system: &StepSystem,
+        trial: &TrialStresses,
+        profile: &Profile,
+    ) -> Result<&SparseMatrix, StepError> {
         profile.time(Stage::Assembly, || {
             if !self.pattern_current {
                 self.update_pattern(system)?;
@@ -125,12 +147,24 @@ impl Tangent {
             let Some((_, assembler)) = self.pattern.as_ref() else {
                 return Err(StepError::NotAvailable("no sparsity pattern was built"));
             };
-            let blocks = cell_blocks(system, trial);
+            fill_cell_blocks(system, trial, &mut self.blocks);
+            let size = stiffness::patch_dofs(&system.model.grid).pow(2);
+            let background = &system.background_block[..];
+            let reached = system.setup.bins.reached_cells.len();
+            let elements: Vec<&[f64]> = self
+                .blocks
+                .chunks(size)
+                .chain(std::iter::repeat_n(background, reached))
+                .collect();
             let diagonal = system.mass_diagonal();
-            let matrix = assembler.assemble_with_diagonal(&blocks, diagonal.as_deref())?;
+            let diagonal = diagonal.as_deref();
+            match self.matrix.as_mut() {
+                Some(k) if assembler.built(k) => assembler.reassemble(k, &elements, diagonal)?,
+                _ => self.matrix = Some(assembler.assemble_with_diagonal(&elements, diagonal)?),
+            }
             profile.count(Work::Assemblies, 1);
             profile.count(Work::MassDiagonals, u64::from(diagonal.is_some()));
-            Ok(matrix)
+            Ok(self.matrix.as_ref().expect("assembled above"))
         })
     }
 
@@ -146,11 +180,27 @@ impl Tangent {
         usage: &mut SolverUsage,
         profile: &Profile,
     ) -> Result<Vec<f64>, StepError> {
-        let matrix = self.assemble(system, trial, profile)?;
+        self.assemble_reusing(system, trial, profile)?;
+        let matrix = self.matrix.take().expect("assembled above");
+        let result = self.factorise_and_solve(system, &matrix, residual, usage, profile);
+        self.matrix = Some(matrix);
+        result
+    }
+
+    /// Factorise the assembled `matrix` and solve for the correction
+    /// ([`Self::solve`]).
+    fn factorise_and_solve(
+        &mut self,
+        system: &StepSystem,
+        matrix: &SparseMatrix,
+        residual: &[f64],
+        usage: &mut SolverUsage,
+        profile: &Profile,
+    ) -> Result<Vec<f64>, StepError> {
         let symmetric = self.symmetric;
         let before = self.solver.stats();
         let kind = profile.time(Stage::Factorisation, || {
-            self.solver.factorize(&matrix, symmetric)
+            self.solver.factorize(matrix, symmetric)
         });
         count_factorisations(&before, &self.solver.stats(), profile);
         kind?;
@@ -167,7 +217,7 @@ impl Tangent {
             let after = self.solver.stats();
             export.record(
                 system,
-                &matrix,
+                matrix,
                 residual,
                 &correction,
                 symmetric,
@@ -216,35 +266,36 @@ fn count_factorisations(before: &SolverStats, after: &SolverStats, profile: &Pro
     );
 }
 
-/// The system's element blocks: every active cell's patch stiffness (with
-/// the spin term when the tangent is unsymmetric), the penalty springs of
-/// driven points, and the background stiffness.
-fn cell_blocks(system: &StepSystem, trial: &TrialStresses) -> Vec<Vec<f64>> {
+/// The active cells' patch blocks of the system, flat into `blocks`
+/// (`stiffness::cell_stiffness_blocks_into`): every active cell's patch
+/// stiffness (with the spin term when the tangent is unsymmetric), the
+/// penalty springs of driven points, and the background stiffness on the
+/// cell's own nodes. The reached cells' elements (GIMP) carry the
+/// background block alone (`stiffness::system_blocks`, same values).
+fn fill_cell_blocks(system: &StepSystem, trial: &TrialStresses, blocks: &mut Vec<f64>) {
     let (model, setup) = (system.model, system.setup);
+    let grid = &model.grid;
     let spin = (!trial.spin_sensitivity.is_empty()).then_some(trial.spin_sensitivity.as_slice());
-    let places = model.grid.patch_side() * model.grid.patch_side();
+    let places = grid.patch_side() * grid.patch_side();
     let b_bar = model.b_bar().then(|| {
         CellMeanGradients::new(&setup.bins, &setup.shapes, &model.particles.volume, places)
     });
-    let mut blocks = stiffness::cell_stiffness_blocks(
-        &model.grid,
-        &setup.bins,
-        &setup.shapes,
-        &model.particles.volume,
-        &trial.tangent,
-        spin,
-        b_bar.as_ref(),
-    );
-    let dofs = stiffness::patch_dofs(&model.grid);
+    let points = stiffness::PointStiffness {
+        shapes: &setup.shapes,
+        volume: &model.particles.volume,
+        tangent: &trial.tangent,
+        spin_sensitivity: spin,
+        b_bar: b_bar.as_ref(),
+    };
+    stiffness::cell_stiffness_blocks_into(grid, &setup.bins, &points, blocks);
+    let dofs = stiffness::patch_dofs(grid);
     model
         .driven
-        .add_stiffness(&setup.driven_shapes, &setup.bins, dofs, &mut blocks);
-    stiffness::system_blocks(
-        &model.grid,
-        &setup.bins,
-        blocks,
-        Some(&system.background_block),
-    )
+        .add_stiffness(&setup.driven_shapes, &setup.bins, dofs, blocks);
+    let background = &system.background_block;
+    blocks
+        .par_chunks_mut(dofs * dofs)
+        .for_each(|block| stiffness::add_own_cell_block(grid, block, background));
 }
 
 impl StepSystem<'_> {
