@@ -185,8 +185,9 @@ fn kernel(r2: f64, inv_l2: f64) -> f64 {
 /// assembled from its exponent bits.
 #[inline(always)]
 fn exp_nonpositive(x: f64) -> f64 {
-    const SHIFT: f64 = 6_755_399_441_055_744.0; // 1.5 · 2^52
-                                                // ln 2 = LN2_HI + LN2_LO, LN2_HI with 11 trailing zero bits (exact times any |k| < 2^11)
+    // adding 1.5 · 2^52 rounds to an integer, held in the low bits
+    const SHIFT: f64 = 6_755_399_441_055_744.0;
+    // ln 2 = LN2_HI + LN2_LO, LN2_HI with 11 trailing zero bits (exact times any |k| < 2^11)
     const LN2_HI: f64 = f64::from_bits(0x3fe6_2e42_fee0_0000);
     const LN2_LO: f64 = f64::from_bits(0x3dea_39ef_3579_3c76);
     // 1/n!, n = 13 … 2
