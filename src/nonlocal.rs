@@ -781,10 +781,15 @@ impl NonlocalAverager {
         if !is_candidate.contains(&true) {
             return Ok(0);
         }
-        let fresh = self.weights.get().is_none();
-        let plan = match self.weights.get() {
-            Some(w) => w.plan.clone(),
-            None => SymmetricPlan::new(&self.sorted, self.rc2),
+        // the plan of the denominators, or a new one if they are still to be computed
+        let fresh_plan = match self.weights.get() {
+            Some(_) => None,
+            None => Some(SymmetricPlan::new(&self.sorted, self.rc2)),
+        };
+        let plan = match (&fresh_plan, self.weights.get()) {
+            (Some(plan), _) => plan,
+            (None, Some(w)) => &w.plan,
+            (None, None) => unreachable!("a plan exists in one of the two"),
         };
         let cache = &mut self.cache;
         if cache.blocks.len() != plan.pairs.len() {
@@ -831,7 +836,7 @@ impl NonlocalAverager {
             }
         }
         cache.sources += added;
-        if fresh {
+        if fresh_plan.is_some() {
             let results = plan.sums(
                 &self.sorted,
                 &self.sorted.s,
@@ -839,8 +844,10 @@ impl NonlocalAverager {
                 self.inv_l2,
                 &mut cache.blocks,
             );
-            // `fresh`: the cell is empty, so this cannot fail
-            let _ = self.weights.set(Weights::from_sums(plan, &results));
+            if let Some(plan) = fresh_plan {
+                // the cell was empty above, so this cannot fail
+                let _ = self.weights.set(Weights::from_sums(plan, &results));
+            }
         } else {
             let (sorted, rc2, inv_l2) = (&self.sorted, self.rc2, self.inv_l2);
             cache
