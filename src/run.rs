@@ -628,6 +628,7 @@ pub fn write_run_json(
         "time": model.time,
         "particles": model.particles.len(),
         "lost_points": model.lost_points,
+        "point_volumes": point_volume_summary(model),
         "grid_cells": model.grid.cells,
         "wall_seconds": wall_seconds,
         "rayon_threads": rayon::current_num_threads(),
@@ -678,4 +679,27 @@ pub fn write_run_json(
         "scene": model.scene,
     });
     write_json(path, &value)
+}
+
+/// The largest point volume at the end of the run, in cell areas h², and
+/// how many points sit at the `grid.max_point_volume` bound (null when
+/// unset): how far the motion stretched the points (a 2 × 2 layout starts
+/// at 0.25).
+fn point_volume_summary(model: &crate::model::Model) -> serde_json::Value {
+    let cell_area = model.grid.cell_size.powi(2);
+    let largest = model.particles.volume.iter().copied().fold(0.0, f64::max) / cell_area;
+    let at_bound = model.scene.grid.max_point_volume.map(|cells| {
+        let bound = cells * cell_area;
+        model
+            .particles
+            .volume
+            .iter()
+            .filter(|&&v| v >= bound * (1.0 - 1e-12))
+            .count()
+    });
+    json!({
+        "largest_cells": largest,
+        "bound_cells": model.scene.grid.max_point_volume,
+        "at_bound": at_bound,
+    })
 }

@@ -116,12 +116,14 @@ impl Simulation {
                 cause,
             })?;
         self.model.account_rigid_work(start);
-        self.check_monitors()?;
+        // the points are already removed: the monitors follow their new
+        // indices before anything reads them
         for remap in &report.removed_points {
             for monitor in &mut self.monitors {
                 monitor.remap_particle(remap);
             }
         }
+        self.check_monitors()?;
         Ok(report)
     }
 

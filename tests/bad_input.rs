@@ -207,7 +207,7 @@ fn shape_function_and_contact_options_are_checked() {
 }
 
 #[test]
-fn out_of_range_over_nonlocal_factor_and_unknown_lost_point_policy_are_refused() {
+fn out_of_range_over_nonlocal_factor_lost_point_policy_and_volume_bound_are_refused() {
     let scene = common::validation("biaxial/nonlocal_h300.toml");
     let scene = scene.to_str().unwrap();
     for (set, needles) in [
@@ -216,6 +216,15 @@ fn out_of_range_over_nonlocal_factor_and_unknown_lost_point_policy_are_refused()
             ["nonlocal.over_nonlocal", "[1, 3]"],
         ),
         ("grid.lost_points=\"drop\"", ["lost_points", "drop"]),
+        // below a point's initial volume (1/2² of a cell), and not finite
+        (
+            "grid.max_point_volume=0.2",
+            ["grid.max_point_volume", "0.25"],
+        ),
+        (
+            "grid.max_point_volume=inf",
+            ["grid.max_point_volume", "inf"],
+        ),
     ] {
         let (code, text) = mpm_geo(&["check", scene, "--set", set]);
         assert_ne!(code, 0, "accepted {set}: {text}");

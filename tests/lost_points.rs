@@ -1,7 +1,8 @@
 //! `[grid] lost_points`: material points that leave the grid are dropped
 //! (`remove`) or stop the run (`stop`, the default). Scene:
 //! `validation/lost_points/block_leaves_grid.toml`, a free block translating
-//! rigidly at 1 m/s across the grid's right edge at x = 0.4 m.
+//! rigidly at 1 m/s across the grid's right edge at x = 0.4 m, with two of
+//! the points that stay followed by monitors.
 
 mod common;
 
@@ -62,6 +63,35 @@ fn points_crossing_the_edge_are_removed_and_the_rest_translate_rigidly() {
     let last = history.last().unwrap().1[kinetic];
     assert!((first / (0.5 * initial_mass * SPEED * SPEED) - 1.0).abs() < 1e-12);
     assert!((last / (0.5 * kept_mass * SPEED * SPEED) - 1.0).abs() < 1e-9);
+}
+
+/// The monitors follow their points across the removals, whichever points
+/// go: at every step a monitored point has moved v t. Moving left, the
+/// points that leave are the first half of the arrays, so the followed
+/// points' indices shift by 16; a stale index would read another point or
+/// one past the end of the shortened arrays (a panic, before the fix).
+#[test]
+fn monitors_follow_their_points_when_earlier_points_are_removed() {
+    let leftward = [
+        "body.0.velocity0=[-1.0, 0.0]",
+        "monitor.1.point=[0.3, 0.15]",
+        "monitor.2.point=[0.3, 0.05]",
+    ];
+    for (velocity, overrides) in [(SPEED, &[][..]), (-SPEED, &leftward[..])] {
+        let mut sim = common::simulation(SCENE, overrides);
+        let history = common::run_history(&mut sim);
+        assert_eq!(sim.model.lost_points.len(), 16, "v = {velocity}");
+        for name in ["u_top_left", "u_bottom_left"] {
+            let column = common::column(&sim, name);
+            for (t, values) in &history {
+                let u = values[column];
+                assert!(
+                    (u - velocity * t).abs() < 1e-9,
+                    "v = {velocity}: {name} at t = {t}: {u}"
+                );
+            }
+        }
+    }
 }
 
 #[test]

@@ -56,7 +56,12 @@ pub fn commit_swapping(
     let p = &mut model.particles;
     std::mem::swap(&mut p.stress, &mut converged.stress);
     std::mem::swap(&mut p.state, &mut converged.state);
-    let first = deform_and_check(p, &trial.gradient, &model.grid);
+    let volume_cap = model
+        .scene
+        .grid
+        .max_point_volume
+        .map_or(f64::INFINITY, |cells| cells * model.grid.cell_size.powi(2));
+    let first = deform_and_check(p, &trial.gradient, &model.grid, volume_cap);
     if let Some(i) = first.non_finite {
         return Err(non_finite_point(p, i));
     }
@@ -112,10 +117,16 @@ impl FirstFailures {
 }
 
 /// The one pass over the committed point state, in parallel: F, V and ε of
-/// every point from its increment gradient (DESIGN D14), then the point
-/// checked; returns the lowest-index points with a non-finite variable and
-/// outside the grid (the same whatever the number of threads).
-fn deform_and_check(p: &mut Particles, gradient: &[[f64; 4]], grid: &Grid) -> FirstFailures {
+/// every point from its increment gradient (DESIGN D14, V bounded by
+/// `volume_cap`, m², see `grid.max_point_volume`), then the point checked;
+/// returns the lowest-index points with a non-finite variable and outside
+/// the grid (the same whatever the number of threads).
+fn deform_and_check(
+    p: &mut Particles,
+    gradient: &[[f64; 4]],
+    grid: &Grid,
+    volume_cap: f64,
+) -> FirstFailures {
     let Particles {
         position,
         velocity,
@@ -139,7 +150,7 @@ fn deform_and_check(p: &mut Particles, gradient: &[[f64; 4]], grid: &Grid) -> Fi
         .fold(
             FirstFailures::default,
             |mut first, (i, (((f, v), e), l))| {
-                deform(f, v, e, l);
+                deform(f, v, e, l, volume_cap);
                 let finite = |x: &[f64]| x.iter().all(|c| c.is_finite());
                 let point_finite = finite(&stress[i])
                     && finite(&position[i])
@@ -222,8 +233,17 @@ fn check_finite_nodes(grid: &Grid, nodal: &NodalResults) -> Result<(), StepError
     Ok(())
 }
 
-/// F ← (I + L) F; V ← det(I + L) V; ε += Δε of one point (DESIGN D14).
-fn deform(def_grad: &mut [f64; 4], volume: &mut f64, strain: &mut Voigt, l: &[f64; 4]) {
+/// F ← (I + L) F; V ← min(det(I + L) V, `volume_cap`); ε += Δε of one
+/// point (DESIGN D14; the bound is `grid.max_point_volume`, infinite when
+/// unset). F keeps the whole motion: only the volume that weights the
+/// point's force, stiffness, density and nonlocal weight is bounded.
+fn deform(
+    def_grad: &mut [f64; 4],
+    volume: &mut f64,
+    strain: &mut Voigt,
+    l: &[f64; 4],
+    volume_cap: f64,
+) {
     let df = [1.0 + l[0], l[1], l[2], 1.0 + l[3]];
     let f = *def_grad;
     *def_grad = [
@@ -232,9 +252,40 @@ fn deform(def_grad: &mut [f64; 4], volume: &mut f64, strain: &mut Voigt, l: &[f6
         df[2] * f[0] + df[3] * f[2],
         df[2] * f[1] + df[3] * f[3],
     ];
-    *volume *= df[0] * df[3] - df[1] * df[2];
+    let deformed = *volume * (df[0] * df[3] - df[1] * df[2]);
+    // not `f64::min`, which would turn a NaN volume into the cap and hide it
+    *volume = if deformed > volume_cap {
+        volume_cap
+    } else {
+        deformed
+    };
     let (de, _) = strain_and_spin(l);
     for k in 0..4 {
         strain[k] += de[k];
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A uniform stretch grows V by det(I + L) until the bound, then V stays
+    /// at the bound while F keeps the whole motion; a NaN volume stays NaN
+    /// (the check after it must see it).
+    #[test]
+    fn volume_follows_the_motion_up_to_its_bound() {
+        let (mut f, mut v, mut e) = ([1.0, 0.0, 0.0, 1.0], 0.25, [0.0; 4]);
+        let stretch = [0.5, 0.0, 0.0, 0.0]; // det(I + L) = 1.5 per step
+        deform(&mut f, &mut v, &mut e, &stretch, 1.0);
+        assert!((v - 0.375).abs() < 1e-15, "unbounded step: V = {v}");
+        for _ in 0..4 {
+            deform(&mut f, &mut v, &mut e, &stretch, 1.0);
+        }
+        assert_eq!(v, 1.0, "V must stop at the bound");
+        let det = f[0] * f[3] - f[1] * f[2];
+        assert!((det - 1.5f64.powi(5)).abs() < 1e-12, "det F = {det}");
+        let mut nan = f64::NAN;
+        deform(&mut f, &mut nan, &mut e, &stretch, 1.0);
+        assert!(nan.is_nan(), "a NaN volume became {nan}");
     }
 }

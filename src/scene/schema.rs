@@ -199,6 +199,17 @@ pub struct GridSpec {
     /// plastic flow; both integrators).
     #[serde(default)]
     pub volumetric: VolumetricTreatment,
+    /// Largest volume a material point may take, in cell areas h² (× 1 m):
+    /// V ← min(det(I + L) V, max_point_volume · h²) at every commit
+    /// (DESIGN D14 with a bound). Unset: unbounded. A point fully softened
+    /// to the apex of the yield surface carries no tension, so the grid can
+    /// stretch it without limit (measured on the vertical cut at h = 0.1 m:
+    /// J = V/V₀ up to 2.6·10⁶ by t = 1 s); such a point would dominate the
+    /// volume-weighted nonlocal average (D35) and, through its density
+    /// m/V, drive the explicit stable step (D20) towards zero. One cell is
+    /// the most space a point's integration domain can stand for.
+    #[serde(default)]
+    pub max_point_volume: Option<f64>,
 }
 
 /// `[grid] volumetric`: how the volumetric strain of a material point is taken.

@@ -361,6 +361,18 @@ impl Scene {
              (the force-restoring correction uses the standard strain operator)"
                 .to_string(),
         );
+        if let Some(cap) = g.max_point_volume {
+            let initial = 1.0 / (g.points_per_cell * g.points_per_cell) as f64;
+            check(
+                e,
+                "grid.max_point_volume",
+                cap.is_finite() && cap >= initial,
+                format!(
+                    "must be a finite number of cell areas no smaller than a point's initial \
+                     volume, 1/points_per_cell² = {initial} (got {cap})"
+                ),
+            );
+        }
         if e.len() == before {
             for (c, axis) in ["x", "y"].iter().enumerate() {
                 check(
