@@ -576,12 +576,18 @@ fn dot4(a: &[f64; 4], b: &[f64; 4]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3]
 }
 
-/// One step's dissipation increment \[D43\]:
+/// One step's dissipation increment \[D43, with σ(n+1) for the trapezoid\]:
 ///
-/// ΔD = Σ_p V_p(n) · ½(σ_p(n+1) + σ_p^R(n)) · Δε^p_p,
+/// ΔD = Σ_p V_p(n) · σ_p(n+1) · Δε^p_p,
 /// Δε^p = Δε − C(σ(n+1) − σ^R(n)),
 ///
-/// with Voigt dot products (engineering shear, \[D2\]). `volumes` = V_p(n),
+/// with Voigt dot products (engineering shear, \[D2\]). DESIGN's D43
+/// weights Δε^p with ½(σ(n+1) + σ^R(n)), which can be negative: a point
+/// torn from compression to the apex in one step flows dilatantly under
+/// the compressive σ^R(n) (measured on the vertical cut: D fell to
+/// −7·10⁵ kJ/m). σ(n+1) · Δε^p is the dissipation of the backward-Euler
+/// return, Δλ σ:∂g/∂σ ≥ 0 for the HMC surfaces; the two agree to
+/// O(Δσ · Δε^p) per step. `volumes` = V_p(n),
 /// `stress_new` = σ(n+1) (constitutive stress, before double mapping \[D38\]),
 /// `stress_rot_old` = σ^R(n) (the rotated start-of-step stress), `dstrain`
 /// = the step's strain increment Δε.
@@ -618,13 +624,7 @@ pub fn dissipation_increment(
             de[2] - de_el[2],
             de[3] - de_el[3],
         ];
-        let sm = [
-            0.5 * (s1[0] + s0[0]),
-            0.5 * (s1[1] + s0[1]),
-            0.5 * (s1[2] + s0[2]),
-            0.5 * (s1[3] + s0[3]),
-        ];
-        d += volumes[p] * dot4(&sm, &dep);
+        d += volumes[p] * dot4(s1, &dep);
     }
     if !d.is_finite() {
         return Err(MetricsError::NonFinite("dissipation increment"));

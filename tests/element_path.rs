@@ -53,7 +53,7 @@ fn engine_reproduces_the_driver_and_first_yield() {
     );
     assert!(worst <= 5e-3 * peak);
     // M5 (DESIGN D43): the engine's dissipation equals the driver's path integral
-    // Σ_n V(n) ½(σ_n + σ_{n+1})·(Δε − C Δσ) with the engine's volumes, within 0.5 %.
+    // Σ_n V(n) σ_{n+1}·(Δε − C Δσ) with the engine's volumes, within 0.5 %.
     let compliance = mpm_geo::constitutive::invert4(&LinearElastic::new(20000.0, 0.2).stiffness());
     let mut dissipation = 0.0;
     for n in 0..driver.len() - 1 {
@@ -61,7 +61,7 @@ fn engine_reproduces_the_driver_and_first_yield() {
         let ds: [f64; 4] = std::array::from_fn(|k| b.stress[k] - a.stress[k]);
         let elastic = mpm_geo::constitutive::mat4_mul_vec(&compliance, &ds);
         let work: f64 = (0..4)
-            .map(|k| 0.5 * (a.stress[k] + b.stress[k]) * (b.strain[k] - a.strain[k] - elastic[k]))
+            .map(|k| b.stress[k] * (b.strain[k] - a.strain[k] - elastic[k]))
             .sum();
         dissipation += volumes[n] * work;
     }

@@ -164,8 +164,9 @@ fn smooth(
 /// stress update was given, B-bar included):
 /// - internal work Σ_p V_p(n) · ½(σ_p(n+1) + σ_p^R(n)) · Δε_p (elastic
 ///   energy stored plus dissipation);
-/// - plastic dissipation (DESIGN D43) Σ_p V_p(n) · ½(σ_p(n+1) + σ_p^R(n)) · Δε^p_p
-///   with Δε^p = Δε − C(σ(n+1) − σ^R(n)); elastic materials contribute nothing.
+/// - plastic dissipation (DESIGN D43 with σ(n+1), see
+///   [`dissipation_increment`]) Σ_p V_p(n) · σ_p(n+1) · Δε^p_p with
+///   Δε^p = Δε − C(σ(n+1) − σ^R(n)); elastic materials contribute nothing.
 ///
 /// The constitutive stresses are `stress` (the trial's). The points' work
 /// is formed in parallel into `point_work` and summed in point order (the

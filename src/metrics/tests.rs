@@ -417,13 +417,19 @@ fn bar_run(step: f64, n_load: usize, unload: f64) -> (f64, Dissipation, f64, f64
 
 #[test]
 fn energy_balance_closes_for_elastoplastic_bar() {
-    // yielding mid-step (0.7 mm/m steps, yield strain 2 mm/m), then unloading:
-    // the trapezoidal W and the trapezoidal D43 make W − D − ΔU vanish to
-    // round-off.
-    let (w, acc, du, eps_p, n, _, _) = bar_run(7e-4, 10, 6e-4);
+    // yielding mid-step (0.7 mm/m steps, yield strain 2 mm/m, σ(n) = 1.4 kPa
+    // before the step that yields, Δε^p = 0.1 mm/m in it), then unloading:
+    // the trapezoidal W and ΔU leave W − D − ΔU = −½(σy − σ(n)) Δε^p V, the
+    // part of the yielding step's flow that the backward-Euler D charges at
+    // σy and the trapezoid at ½(σ(n) + σy); every later step is at σy.
+    let (w, acc, du, eps_p, n, sy, vol) = bar_run(7e-4, 10, 6e-4);
     let bal = energy_balance(w, acc.total(), du, 0.0);
+    let transition = -0.5 * (sy - 1.4) * 1e-4 * vol;
     assert!(w > 0.0 && eps_p > 0.0);
-    assert!(bal.abs() < 1e-12 * w, "balance {bal} of W {w}");
+    assert!(
+        (bal - transition).abs() < 1e-12 * w,
+        "balance {bal}, expected {transition}, of W {w}"
+    );
     assert_eq!(acc.history().len(), n);
     // yield reached exactly at a step end: every plastic step is at σ = σy,
     // so D = σy · ε_p · V in closed form
@@ -443,4 +449,55 @@ fn clip_outliers_caps_only_the_tail() {
     assert_eq!(clipped[50], 50.0);
     assert_eq!(clipped[100], 99.0);
     assert!(clipped[101].is_nan());
+}
+
+/// The dissipation of a return mapping across the apex is not negative.
+/// A softened HMC point under compression (p = 100 kPa) is torn open by one
+/// large dilating increment: the return mapping ends near the apex, with
+/// dilatant plastic flow. The trapezoid ½(σ(n) + σ(n+1))·Δε^p of the print
+/// of D43 weights that flow with the compressive σ(n) and comes out
+/// negative (−1.05 kJ/m³ here); the backward-Euler form σ(n+1)·Δε^p,
+/// the dissipation of the closest-point return, is Δλ σ:∂g/∂σ ≥ 0.
+#[test]
+fn d43_return_across_the_apex_dissipates_a_non_negative_energy() {
+    use crate::constitutive::hmc::{Hmc, HmcParameters};
+    use crate::constitutive::{ConstitutiveModel, PointState, StrengthVariable};
+    let parameters = HmcParameters::table1();
+    let hmc = Hmc::new(parameters).unwrap();
+    let softened = PointState {
+        plastic_strain_eq: 2.0,
+        plastic_strain_eq_nonlocal: 2.0,
+        plastic_strain: [0.0; 4],
+    };
+    let before = [-100.0, -100.0, -100.0, 0.0];
+    let opening = [0.02, 0.01, 0.0, 0.004];
+    let update = hmc
+        .update(&before, &opening, &softened, StrengthVariable::Local)
+        .unwrap();
+    assert!(update.yielded);
+    let c = isotropic_compliance(parameters.youngs_modulus, parameters.poisson_ratio);
+    let d = dissipation_increment(
+        &[1.0],
+        &[update.stress],
+        &[before],
+        &[opening],
+        ComplianceSource::Uniform(&c),
+    )
+    .unwrap();
+    let trapezoid: f64 = {
+        let ds: [f64; 4] = std::array::from_fn(|k| update.stress[k] - before[k]);
+        let elastic = mat_vec(&c, &ds);
+        (0..4)
+            .map(|k| 0.5 * (before[k] + update.stress[k]) * (opening[k] - elastic[k]))
+            .sum()
+    };
+    println!(
+        "σ(n+1) = {:?}: D = {d:.4e}, trapezoid {trapezoid:.4e} kJ/m³",
+        update.stress
+    );
+    assert!(
+        trapezoid < 0.0,
+        "the case no longer tests the apex: {trapezoid}"
+    );
+    assert!(d >= 0.0, "D = {d}");
 }
