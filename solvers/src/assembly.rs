@@ -205,7 +205,7 @@ fn coupling_mask(d: usize, coupled: &impl Fn(usize, usize, usize) -> bool) -> Ve
 /// array of the rows' positions in the column fills the elements' scatter
 /// entries of that column without a search. The same pattern and map as
 /// sorting every column's candidate rows and binary-searching each entry
-/// (`tests.rs` compares the two).
+/// (the test below compares the two).
 fn column_pattern(
     n_dofs: usize,
     element_dofs: &[&[u32]],

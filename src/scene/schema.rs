@@ -205,7 +205,7 @@ pub struct GridSpec {
     /// to the apex of the yield surface carries no tension, so the grid can
     /// stretch it without limit (measured on the vertical cut at h = 0.1 m:
     /// J = V/V₀ up to 2.6·10⁶ by t = 1 s); such a point would dominate the
-    /// volume-weighted nonlocal average (D35) and, through its density
+    /// volume-weighted nonlocal average (D34) and, through its density
     /// m/V, drive the explicit stable step (D20) towards zero. One cell is
     /// the most space a point's integration domain can stand for.
     #[serde(default)]
