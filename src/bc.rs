@@ -318,6 +318,10 @@ pub struct DrivenPoints {
     pub velocity: Vec<[f64; 2]>,
     /// Names of the rigid bodies.
     pub names: Vec<String>,
+    /// Whether each point bore on soil in the last committed step
+    /// ([`DrivenPoints::bears_on_soil`]); empty before the first step (all
+    /// bear). Derived every step, so not checkpointed.
+    pub bearing: Vec<bool>,
 }
 
 /// Outward normal of the contact surface (the body's top).
@@ -481,17 +485,33 @@ impl DrivenPoints {
         [x0[0] + v[0] * t, x0[1] + v[1] * t]
     }
 
+    /// Whether a point with shape `shape` bears on soil this step: its cell
+    /// holds material points. A surface point whose cell the soil has left
+    /// (squeezed out at a footing corner) carries neither force nor
+    /// stiffness. Its nodes can still carry unknowns through the
+    /// neighbouring cells, so a force without its stiffness would leave the
+    /// tangent inconsistent: measured on the footing at h = 0.1 m, nonlocal,
+    /// where Newton diverged at δ = 0.28 m until such points were left out.
+    pub fn bears_on_soil(shape: &ShapeAt, bins: &ParticleBins) -> bool {
+        bins.cell_slot[shape.cell as usize] != NONE
+    }
+
     /// Penalty forces f_i^pen = Σ k N_i (X̄(t) − x − Σ_j N_j Δu_j) added into `force`
-    /// (DESIGN D40); `du` is the current nodal displacement increment (zeros for explicit).
+    /// (DESIGN D40) by the points that bear on soil; `du` is the current
+    /// nodal displacement increment (zeros for explicit).
     pub fn add_forces(
         &self,
         particles: &Particles,
         shapes: &[ShapeAt],
+        bins: &ParticleBins,
         du: &[[f64; 2]],
         t: f64,
         force: &mut [[f64; 2]],
     ) {
         for (k, s) in shapes.iter().enumerate() {
+            if !Self::bears_on_soil(s, bins) {
+                continue;
+            }
             let gap = self.gap(k, particles, s, du, t);
             for a in s.support() {
                 let node = s.nodes[a] as usize;
@@ -518,9 +538,8 @@ impl DrivenPoints {
 
     /// Add K_pen = Σ k N Nᵀ ⊗ I₂ (DESIGN D41) into the patch blocks of the
     /// active cells (one flat array, block `slot` at `slot · dofs²`, `dofs`
-    /// per block row). A surface
-    /// point whose cell holds no material point (its nodes carry no unknowns)
-    /// adds nothing.
+    /// per block row). A point that does not bear on soil
+    /// ([`DrivenPoints::bears_on_soil`]) adds nothing, as it adds no force.
     pub fn add_stiffness(
         &self,
         shapes: &[ShapeAt],
@@ -529,10 +548,10 @@ impl DrivenPoints {
         blocks: &mut [f64],
     ) {
         for (k, s) in shapes.iter().enumerate() {
-            let slot = bins.cell_slot[s.cell as usize];
-            if slot == NONE {
+            if !Self::bears_on_soil(s, bins) {
                 continue;
             }
+            let slot = bins.cell_slot[s.cell as usize];
             let size = dofs * dofs;
             let block = &mut blocks[slot as usize * size..(slot as usize + 1) * size];
             for a in s.support() {
@@ -548,8 +567,12 @@ impl DrivenPoints {
     }
 
     /// Move the surface points with the soil surface: x_s += Σ_i N_i(x_s) Δu_i
-    /// (tied material points move themselves).
-    pub fn advect(&mut self, shapes: &[ShapeAt], du: &[[f64; 2]]) {
+    /// (tied material points move themselves), and record which points bore
+    /// on soil in the step ([`DrivenPoints::bearing`]).
+    pub fn advect(&mut self, shapes: &[ShapeAt], bins: &ParticleBins, du: &[[f64; 2]]) {
+        self.bearing.clear();
+        self.bearing
+            .extend(shapes.iter().map(|s| Self::bears_on_soil(s, bins)));
         for (k, shape) in shapes.iter().enumerate() {
             if self.particle[k].is_none() {
                 let u = transfer::interpolate(shape, du);
@@ -563,7 +586,8 @@ impl DrivenPoints {
     /// at the committed positions and time `t`.
     pub fn force_on_soil(&self, r: usize, particles: &Particles, t: f64) -> [f64; 2] {
         let mut f = [0.0; 2];
-        for k in (0..self.len()).filter(|&k| self.rigid[k] == r) {
+        let bears = |k: usize| self.bearing.get(k).copied().unwrap_or(true);
+        for k in (0..self.len()).filter(|&k| self.rigid[k] == r && bears(k)) {
             let anchor = self.anchor(k, t);
             let x = self.current(k, particles);
             f[0] += self.stiffness[k] * (anchor[0] - x[0]);
@@ -572,11 +596,15 @@ impl DrivenPoints {
         f
     }
 
-    /// Mean displacement x − x(0) of the points tied to rigid body `r`, m.
+    /// Mean displacement x − x(0) of the points tied to rigid body `r` that
+    /// bear on soil (all of them if none does), m: a point over an emptied
+    /// cell is not pulled along and would lag.
     pub fn mean_displacement(&self, r: usize, particles: &Particles) -> [f64; 2] {
         let mut sum = [0.0; 2];
         let mut count = 0;
-        for k in (0..self.len()).filter(|&k| self.rigid[k] == r) {
+        let bears = |k: usize| self.bearing.get(k).copied().unwrap_or(true);
+        let any_bears = (0..self.len()).any(|k| self.rigid[k] == r && bears(k));
+        for k in (0..self.len()).filter(|&k| self.rigid[k] == r && (bears(k) || !any_bears)) {
             let x = self.current(k, particles);
             sum[0] += x[0] - self.position0[k][0];
             sum[1] += x[1] - self.position0[k][1];

@@ -58,3 +58,95 @@ fn top_point_contact_stiffens_the_coarse_mesh() {
         "top points {top_points} vs surface {surface}"
     );
 }
+
+/// A surface contact point whose cell the soil has left bears on nothing:
+/// it adds no penalty force, no stiffness and no share of the reported
+/// rigid force, so the tangent stays the derivative of the residual (a
+/// force without its stiffness made Newton diverge at δ = 0.28 m on the
+/// footing at h = 0.1 m). The footing scene at h = 0.5 m with the material
+/// of the first tied point's cell removed: force, stiffness and reported
+/// load come from the same points, the others.
+#[test]
+fn tied_points_over_emptied_cells_carry_neither_force_nor_stiffness() {
+    use mpm_geo::bc::DrivenPoints;
+    use mpm_geo::integrators::setup::StepSetup;
+    let mut sim = common::simulation("footing/local_h250.toml", &["grid.cell_size=0.5"]);
+    let model = &mut sim.model;
+    let first = StepSetup::new(model).unwrap();
+    let (ci, cj) = model.grid.cell_ij(first.driven_shapes[0].cell as usize);
+    let (h, origin) = (model.grid.cell_size, model.grid.origin);
+    let in_cell = |x: [f64; 2]| {
+        ((x[0] - origin[0]) / h).floor() as usize == ci
+            && ((x[1] - origin[1]) / h).floor() as usize == cj
+    };
+    let keep: Vec<bool> = model
+        .particles
+        .position
+        .iter()
+        .map(|&x| !in_cell(x))
+        .collect();
+    assert!(
+        keep.iter().any(|k| !k),
+        "no material in the first tied point's cell"
+    );
+    model.particles.retain(&keep);
+    let setup = StepSetup::new(model).unwrap();
+    let driven = &model.driven;
+    let bears: Vec<bool> = setup
+        .driven_shapes
+        .iter()
+        .map(|s| DrivenPoints::bears_on_soil(s, &setup.bins))
+        .collect();
+    assert!(
+        !bears[0] && bears.iter().filter(|&&b| b).count() >= 2,
+        "{bears:?}"
+    );
+
+    // the footing has moved 0.125 m down at t = 1 s: every gap is (0, −0.125)
+    let (t, nodes) = (1.0, model.grid.node_count());
+    let zero = vec![[0.0; 2]; nodes];
+    let mut force = vec![[0.0; 2]; nodes];
+    driven.add_forces(
+        &model.particles,
+        &setup.driven_shapes,
+        &setup.bins,
+        &zero,
+        t,
+        &mut force,
+    );
+    let expected: f64 = (0..driven.len())
+        .filter(|&k| bears[k])
+        .map(|k| {
+            driven.stiffness[k]
+                * driven.gap(k, &model.particles, &setup.driven_shapes[k], &zero, t)[1]
+        })
+        .sum();
+    let total: f64 = force.iter().map(|f| f[1]).sum();
+    assert!(
+        (total / expected - 1.0).abs() < 1e-12,
+        "force {total}, bearing points {expected}"
+    );
+
+    // Σ_ab k N_a N_b = k per direction and point
+    let dofs = mpm_geo::stiffness::patch_dofs(&model.grid);
+    let mut blocks = vec![0.0; setup.bins.active_cells.len() * dofs * dofs];
+    driven.add_stiffness(&setup.driven_shapes, &setup.bins, dofs, &mut blocks);
+    let stiffness: f64 = blocks.iter().sum();
+    let bearing_k: f64 = (0..driven.len())
+        .filter(|&k| bears[k])
+        .map(|k| driven.stiffness[k])
+        .sum();
+    assert!(
+        (stiffness / (2.0 * bearing_k) - 1.0).abs() < 1e-12,
+        "{stiffness} against {bearing_k}"
+    );
+
+    // the reported force on the soil: the same points after the step's commit
+    let mut moved = model.driven.clone();
+    moved.advect(&setup.driven_shapes, &setup.bins, &zero);
+    let reported = moved.force_on_soil(0, &model.particles, t)[1];
+    assert!(
+        (reported / expected - 1.0).abs() < 1e-12,
+        "reported {reported}, expected {expected}"
+    );
+}

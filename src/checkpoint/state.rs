@@ -372,6 +372,7 @@ impl Codec for DrivenPoints {
             stiffness: r.get()?,
             velocity: r.get()?,
             names: r.get()?,
+            bearing: Vec::new(),
         })
     }
 }

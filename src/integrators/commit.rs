@@ -80,7 +80,7 @@ pub fn commit_swapping(
         .advect(&setup.traction_shapes, nodal.increment);
     model
         .driven
-        .advect(&setup.driven_shapes, nodal.contact_motion);
+        .advect(&setup.driven_shapes, &setup.bins, nodal.contact_motion);
     copy_into(&mut model.reaction, nodal.reaction);
     copy_into(&mut model.last_increment, nodal.increment);
     model.drop_lost_points()

@@ -336,9 +336,14 @@ impl Buffers {
             if !model.driven.is_empty() {
                 self.zero.clear();
                 self.zero.resize(nodes, [0.0; 2]);
-                model
-                    .driven
-                    .add_forces(p, &setup.driven_shapes, &self.zero, t, &mut self.external);
+                model.driven.add_forces(
+                    p,
+                    &setup.driven_shapes,
+                    &setup.bins,
+                    &self.zero,
+                    t,
+                    &mut self.external,
+                );
             }
         }
         // m_i, p_i and f_i = f_ext − f_int, f_ext the body force alone

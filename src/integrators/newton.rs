@@ -287,9 +287,14 @@ impl StepSystem<'_> {
         });
         crate::stiffness::add_reached_cells_force(grid, bins, &self.background_block, du, internal);
         zeroed(penalty, grid.node_count());
-        model
-            .driven
-            .add_forces(p, &self.setup.driven_shapes, du, self.t + self.dt, penalty);
+        model.driven.add_forces(
+            p,
+            &self.setup.driven_shapes,
+            bins,
+            du,
+            self.t + self.dt,
+            penalty,
+        );
         let residual = &mut res.residual;
         zeroed(residual, grid.node_count());
         let (mut norm2, mut ext2, mut int2, mut inertia2) = (0.0, 0.0, 0.0, 0.0);
