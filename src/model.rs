@@ -82,9 +82,13 @@ pub struct Model {
     /// Work W of the external loads on the soil so far, kJ per metre run: the
     /// follower pressures (trapezoidal per step) and the rigid bodies (their
     /// force on the soil times their prescribed motion, trapezoidal per step;
-    /// the penalty springs' own energy, ½ k gap², is left out). Gravity is not
-    /// included. Energy balance (DESIGN §9, M5): W = W_int + ΔK + numerical losses.
+    /// the penalty springs' own energy, ½ k gap², is left out) and gravity
+    /// (−g Σ_p m_p Δy_p per step, with the step's g). Energy balance (DESIGN
+    /// §9, M5): W = W_int + ΔK + numerical losses.
     pub external_work: f64,
+    /// Σ_p m_p y_p of the committed points (t·m/m), from which a step's
+    /// gravity work follows; recomputed from the positions on a restore.
+    pub(crate) mass_height: f64,
     /// Work of the stresses on the strain increments so far (DESIGN D43 with the
     /// total strain increment), kJ per metre run: elastic energy stored plus
     /// plastic dissipation.
@@ -195,7 +199,7 @@ impl Model {
             });
         }
         let n_nodes = grid.node_count();
-        Ok(Model {
+        let mut model = Model {
             constraints: Constraints::from_scene(&scene, &grid),
             traction: TractionPoints::from_scene(&scene),
             compliances: materials
@@ -215,10 +219,13 @@ impl Model {
             dissipated_energy: 0.0,
             external_work: 0.0,
             internal_work: 0.0,
+            mass_height: 0.0,
             lost_points: Vec::new(),
             rigid_force: Vec::new(),
             scene,
-        })
+        };
+        model.mass_height = model.current_mass_height();
+        Ok(model)
     }
 
     /// The analysis type.
@@ -315,6 +322,22 @@ impl Model {
             crate::metrics::ComplianceSource::PerPoint(&compliance),
         )
         .unwrap_or(f64::NAN)
+    }
+
+    /// Σ_p m_p y_p over the material points, t·m per metre run.
+    pub fn current_mass_height(&self) -> f64 {
+        let p = &self.particles;
+        p.mass.iter().zip(&p.position).map(|(m, x)| m * x[1]).sum()
+    }
+
+    /// Add the work of gravity `g` (along −y) over the step that moved the
+    /// points from [`Self::mass_height`] to their present positions:
+    /// −g Σ_p m_p Δy_p, which equals Σ_i f_i^g · Δu_i of the body forces
+    /// (DESIGN D10) because a point moves by Σ_i N_ip Δu_i.
+    pub(crate) fn account_gravity_work(&mut self, g: f64) {
+        let now = self.current_mass_height();
+        self.external_work -= g * (now - self.mass_height);
+        self.mass_height = now;
     }
 
     /// Add the work of the rigid bodies on the soil over the step that began at

@@ -218,6 +218,7 @@ impl SavedState {
         model.internal_work = self.internal_work;
         model.lost_points = self.lost_points;
         model.rigid_force = self.rigid_force;
+        model.mass_height = model.current_mass_height();
         match &mut sim.integrator {
             Integrator::Implicit(implicit) => {
                 implicit.usage = self.usage;

@@ -24,6 +24,8 @@ pub struct NodalResults<'a> {
     /// Nodal motion that moves the rigid bodies' surface contact points: the
     /// one that moved the material points.
     pub contact_motion: &'a [[f64; 2]],
+    /// Gravity of the step's external force (DESIGN D10), m/s² along −y.
+    pub gravity: f64,
 }
 
 /// Commit the step: deformation and stresses at the points, the step's
@@ -75,6 +77,7 @@ pub fn commit_swapping(
         }
     }
 
+    model.account_gravity_work(nodal.gravity);
     model.external_work += model
         .traction
         .advect(&setup.traction_shapes, nodal.increment);
@@ -83,7 +86,9 @@ pub fn commit_swapping(
         .advect(&setup.driven_shapes, &setup.bins, nodal.contact_motion);
     copy_into(&mut model.reaction, nodal.reaction);
     copy_into(&mut model.last_increment, nodal.increment);
-    model.drop_lost_points()
+    let remap = model.drop_lost_points();
+    model.mass_height = model.current_mass_height();
+    remap
 }
 
 /// `to = from`, reusing the array of `to`.

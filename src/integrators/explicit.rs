@@ -238,6 +238,7 @@ impl Buffers {
                 reaction: &grid.reaction,
                 increment,
                 contact_motion,
+                gravity: model.scene.loads.gravity_at(t),
             };
             commit_swapping(model, setup, trial, converged, nodal)
         })?;

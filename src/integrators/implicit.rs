@@ -180,6 +180,7 @@ impl ImplicitIntegrator {
                 reaction: &grid.reaction,
                 increment: &grid.du,
                 contact_motion: &grid.du,
+                gravity: model.scene.loads.gravity_at(t + dt),
             };
             commit(model, setup, &grid.trial, converged, nodal)
         })?;

@@ -811,8 +811,8 @@ pub enum MonitorKind {
     KineticEnergy,
     /// Total elastic strain energy Σ ½ V_p σ_pᵀ C σ_p, kJ/m.
     StrainEnergy,
-    /// Work of the pressures and rigid bodies on the soil so far, kJ/m (gravity
-    /// not included; see `Simulation::external_work`).
+    /// Work of the pressures, rigid bodies and gravity on the soil so far,
+    /// kJ/m (see `Model::external_work`).
     ExternalWork,
     /// Work of the stresses on the strain increments so far (elastic energy
     /// stored plus dissipation), kJ/m.

@@ -181,15 +181,6 @@ impl Scene {
             }
         }
         w.extend(self.unused_key_warnings());
-        let gravity = self.loads.gravity != 0.0 || self.loads.gravity_ramp.is_some();
-        for m in &self.monitor {
-            if gravity && m.kind == MonitorKind::ExternalWork {
-                w.push(format!(
-                    "monitor {} (external_work) leaves out the work of gravity",
-                    m.name
-                ));
-            }
-        }
         let surface_contact = self
             .bc
             .rigid
