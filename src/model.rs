@@ -282,11 +282,15 @@ impl Model {
             .fold(0.0, f64::max)
     }
 
-    /// The double-mapping mode in force: `auto` means `increment` when some
-    /// material can soften (the paper's use), else `off`.
+    /// The double-mapping mode in force: `auto` means `increment` with
+    /// bilinear cells when some material can soften (the paper's use), else
+    /// `off`: GIMP has no cell-crossing error to smooth, and DESIGN decision
+    /// 27 keeps the mapping off there (it made the biaxial bands irregular,
+    /// and it adds stress without work, on which an explicit run can feed).
     pub fn double_mapping(&self) -> DoubleMapping {
+        let bilinear = self.scene.grid.shape_functions == ShapeFunctionChoice::Bilinear;
         match self.scene.smoothing.double_mapping {
-            DoubleMapping::Auto if self.materials.iter().any(|m| m.can_soften()) => {
+            DoubleMapping::Auto if bilinear && self.materials.iter().any(|m| m.can_soften()) => {
                 DoubleMapping::Increment
             }
             DoubleMapping::Auto => DoubleMapping::Off,

@@ -92,7 +92,7 @@ pub fn double_map(
     state: &[PointState],
     strength_kappa: Option<&[f64]>,
 ) -> Result<(), SolverError> {
-    // `Auto` is resolved by the caller (`Simulation::double_mapping`).
+    // `Auto` is resolved by the caller (`Model::double_mapping`).
     if matches!(mode, DoubleMapping::Off | DoubleMapping::Auto) {
         return Ok(());
     }

@@ -176,6 +176,22 @@ fn double_mapping_off_does_no_smoothing() {
     let bar = bar_implicit();
     assert_eq!(bar.json["scene"]["smoothing"]["double_mapping"], "auto");
     bar.assert_none(&["smoothing_passes", "force_restorations"]);
+    // `auto` with a softening material: on with bilinear cells (the paper's
+    // use), off with GIMP (DESIGN decision 27)
+    let auto = |shapes: &str| {
+        let shapes = format!("grid.shape_functions=\"{shapes}\"");
+        run(
+            "biaxial/local_h300.toml",
+            &[
+                "scene.steps=5",
+                "smoothing.double_mapping=\"auto\"",
+                &shapes,
+            ],
+        )
+    };
+    auto("gimp").assert_none(&["smoothing_passes"]);
+    let bilinear = auto("bilinear");
+    assert_eq!(bilinear.work("smoothing_passes"), bilinear.steps());
     // on: one pass (and restoration) per step
     let on = run(
         "biaxial/local_h300.toml",

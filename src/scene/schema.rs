@@ -107,7 +107,8 @@ fn default_kappa_tolerance() -> f64 {
 #[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct SmoothingSpec {
-    /// `auto` (on for softening materials), `off`, `increment` or `total` (DESIGN §7).
+    /// `auto` (on for softening materials with bilinear cells), `off`,
+    /// `increment` or `total` (DESIGN §7).
     #[serde(default)]
     pub double_mapping: DoubleMapping,
     /// Restore the internal forces of the unsmoothed stresses after smoothing
@@ -121,7 +122,8 @@ pub struct SmoothingSpec {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum DoubleMapping {
-    /// On for materials that can soften, off otherwise (the paper's use).
+    /// `Increment` with bilinear cells when a material can soften (the
+    /// paper's use), `Off` otherwise (GIMP: DESIGN decision 27).
     #[default]
     Auto,
     /// No smoothing.
