@@ -207,7 +207,7 @@ fn shape_function_and_contact_options_are_checked() {
 }
 
 #[test]
-fn out_of_range_over_nonlocal_factor_lost_point_policy_and_volume_bound_are_refused() {
+fn out_of_range_nonlocal_settings_lost_point_policy_and_volume_bound_are_refused() {
     let scene = common::validation("biaxial/nonlocal_h300.toml");
     let scene = scene.to_str().unwrap();
     for (set, needles) in [
@@ -216,6 +216,10 @@ fn out_of_range_over_nonlocal_factor_lost_point_policy_and_volume_bound_are_refu
             ["nonlocal.over_nonlocal", "[1, 3]"],
         ),
         ("grid.lost_points=\"drop\"", ["lost_points", "drop"]),
+        (
+            "nonlocal.weight_cache_mb=-1",
+            ["nonlocal.weight_cache_mb", "[0, 1e6]"],
+        ),
         // below a point's initial volume (1/2² of a cell), and not finite
         (
             "grid.max_point_volume=0.2",

@@ -158,6 +158,46 @@ fn local_scene_builds_no_neighbour_lists_and_does_no_averaging() {
     }
 }
 
+/// The last row of `curve.csv` of a run of `scene` with `overrides`, and its `run.json`.
+fn final_row(scene: &str, overrides: &[&str]) -> (Vec<f64>, Value) {
+    let dir = tempfile::tempdir().unwrap();
+    let outcome = run_scene(common::scene(scene, overrides), dir.path(), false).unwrap();
+    assert!(outcome.error.is_none(), "{scene}: {:?}", outcome.error);
+    let curve = std::fs::read_to_string(dir.path().join("curve.csv")).unwrap();
+    let last = curve.lines().last().unwrap();
+    let row = last.split(',').map(|v| v.parse().unwrap()).collect();
+    let json = std::fs::read_to_string(dir.path().join("run.json")).unwrap();
+    (row, serde_json::from_str(&json).unwrap())
+}
+
+#[test]
+fn nonlocal_weight_cache_changes_the_work_not_the_result() {
+    let steps = format!("scene.steps={BIAXIAL_STEPS}");
+    let (cached, cached_json) = final_row("biaxial/nonlocal_h300.toml", &[&steps]);
+    let (uncached, uncached_json) = final_row(
+        "biaxial/nonlocal_h300.toml",
+        &[&steps, "nonlocal.weight_cache_mb=0"],
+    );
+    let caches = |json: &Value| json["work"]["weight_caches"].as_u64().unwrap();
+    assert!(
+        caches(&cached_json) > 0,
+        "the default run cached no weights"
+    );
+    assert_eq!(caches(&uncached_json), 0);
+    // the same operator summed in another order: equal to round-off
+    // (measured 3.4e-14)
+    let difference = cached
+        .iter()
+        .zip(&uncached)
+        .map(|(a, b)| (a - b).abs() / a.abs().max(1e-12))
+        .fold(0.0, f64::max);
+    println!("largest relative difference of the final monitors: {difference:.1e}");
+    assert!(
+        difference <= 5e-13,
+        "cached {cached:?} against uncached {uncached:?}"
+    );
+}
+
 #[test]
 fn elastic_scene_does_no_yield_checks_or_return_mapping() {
     for bar in [bar_implicit(), bar_explicit()] {

@@ -177,6 +177,13 @@ pub struct SolverStats {
     pub fallbacks: usize,
     /// `"supernodal"`, `"simplicial"`, or `"auto"` (faer's own choice for its LU, not exposed).
     pub last_variant: Option<&'static str>,
+    /// Systems solved by GMRES with the LU factors of an earlier matrix
+    /// ([`crate::Method::LuReuse`]).
+    pub reused_factors: usize,
+    /// Total GMRES steps of [`crate::Method::LuReuse`] (those of the solves that gave up too).
+    pub gmres_iterations: usize,
+    /// Solves of [`crate::Method::LuReuse`] in which GMRES gave up and K was factorised anew.
+    pub gmres_refactorisations: usize,
 }
 
 /// Sparse direct solver (faer, sequential: `Par::Seq`) that caches the symbolic factorisation

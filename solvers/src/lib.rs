@@ -21,6 +21,7 @@ mod assembly;
 pub mod bench;
 mod direct;
 mod error;
+mod gmres;
 #[cfg(feature = "ldl")]
 mod ldl;
 mod linear;
@@ -33,6 +34,7 @@ pub use direct::{
     DirectSolver, FactorKind, Factorization, Ordering, SolverOptions, SolverPolicy, SolverStats,
 };
 pub use error::SolverError;
+pub use gmres::{gmres, GmresOutcome};
 #[cfg(feature = "ldl")]
 pub use ldl::LdlSolver;
 pub use linear::{LinearOptions, LinearSolver, Method, Used};

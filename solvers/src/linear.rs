@@ -7,6 +7,7 @@
 
 use std::time::Instant;
 
+use crate::gmres::gmres;
 use crate::pcg::{Pcg, PcgOptions};
 use crate::SparseMatrix;
 use crate::{DirectSolver, FactorKind, SolverError, SolverOptions, SolverPolicy, SolverStats};
@@ -26,7 +27,21 @@ pub enum Method {
     Pcg,
     /// sprs_ldl's LDLᵀ (feature `ldl`; symmetric K only; LU otherwise, recorded).
     Ldl,
+    /// faer's LU, whose factors then serve the following systems of the same pattern
+    /// (the next Newton iterations) as the preconditioner of GMRES ([`crate::gmres`]),
+    /// to a relative residual of [`REUSE_TOLERANCE`]; K is factorised anew when GMRES needs
+    /// more than [`REUSE_MAX_ITERATIONS`] steps or the pattern changes.
+    LuReuse,
 }
+
+/// Relative residual `‖b − K x‖/‖b‖` a GMRES solve of [`Method::LuReuse`] reaches (a fresh
+/// LU reaches ~1e-13 on the tangents of the benchmarks).
+pub const REUSE_TOLERANCE: f64 = 1e-10;
+
+/// GMRES steps of [`Method::LuReuse`] after which the factors are judged too far from K
+/// and K is factorised anew: each step costs a pair of triangular solves and a product
+/// with K, a small fraction of a numeric factorisation.
+pub const REUSE_MAX_ITERATIONS: usize = 12;
 
 impl Method {
     /// Whether the method needs a symmetric K (it is refused or falls back otherwise).
@@ -62,10 +77,14 @@ pub enum Used {
     Pcg,
     /// sprs_ldl LDLᵀ.
     Ldl,
+    /// GMRES preconditioned by the LU factors of an earlier K ([`Method::LuReuse`]).
+    LuReused,
 }
 
 enum Active {
     Direct,
+    /// [`Method::LuReuse`]: the factors of `factored` precondition GMRES on `matrix`.
+    Reused,
     Fallback,
     Pcg(Pcg),
     #[cfg(feature = "ldl")]
@@ -81,8 +100,12 @@ pub struct LinearSolver {
     #[cfg(feature = "ldl")]
     ldl: crate::ldl::LdlSolver,
     active: Option<Active>,
-    /// The matrix last factorised (PCG needs it for its products and for a late fallback).
+    /// The matrix last factorised (PCG needs it for its products and for a late fallback;
+    /// [`Method::LuReuse`]: the present K, for the products of GMRES).
     matrix: Option<SparseMatrix>,
+    /// [`Method::LuReuse`]: whether `direct` holds the LU factors of a matrix with the pattern
+    /// of this one.
+    factored: Option<SparseMatrix>,
     own: SolverStats,
     first_fallback: Option<String>,
 }
@@ -112,7 +135,7 @@ impl LinearSolver {
                 .map_err(SolverError::Unsupported)?;
         }
         let policy = match options.method {
-            Method::Lu => SolverPolicy::Lu,
+            Method::Lu | Method::LuReuse => SolverPolicy::Lu,
             _ => SolverPolicy::Auto,
         };
         Ok(Self {
@@ -130,6 +153,7 @@ impl LinearSolver {
             ldl: crate::ldl::LdlSolver::new(),
             active: None,
             matrix: None,
+            factored: None,
             own: SolverStats::default(),
             first_fallback: None,
         })
@@ -199,6 +223,57 @@ impl LinearSolver {
                 }
             }
             Method::Ldl => self.factorize_ldl(k),
+            Method::LuReuse => {
+                let reusable = self
+                    .factored
+                    .as_ref()
+                    .is_some_and(|f| f.shares_pattern_with(k));
+                if reusable {
+                    self.matrix = Some(k.clone());
+                    self.active = Some(Active::Reused);
+                    Ok(Used::LuReused)
+                } else {
+                    self.factorize_lu_for_reuse(k)
+                }
+            }
+        }
+    }
+
+    /// [`Method::LuReuse`]: factorise `k` and keep its pattern for the systems to come.
+    fn factorize_lu_for_reuse(&mut self, k: &SparseMatrix) -> Result<Used, SolverError> {
+        self.factored = None;
+        self.direct.factorize(k, false)?;
+        self.factored = Some(k.clone());
+        self.active = Some(Active::Direct);
+        self.own.factor_nnz = None;
+        Ok(Used::Lu)
+    }
+
+    /// [`Method::LuReuse`] with earlier factors: GMRES on `k`; if it needs more than
+    /// [`REUSE_MAX_ITERATIONS`] steps, `k` is factorised and solved directly.
+    fn solve_reusing(&mut self, k: &SparseMatrix, rhs: &mut [f64]) -> Result<Used, SolverError> {
+        let direct = &mut self.direct;
+        let outcome = gmres(
+            k,
+            rhs,
+            |z| direct.solve_in_place(z),
+            REUSE_TOLERANCE,
+            REUSE_MAX_ITERATIONS,
+        );
+        match outcome {
+            Ok(out) => {
+                self.own.reused_factors += 1;
+                self.own.gmres_iterations += out.iterations;
+                Ok(Used::LuReused)
+            }
+            Err(SolverError::NotConverged { iterations, .. }) => {
+                self.own.gmres_iterations += iterations;
+                self.own.gmres_refactorisations += 1;
+                self.factorize_lu_for_reuse(k)?;
+                self.direct.solve_in_place(rhs)?;
+                Ok(Used::Lu)
+            }
+            Err(e) => Err(e),
         }
     }
 
@@ -244,6 +319,12 @@ impl LinearSolver {
                     Some(FactorKind::Cholesky) => Used::Cholesky,
                     _ => Used::Lu,
                 })
+            }
+            Active::Reused => {
+                let k = self.matrix.take().ok_or(SolverError::NotFactorized)?;
+                let used = self.solve_reusing(&k, rhs);
+                self.matrix = Some(k);
+                used
             }
             Active::Pcg(pcg) => {
                 let k = self.matrix.as_ref().ok_or(SolverError::NotFactorized)?;
@@ -319,7 +400,7 @@ impl LinearSolver {
             },
             factor_nnz: match self.active {
                 Some(Active::Fallback) => f.factor_nnz,
-                Some(Active::Direct) => d.factor_nnz,
+                Some(Active::Direct | Active::Reused) => d.factor_nnz,
                 _ => o.factor_nnz,
             },
             last_variant: if fallback_last {
@@ -332,6 +413,9 @@ impl LinearSolver {
             last_pcg_residual: o.last_pcg_residual,
             max_pcg_residual: o.max_pcg_residual,
             fallbacks: o.fallbacks,
+            reused_factors: o.reused_factors,
+            gmres_iterations: o.gmres_iterations,
+            gmres_refactorisations: o.gmres_refactorisations,
         }
     }
 

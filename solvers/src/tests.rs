@@ -830,3 +830,87 @@ fn matrix_market_round_trip_is_exact() {
     assert!(rows.iter().all(|r| r.diff_to_lu <= 1e-8), "{rows:?}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// `lu_reuse`: the LU of one tangent solves the next (same pattern, values changed a
+/// little) by GMRES to the tolerance; a tangent far from the factored one is factorised
+/// anew after GMRES gives up; a new pattern is factorised at once.
+#[test]
+fn lu_reuse_solves_nearby_tangents_with_earlier_factors() {
+    let (asm, blocks, _) = elastic_system(30, 20);
+    let scaled = |factor: f64| {
+        let blocks: Vec<Vec<f64>> = blocks
+            .iter()
+            .map(|blk| blk.iter().map(|v| v * factor).collect())
+            .collect();
+        asm.assemble(&blocks).unwrap()
+    };
+    // a stiffness change of 2 % in every other cell: near the factored K
+    let nearby = {
+        let blocks: Vec<Vec<f64>> = blocks
+            .iter()
+            .enumerate()
+            .map(|(e, blk)| {
+                blk.iter()
+                    .map(|v| v * (1.0 + 0.02 * (e % 2) as f64))
+                    .collect()
+            })
+            .collect();
+        asm.assemble(&blocks).unwrap()
+    };
+    let mut s = LinearSolver::new(LinearOptions {
+        method: Method::LuReuse,
+        ..Default::default()
+    })
+    .unwrap();
+    let solve = |s: &mut LinearSolver, k: &SparseMatrix, seed: u64| {
+        let b = random_rhs(k.n(), seed);
+        let used = s.factorize(k, false).unwrap();
+        let mut x = b.clone();
+        let solved = s.solve_in_place(&mut x).unwrap();
+        (used, solved, rel_residual(k, &x, &b))
+    };
+    let (used, solved, r) = solve(&mut s, &scaled(1.0), 1);
+    assert_eq!((used, solved), (Used::Lu, Used::Lu));
+    assert!(r <= 1e-12, "fresh LU: residual {r:e}");
+    let (used, solved, r) = solve(&mut s, &nearby, 2);
+    assert_eq!((used, solved), (Used::LuReused, Used::LuReused));
+    // GMRES stops at 1e-10 (checked on the true residual)
+    assert!(r <= 1e-10, "reused LU: residual {r:e}");
+    let stats = s.stats();
+    assert_eq!((stats.numeric_lu, stats.reused_factors), (1, 1));
+    println!(
+        "GMRES steps with the factors of the nearby K: {}",
+        stats.gmres_iterations
+    );
+    assert!(stats.gmres_iterations <= 6, "{stats:?}");
+    // an unsymmetric perturbation as large as the stiffness itself: GMRES gives up, K is
+    // factorised
+    let far = {
+        let mut rng = Rng(5);
+        let scale = blocks[0][0];
+        let blocks: Vec<[f64; 64]> = blocks
+            .iter()
+            .map(|blk| {
+                let mut blk = *blk;
+                for a in 0..8 {
+                    for b in (a + 1)..8 {
+                        blk[8 * a + b] += scale * rng.uniform();
+                    }
+                }
+                blk
+            })
+            .collect();
+        asm.assemble(&blocks).unwrap()
+    };
+    let (used, solved, r) = solve(&mut s, &far, 3);
+    assert_eq!((used, solved), (Used::LuReused, Used::Lu));
+    assert!(r <= 1e-12, "refactorised: residual {r:e}");
+    assert_eq!(s.stats().gmres_refactorisations, 1);
+    assert_eq!(s.stats().numeric_lu, 2);
+    // another pattern: factorised without trying the old factors
+    let other = elastic_system(20, 30).2;
+    let (used, _, r) = solve(&mut s, &other, 4);
+    assert_eq!(used, Used::Lu);
+    assert!(r <= 1e-12);
+    assert_eq!(s.stats().reused_factors, 1);
+}

@@ -79,12 +79,13 @@ impl NonlocalStep {
             length_scale: spec.length_scale,
             cutoff_factor: spec.cutoff_factor,
         };
-        let averager = NonlocalAverager::new(
+        let mut averager = NonlocalAverager::new(
             &params,
             &particles.position,
             &particles.volume,
             &particles.material,
         )?;
+        averager.set_pair_budget(spec.weight_budget());
         let start: Vec<f64> = particles
             .state
             .iter()
@@ -238,6 +239,7 @@ mod tests {
             update: NonlocalUpdate::Iteration,
             tolerance: 1e-3,
             over_nonlocal,
+            weight_cache_mb: 512.0,
         }
     }
 

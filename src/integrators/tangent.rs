@@ -202,14 +202,18 @@ impl Tangent {
         let kind = profile.time(Stage::Factorisation, || {
             self.solver.factorize(matrix, symmetric)
         });
-        count_factorisations(&before, &self.solver.stats(), profile);
+        let factorised = self.solver.stats();
+        count_factorisations(&before, &factorised, profile);
         kind?;
         usage.max_unknowns = usage.max_unknowns.max(matrix.n());
         let mut correction = residual.to_vec();
-        let used = profile.time(Stage::Solve, || self.solver.solve_in_place(&mut correction))?;
+        let used = profile.time(Stage::Solve, || self.solver.solve_in_place(&mut correction));
+        // `lu_reuse` factorises in the solve when GMRES gives up
+        count_factorisations(&factorised, &self.solver.stats(), profile);
+        let used = used?;
         match used {
             Used::Cholesky => usage.cholesky += 1,
-            Used::Lu => usage.lu += 1,
+            Used::Lu | Used::LuReused => usage.lu += 1,
             Used::Pcg => usage.pcg += 1,
             Used::Ldl => usage.ldl += 1,
         }

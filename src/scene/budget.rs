@@ -224,10 +224,10 @@ impl Scene {
         let neighbour_pairs = self.nonlocal.as_ref().map(|nl| {
             let radius = nl.cutoff_factor * nl.length_scale;
             let neighbours = (std::f64::consts::PI * radius * radius * density).min(points);
-            points * neighbours
+            (points * neighbours, nl.weight_budget() as f64)
         });
-        if let Some(pairs) = neighbour_pairs {
-            let cached = (STORED_PER_PAIR * pairs).min(crate::nonlocal::DEFAULT_PAIR_BUDGET as f64);
+        if let Some((pairs, budget)) = neighbour_pairs {
+            let cached = (STORED_PER_PAIR * pairs).min(budget);
             parts.push(MemoryPart {
                 what: format!("{pairs:.3e} nonlocal neighbour pairs ({cached:.3e} cached)"),
                 bytes: cached * BYTES_PER_PAIR,
@@ -236,6 +236,7 @@ impl Scene {
                     "nonlocal.cutoff_factor".into(),
                     "grid.cell_size".into(),
                     "grid.points_per_cell".into(),
+                    "nonlocal.weight_cache_mb".into(),
                 ],
             });
         }
@@ -274,7 +275,7 @@ impl Scene {
         ResourceEstimate {
             points,
             cells,
-            neighbour_pairs,
+            neighbour_pairs: neighbour_pairs.map(|(pairs, _)| pairs),
             matrix_nonzeros,
             factor_entries,
             parts,

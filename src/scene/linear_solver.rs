@@ -21,6 +21,7 @@ impl SolverSpec {
                 LinearSolverChoice::Lu => Method::Lu,
                 LinearSolverChoice::Pcg => Method::Pcg,
                 LinearSolverChoice::Ldl => Method::Ldl,
+                LinearSolverChoice::LuReuse => Method::LuReuse,
             },
             direct: SolverOptions {
                 factorization: match self.factorization {

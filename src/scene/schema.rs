@@ -89,10 +89,29 @@ pub struct NonlocalSpec {
     /// m Σ_q W_pq Δκ_q + (1 − m) Δκ_p. The default 1 is DESIGN D35.
     #[serde(default = "default_over_nonlocal")]
     pub over_nonlocal: f64,
+    /// Memory for the weights cached within a step (D36), MiB (default 512;
+    /// 0 caches none). Pairs beyond it are evaluated on the fly, with the
+    /// same result to round-off; the run's memory estimate counts it.
+    #[serde(default = "default_weight_cache_mb")]
+    pub weight_cache_mb: f64,
 }
 
 fn default_over_nonlocal() -> f64 {
     1.0
+}
+
+fn default_weight_cache_mb() -> f64 {
+    (crate::nonlocal::DEFAULT_PAIR_BUDGET * std::mem::size_of::<f64>()) as f64 / MIB
+}
+
+/// Bytes per MiB.
+const MIB: f64 = (1u64 << 20) as f64;
+
+impl NonlocalSpec {
+    /// `weight_cache_mb` as a number of stored weights (8 bytes each).
+    pub fn weight_budget(&self) -> usize {
+        (self.weight_cache_mb * MIB / std::mem::size_of::<f64>() as f64) as usize
+    }
 }
 
 fn default_cutoff() -> f64 {
@@ -281,6 +300,9 @@ pub enum LinearSolverChoice {
     Pcg,
     /// sprs_ldl's LDLᵀ (build with `--features ldl`); symmetric scenes only.
     Ldl,
+    /// Sparse LU whose factors precondition GMRES for the next Newton iterations while the
+    /// pattern holds (refactorised when GMRES needs more than 12 steps).
+    LuReuse,
 }
 
 /// `[solver] factorization`: faer's supernodal or simplicial factorisation.

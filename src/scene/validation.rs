@@ -160,6 +160,15 @@ impl Scene {
             );
             check(
                 &mut e,
+                "nonlocal.weight_cache_mb",
+                nl.weight_cache_mb >= 0.0 && nl.weight_cache_mb <= 1.0e6,
+                format!(
+                    "must lie in [0, 1e6] MiB (got {}; 0 caches no weights)",
+                    nl.weight_cache_mb
+                ),
+            );
+            check(
+                &mut e,
                 "grid.cell_size",
                 self.grid.cell_size <= nl.length_scale,
                 format!("{} m exceeds the nonlocal length scale {} m: the averaging needs cells no larger than l_s", self.grid.cell_size, nl.length_scale),
