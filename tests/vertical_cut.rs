@@ -77,7 +77,7 @@ fn coarse_nonlocal_cut_collapses_alike_with_both_integrators() {
 
 /// The explicit twin of the coarse nonlocal cut runs to t = 1 s without
 /// its stable step collapsing: every step (but the last, cut to end at
-/// t = 1 s) at least 1/4 of the first. Measured: 0.35 with the scenes'
+/// t = 1 s) at least 1/4 of the first. Measured: 0.39 with the scenes'
 /// bound `max_point_volume = 1`, 7e-4 without it (points stretched to
 /// 5e5 cells, 166,000 steps instead of 1,600).
 #[test]
