@@ -40,6 +40,15 @@ fn run(path: &str, overrides: &[&str], out: &Path) -> Vec<Vec<f64>> {
 }
 
 /// Largest difference of two curves per column, relative to the column's largest value.
+/// `reused_factors` of a run's run.json (systems solved with earlier LU factors).
+fn reused_factors(out: &Path) -> u64 {
+    let text = std::fs::read_to_string(out.join("run.json")).unwrap();
+    let json: serde_json::Value = serde_json::from_str(&text).unwrap();
+    json["solver"]["factorisation"]["reused_factors"]
+        .as_u64()
+        .unwrap()
+}
+
 fn curve_difference(a: &[Vec<f64>], b: &[Vec<f64>]) -> f64 {
     assert_eq!(a.len(), b.len());
     let mut worst = 0.0f64;
@@ -128,12 +137,19 @@ fn every_solver_agrees_on_elastic_and_softening_systems() {
     if Method::Ldl.available() {
         variants.push(vec!["solver.linear_solver=\"ldl\""]);
     }
+    // the LU of the first system preconditions GMRES for the later ones
+    variants.push(vec!["solver.linear_solver=\"lu_reuse\""]);
     for (i, v) in variants.iter().enumerate() {
         let mut o = vec![base[0]];
         o.extend(v);
-        let curve = run(elastic, &o, &dir.path().join(format!("v{i}")));
+        let out = dir.path().join(format!("v{i}"));
+        let curve = run(elastic, &o, &out);
         let d = curve_difference(&lu, &curve);
         assert!(d <= 1e-5, "{v:?}: curve differs by {d:e}");
+        if v.contains(&"solver.linear_solver=\"lu_reuse\"") {
+            let reused = reused_factors(&out);
+            assert!(reused > 0, "lu_reuse reused no factors");
+        }
     }
     let systems = list_systems(&dir.path().join("lu/systems")).unwrap();
     assert!(!systems.is_empty());
@@ -184,6 +200,15 @@ fn every_solver_agrees_on_elastic_and_softening_systems() {
     let amd = run(soft, &o, &dir.path().join("soft_amd"));
     let d = curve_difference(&lu, &amd);
     assert!(d <= 1e-5, "softening curve differs by {d:e}");
+    let mut o = base.to_vec();
+    o.push("solver.linear_solver=\"lu_reuse\"");
+    let reuse = run(soft, &o, &dir.path().join("soft_reuse"));
+    let d = curve_difference(&lu, &reuse);
+    println!(
+        "lu_reuse on the softening biaxial: curve difference {d:.1e}, {} systems by GMRES",
+        reused_factors(&dir.path().join("soft_reuse"))
+    );
+    assert!(d <= 1e-5, "lu_reuse: softening curve differs by {d:e}");
     let systems = list_systems(&dir.path().join("soft_lu/systems")).unwrap();
     assert!(!systems.is_empty());
     for json in &systems {
