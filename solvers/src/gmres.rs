@@ -58,7 +58,7 @@ pub fn gmres(
     let mut z = vec![0.0; n];
     let mut w = vec![0.0; n];
     let mut estimate = b_norm;
-    while columns.len() < max_iterations && estimate > tolerance * b_norm {
+    while columns.len() < max_iterations && estimate > tolerance * b_norm && estimate.is_finite() {
         let j = columns.len();
         z.copy_from_slice(&basis[j]);
         precondition(&mut z)?;
@@ -104,7 +104,7 @@ pub fn gmres(
         basis.push(w.iter().map(|v| v / next).collect());
     }
     let iterations = columns.len();
-    if estimate > tolerance * b_norm {
+    if estimate.is_nan() || estimate > tolerance * b_norm {
         return Err(not_converged(iterations, estimate / b_norm));
     }
     // R y = g, then x = M⁻¹ V y
@@ -128,7 +128,8 @@ pub fn gmres(
         .sum::<f64>()
         .sqrt()
         / b_norm;
-    if residual > 10.0 * tolerance {
+    if residual.is_nan() || residual > 10.0 * tolerance {
+        // too large, or NaN (a singular R, a preconditioner gone wrong)
         return Err(not_converged(iterations, residual));
     }
     rhs.copy_from_slice(&z);
@@ -235,5 +236,25 @@ mod tests {
             ),
             "{err:?}"
         );
+    }
+
+    #[test]
+    fn a_preconditioner_that_gives_nan_is_reported_not_returned() {
+        let k = convection_diffusion(50, 1.0);
+        let b = rhs(50);
+        let mut x = b.clone();
+        let err = gmres(
+            &k,
+            &mut x,
+            |z| {
+                z.fill(f64::NAN);
+                Ok(())
+            },
+            1e-10,
+            12,
+        )
+        .unwrap_err();
+        assert!(matches!(err, SolverError::NotConverged { .. }), "{err:?}");
+        assert_eq!(x, b);
     }
 }
