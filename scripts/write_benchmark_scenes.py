@@ -9,6 +9,17 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 
+# The monitors of the energy balance W = W_int + K + losses (both families).
+WORK_MONITORS = """\
+[[monitor]]
+name = "external_work"
+kind = "external_work"
+
+[[monitor]]
+name = "internal_work"
+kind = "internal_work"
+"""
+
 FOOTING = """\
 # Rigid rough strip footing (paper §3.2, Figs. 6-8; DESIGN §8.2), {family} model{ls_note}.
 # Soil 14 m x 8 m, weightless, zero initial stress; footing B = 1.5 m centred
@@ -98,14 +109,7 @@ kind = "max_plastic_strain"
 name = "dissipation"
 kind = "dissipated_energy"
 
-[[monitor]]
-name = "external_work"
-kind = "external_work"
-
-[[monitor]]
-name = "internal_work"
-kind = "internal_work"
-
+{work_monitors}
 [[monitor]]
 name = "kinetic_energy"
 kind = "kinetic_energy"
@@ -264,14 +268,7 @@ name = "kinetic_energy"
 kind = "kinetic_energy"
 
 # energy balance W = W_int + K + losses (W includes the work of gravity)
-[[monitor]]
-name = "external_work"
-kind = "external_work"
-
-[[monitor]]
-name = "internal_work"
-kind = "internal_work"
-"""
+{work_monitors}"""
 
 CUT_NONLOCAL = """
 [nonlocal]
@@ -288,7 +285,8 @@ def main():
         for family, nonlocal_table, note in [("local", "", ""),
                                        ("nonlocal", FOOTING_NONLOCAL, ", l_s = 0.8 m")]:
             name = f"{family}_{tag}"
-            text = FOOTING.format(family=family, ls_note=note, h=h, name=name, nonlocal_table=nonlocal_table)
+            text = FOOTING.format(family=family, ls_note=note, h=h, name=name, nonlocal_table=nonlocal_table,
+                                   work_monitors=WORK_MONITORS)
             (footing / f"{name}.toml").write_text(text)
     cut = ROOT / "validation" / "vertical_cut"
     cut.mkdir(parents=True, exist_ok=True)
@@ -298,7 +296,8 @@ def main():
         for family, nonlocal_table, note in [("local", "", ""),
                                        ("nonlocal", CUT_NONLOCAL, ", l_s = 0.4 m")]:
             name = f"{family}_{tag}"
-            text = CUT.format(family=family, ls_note=note, h=h, n=n, name=name, nonlocal_table=nonlocal_table)
+            text = CUT.format(family=family, ls_note=note, h=h, n=n, name=name, nonlocal_table=nonlocal_table,
+                               work_monitors=WORK_MONITORS)
             (cut / f"{name}.toml").write_text(text)
 
 

@@ -566,6 +566,12 @@ impl DrivenPoints {
         }
     }
 
+    /// Whether point `k` bore on soil in the last committed step (every point
+    /// before the first step and after a restore).
+    fn bore(&self, k: usize) -> bool {
+        self.bearing.get(k).copied().unwrap_or(true)
+    }
+
     /// Move the surface points with the soil surface: x_s += Σ_i N_i(x_s) Δu_i
     /// (tied material points move themselves), and record which points bore
     /// on soil in the step ([`DrivenPoints::bearing`]).
@@ -586,8 +592,7 @@ impl DrivenPoints {
     /// at the committed positions and time `t`.
     pub fn force_on_soil(&self, r: usize, particles: &Particles, t: f64) -> [f64; 2] {
         let mut f = [0.0; 2];
-        let bears = |k: usize| self.bearing.get(k).copied().unwrap_or(true);
-        for k in (0..self.len()).filter(|&k| self.rigid[k] == r && bears(k)) {
+        for k in (0..self.len()).filter(|&k| self.rigid[k] == r && self.bore(k)) {
             let anchor = self.anchor(k, t);
             let x = self.current(k, particles);
             f[0] += self.stiffness[k] * (anchor[0] - x[0]);
@@ -602,9 +607,8 @@ impl DrivenPoints {
     pub fn mean_displacement(&self, r: usize, particles: &Particles) -> [f64; 2] {
         let mut sum = [0.0; 2];
         let mut count = 0;
-        let bears = |k: usize| self.bearing.get(k).copied().unwrap_or(true);
-        let any_bears = (0..self.len()).any(|k| self.rigid[k] == r && bears(k));
-        for k in (0..self.len()).filter(|&k| self.rigid[k] == r && (bears(k) || !any_bears)) {
+        let any_bears = (0..self.len()).any(|k| self.rigid[k] == r && self.bore(k));
+        for k in (0..self.len()).filter(|&k| self.rigid[k] == r && (self.bore(k) || !any_bears)) {
             let x = self.current(k, particles);
             sum[0] += x[0] - self.position0[k][0];
             sum[1] += x[1] - self.position0[k][1];

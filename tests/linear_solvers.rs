@@ -147,6 +147,7 @@ fn every_solver_agrees_on_elastic_and_softening_systems() {
         let d = curve_difference(&lu, &curve);
         assert!(d <= 1e-5, "{v:?}: curve differs by {d:e}");
         if v.contains(&"solver.linear_solver=\"lu_reuse\"") {
+            println!("lu_reuse on the platen: curve difference {d:.1e}");
             let reused = reused_factors(&out);
             assert!(reused > 0, "lu_reuse reused no factors");
         }
@@ -208,7 +209,9 @@ fn every_solver_agrees_on_elastic_and_softening_systems() {
         "lu_reuse on the softening biaxial: curve difference {d:.1e}, {} systems by GMRES",
         reused_factors(&dir.path().join("soft_reuse"))
     );
-    assert!(d <= 1e-5, "lu_reuse: softening curve differs by {d:e}");
+    // GMRES stops at 1e-10 of the residual and Newton then meets the same
+    // criteria: the curves agree far inside the Newton tolerance (2.6e-13)
+    assert!(d <= 3e-12, "lu_reuse: softening curve differs by {d:e}");
     let systems = list_systems(&dir.path().join("soft_lu/systems")).unwrap();
     assert!(!systems.is_empty());
     for json in &systems {

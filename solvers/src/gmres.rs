@@ -4,6 +4,7 @@
 //! iterations, a few Krylov steps (one product with K and one pair of triangular solves
 //! each) replace a numeric factorisation.
 
+use crate::pcg::{dot, norm, true_residual};
 use crate::{SolverError, SparseMatrix};
 
 /// The step from which [`gmres`] judges whether it will converge in time.
@@ -120,14 +121,7 @@ pub fn gmres(
         }
     }
     precondition(&mut z)?;
-    k.mul_vec(&z, &mut w);
-    let residual = rhs
-        .iter()
-        .zip(&w)
-        .map(|(b, kx)| (b - kx).powi(2))
-        .sum::<f64>()
-        .sqrt()
-        / b_norm;
+    let residual = true_residual(k, &z, rhs, b_norm);
     if residual.is_nan() || residual > 10.0 * tolerance {
         // too large, or NaN (a singular R, a preconditioner gone wrong)
         return Err(not_converged(iterations, residual));
@@ -137,14 +131,6 @@ pub fn gmres(
         iterations,
         residual,
     })
-}
-
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| x * y).sum()
-}
-
-fn norm(a: &[f64]) -> f64 {
-    dot(a, a).sqrt()
 }
 
 #[cfg(test)]
@@ -173,10 +159,7 @@ mod tests {
     }
 
     fn residual(k: &SparseMatrix, x: &[f64], b: &[f64]) -> f64 {
-        let mut kx = vec![0.0; b.len()];
-        k.mul_vec(x, &mut kx);
-        let r: f64 = b.iter().zip(&kx).map(|(b, y)| (b - y).powi(2)).sum();
-        r.sqrt() / norm(b)
+        true_residual(k, x, b, norm(b))
     }
 
     #[test]

@@ -316,15 +316,18 @@ fn ic0(k: &SparseMatrix) -> Result<Built, SolverError> {
     })
 }
 
-fn dot(a: &[f64], b: &[f64]) -> f64 {
+/// `aᵀb`.
+pub(crate) fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
 
-fn norm(v: &[f64]) -> f64 {
+/// `‖v‖₂`.
+pub(crate) fn norm(v: &[f64]) -> f64 {
     dot(v, v).sqrt()
 }
 
-fn true_residual(k: &SparseMatrix, x: &[f64], b: &[f64], norm_b: f64) -> f64 {
+/// `‖b − K x‖ / norm_b`.
+pub(crate) fn true_residual(k: &SparseMatrix, x: &[f64], b: &[f64], norm_b: f64) -> f64 {
     let mut kx = vec![0.0; b.len()];
     k.mul_vec(x, &mut kx);
     let r2: f64 = kx.iter().zip(b).map(|(a, b)| (b - a) * (b - a)).sum();
