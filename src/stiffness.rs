@@ -230,9 +230,10 @@ pub fn add_reached_cells_force(
     }
 }
 
-/// The linearisation of the Jaumann rotation (DESIGN D13) through the stress
-/// update: σ_{n+1} depends on the spin ω = ½ Σ_b (u_bx ∂yN_b − u_by ∂xN_b) via
-/// σ^R, with dσ_{n+1}/dω = D_alg C g, g = [2σxy, −2σxy, 0, σyy − σxx]
+/// The linearisation of the stress rotation (DESIGN D13, [`crate::transfer::rotate_stress`])
+/// through the stress update: σ_{n+1} depends on the spin ω = ½ Σ_b (u_bx ∂yN_b − u_by ∂xN_b)
+/// via σ^R, with dσ_{n+1}/dω = D_alg C g, g = dσ^R/dω
+/// ([`crate::transfer::rotate_stress_derivative`]; `[2σxy, −2σxy, 0, σyy − σxx]` at ω = 0)
 /// (`spin_sensitivity`). Adds V_p B_aᵀ (D_alg C g) w_bᵀ, w_b = ½[∂yN_b, −∂xN_b],
 /// to the patch block: an unsymmetric term that makes the tangent consistent
 /// for prestressed, rotating material.

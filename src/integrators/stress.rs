@@ -217,8 +217,8 @@ fn evaluate<S: Support>(
             .par_iter_mut()
             .enumerate()
             .for_each(|(p, out)| {
-                let s = &particles.stress[p];
-                let g = [2.0 * s[3], -2.0 * s[3], 0.0, s[1] - s[0]];
+                let spin = transfer::strain_and_spin(&trial.gradient[p]).1;
+                let g = transfer::rotate_stress_derivative(&particles.stress[p], spin);
                 let cg = mat4_mul_vec(&compliances[particles.material[p] as usize], &g);
                 *out = mat4_mul_vec(&trial.tangent[p], &cg);
             });
