@@ -13,7 +13,7 @@ use crate::dofs::{gather_free_into, DofMap};
 use crate::error::{Criterion, NewtonFailure, StepError};
 use crate::model::Model;
 use crate::profile::{Profile, Stage};
-use crate::scene::SolverSpec;
+use crate::scene::{PredictorChoice, SolverSpec};
 use crate::transfer::{self, NONE};
 
 /// Newmark parameters (paper eq. 2 uses γ = ½, β = ¼).
@@ -183,6 +183,26 @@ impl StepSystem<'_> {
             }
         }
         du
+    }
+
+    /// The free dofs' starting increment of Newton (`solver.predictor`): in a dynamic run
+    /// by default the nodal motion at the start of the step carried on,
+    /// Δu⁰ = Δt v_n + ½ Δt² a_n (a Taylor step, i.e. a_{n+1} = a_n); zero in a
+    /// quasi-static run or with `predictor = "zero"` (DESIGN D17).
+    pub fn predictor(&self) -> Vec<f64> {
+        let mut free = vec![0.0; self.dofs.n_free];
+        if self.newmark.is_none() || self.model.scene.solver.predictor == PredictorChoice::Zero {
+            return free;
+        }
+        let (dt, nodal) = (self.dt, &self.nodal);
+        for (d, &index) in self.dofs.index.iter().enumerate() {
+            if index != NONE {
+                let (node, c) = (d / 2, d % 2);
+                free[index as usize] =
+                    dt * nodal.velocity[node][c] + 0.5 * dt * dt * nodal.acceleration[node][c];
+            }
+        }
+        free
     }
 
     /// Stress update and residual at the increment `du` (one Newton evaluation).
@@ -536,7 +556,7 @@ pub fn solve(
     let mut scratch = ResidualScratch::default();
     // the iterate, the line search's best candidate and its spare slot
     let mut current = Candidate {
-        du: system.initial_increment(&vec![0.0; system.dofs.n_free]),
+        du: system.initial_increment(&system.predictor()),
         ..Candidate::default()
     };
     let (mut best, mut spare) = (Candidate::default(), Candidate::default());

@@ -225,6 +225,9 @@ impl Scene {
                 if s.linear_solver != defaults.linear_solver {
                     unused.push("solver.linear_solver");
                 }
+                if s.predictor != defaults.predictor {
+                    unused.push("solver.predictor");
+                }
             }
             AnalysisKind::QuasiStatic | AnalysisKind::ImplicitDynamic => {
                 if self.scene.end_time.is_some() {
@@ -240,6 +243,11 @@ impl Scene {
                     && s.newmark_gamma != defaults.newmark_gamma
                 {
                     unused.push("solver.newmark_gamma");
+                }
+                if self.scene.analysis == AnalysisKind::QuasiStatic
+                    && s.predictor != defaults.predictor
+                {
+                    unused.push("solver.predictor");
                 }
             }
         }
