@@ -7,6 +7,9 @@
 //!   step;
 //! * `new_cache_sparse` / `new_cache_dense`: constructor plus the weight cache of the field's
 //!   sources (`cache_sources`), i.e. the per-step build cost with caching;
+//! * `new_average_sparse` / `new_average_dense`: constructor plus one `average`, the
+//!   explicit step's cost (one pass evaluates each kernel once for denominators and
+//!   numerators; before, `new` plus `uncached_*`);
 //! * `average_sparse` / `average_dense`: one `average` with the cache of that field (the
 //!   per-Newton-iteration cost, [D36]), sparse = 10 % band, dense = nonzero everywhere;
 //! * `uncached_sparse` / `uncached_dense`: `average_uncached` (every nonzero source evaluated
@@ -125,6 +128,16 @@ fn bench_nonlocal(c: &mut Criterion) {
             })
         });
         for (name, field) in [("sparse", &s.sparse), ("dense", &s.dense)] {
+            // an explicit step: a fresh operator and one average (denominators and
+            // numerators in one pass); before, the cost of `new` + `uncached_{name}`
+            group.bench_function(BenchmarkId::new(format!("new_average_{name}"), n), |b| {
+                b.iter(|| {
+                    let nl = NonlocalAverager::new(&s.params, black_box(&s.pos), &s.vol, &s.grp)
+                        .unwrap();
+                    nl.average(field, &mut out).unwrap();
+                    nl
+                })
+            });
             group.bench_function(BenchmarkId::new(format!("new_cache_{name}"), n), |b| {
                 b.iter(|| {
                     let mut nl =
