@@ -203,7 +203,8 @@ impl HyperbolicMohrCoulomb {
             sin_3theta = T::cst(sin_3theta.re().clamp(-1.0, 1.0));
         }
         let base = strength.shape_y * sin_3theta + 1.0;
-        let r = strength.shape_x * base.powf(VAN_EEKELEN_EXPONENT);
+        let base_to_z = base.powf(VAN_EEKELEN_EXPONENT);
+        let r = strength.shape_x * base_to_z;
         let fd = r * r;
         let big_r = (j2 / fd + a * a).sqrt();
         let f = big_r - pressure_strength;
@@ -219,10 +220,9 @@ impl HyperbolicMohrCoulomb {
             // f_s ∂(sin3θ)/∂σ with f_s = −J² r'/(r³ R), r' = X Z Y base^{Z−1} (D31); written with
             // fewer inverse powers of J:
             // f_s ∂s3/∂σ = (3√3/2) r'/(r³ R) [∂J3/∂σ / J − (3/2) J3 [s] / J³].
-            let r_prime = strength.shape_x
-                * strength.shape_y
-                * base.powf(VAN_EEKELEN_EXPONENT - 1.0)
-                * VAN_EEKELEN_EXPONENT;
+            // base^{Z−1} as base^Z / base (base = 1 + Y sin3θ > 0 for |Y| < 1): one power
+            let r_prime =
+                strength.shape_x * strength.shape_y * (base_to_z / base) * VAN_EEKELEN_EXPONENT;
             let coef = r_prime / (fd * r * big_r) * LODE_FACTOR;
             let two_thirds_j2 = j2 * (2.0 / 3.0);
             let txy2 = txy * txy;
