@@ -338,7 +338,8 @@ pub enum OrderingChoice {
 #[serde(rename_all = "snake_case")]
 pub enum PredictorChoice {
     /// The nodal motion at the start of the step carried on: Δu⁰ = Δt v_n + ½ Δt² a_n at the
-    /// free dofs (measured: half the Newton iterations on the footing, the same curve).
+    /// free dofs (measured on the local footing, h = 0.25 m: 924 instead of 1,977 Newton
+    /// iterations, the same curve to 4e-7).
     #[default]
     Motion,
     /// Zero at the free dofs (DESIGN D17: only the prescribed increments).
