@@ -534,9 +534,9 @@ pub fn strain_and_spin(l: &[f64; 4]) -> (Voigt, f64) {
 /// D13 as written (`σxx += 2ω σxy`, `σyy −= 2ω σxy`, `σxy += ω(σyy − σxx)`) is the first-order
 /// part of this rotation, and it is not a rotation: it multiplies the in-plane deviatoric
 /// stress radius by `√(1 + 4ω²)` every step, i.e. it creates stress and hence elastic energy
-/// wherever the material spins (measured in the implicit vertical cut: the dissipation
-/// outgrew the work of the stresses during the run-out). `R σ Rᵀ` keeps every invariant, and
-/// agrees with D13 to `O(ω²)`. `σzz` is unchanged.
+/// wherever the material spins. `R σ Rᵀ` keeps every invariant, and agrees with D13 to
+/// `O(ω²)`; `σzz` is unchanged. Measured on the nonlocal implicit vertical cut (h = 0.1 m):
+/// u_A(1 s) 10.80 m with D13, 10.50 m with the rotation; the same to 0.1 % up to t = 0.3 s.
 #[inline]
 pub fn rotate_stress(stress: &Voigt, spin: f64) -> Voigt {
     let [sxx, syy, szz, sxy] = *stress;
