@@ -141,3 +141,28 @@ fn von_mises_material_loads_and_bad_keys_are_named() {
     .to_string();
     assert!(e.contains("phi"), "{e}");
 }
+
+/// `solver.predictor` defaults to `motion`, is read by implicit dynamic runs only (set in a
+/// quasi-static scene it is reported as unused, not refused), and an unknown value is refused
+/// naming the key.
+#[test]
+fn predictor_is_used_by_implicit_dynamic_runs_only() {
+    let s = Scene::from_str_with_overrides(MINIMAL, "t", &[]).unwrap();
+    assert_eq!(s.solver.predictor, PredictorChoice::Motion);
+    let unused = |analysis: &str| {
+        let overrides = [
+            format!("scene.analysis=\"{analysis}\""),
+            "solver.predictor=\"zero\"".to_string(),
+            "scene.dt=0.01".to_string(),
+        ];
+        let s = Scene::from_str_with_overrides(MINIMAL, "t", &overrides).unwrap();
+        assert_eq!(s.solver.predictor, PredictorChoice::Zero);
+        s.warnings()
+            .iter()
+            .any(|w| w.starts_with("solver.predictor is set but not used"))
+    };
+    assert!(unused("quasi_static"));
+    assert!(!unused("implicit_dynamic"));
+    let bad = Scene::from_str_with_overrides(MINIMAL, "t", &["solver.predictor=\"linear\"".into()]);
+    assert!(bad.unwrap_err().to_string().contains("predictor"));
+}
