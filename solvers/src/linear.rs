@@ -5,9 +5,11 @@
 //! the fallback is counted and described in [`LinearSolver::warnings`]: never a silent wrong
 //! answer.
 
+use std::sync::Arc;
 use std::time::Instant;
 
 use crate::gmres::gmres;
+use crate::matrix::Pattern;
 use crate::pcg::{Pcg, PcgOptions};
 use crate::SparseMatrix;
 use crate::{DirectSolver, FactorKind, SolverError, SolverOptions, SolverPolicy, SolverStats};
@@ -83,7 +85,8 @@ pub enum Used {
 
 enum Active {
     Direct,
-    /// [`Method::LuReuse`]: the factors of `factored` precondition GMRES on `matrix`.
+    /// [`Method::LuReuse`]: the factors of a matrix of the pattern `factored` precondition
+    /// GMRES on `matrix`.
     Reused,
     Fallback,
     Pcg(Pcg),
@@ -103,9 +106,8 @@ pub struct LinearSolver {
     /// The matrix last factorised (PCG needs it for its products and for a late fallback;
     /// [`Method::LuReuse`]: the present K, for the products of GMRES).
     matrix: Option<SparseMatrix>,
-    /// [`Method::LuReuse`]: whether `direct` holds the LU factors of a matrix with the pattern
-    /// of this one.
-    factored: Option<SparseMatrix>,
+    /// [`Method::LuReuse`]: the pattern of the matrix whose LU factors `direct` holds.
+    factored: Option<Arc<Pattern>>,
     own: SolverStats,
     first_fallback: Option<String>,
 }
@@ -227,7 +229,7 @@ impl LinearSolver {
                 let reusable = self
                     .factored
                     .as_ref()
-                    .is_some_and(|f| f.shares_pattern_with(k));
+                    .is_some_and(|f| Arc::ptr_eq(f, &k.pattern));
                 if reusable {
                     self.matrix = Some(k.clone());
                     self.active = Some(Active::Reused);
@@ -243,7 +245,7 @@ impl LinearSolver {
     fn factorize_lu_for_reuse(&mut self, k: &SparseMatrix) -> Result<Used, SolverError> {
         self.factored = None;
         self.direct.factorize(k, false)?;
-        self.factored = Some(k.clone());
+        self.factored = Some(Arc::clone(&k.pattern));
         self.active = Some(Active::Direct);
         self.own.factor_nnz = None;
         Ok(Used::Lu)
