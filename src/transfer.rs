@@ -179,6 +179,8 @@ pub struct ParticleBins {
     pub cell_slot: Vec<u32>,
     /// For every grid node, whether it is active.
     pub node_active: Vec<bool>,
+    /// Indices of the active nodes, increasing.
+    pub active_nodes: Vec<u32>,
 }
 
 impl ParticleBins {
@@ -264,6 +266,9 @@ impl ParticleBins {
                 }
             }
         }
+        self.active_nodes.clear();
+        self.active_nodes
+            .extend((0..grid.node_count() as u32).filter(|&n| self.node_active[n as usize]));
     }
 
     /// Particles in cell `cell`, in index order.
@@ -339,7 +344,42 @@ pub fn scatter_into<const K: usize, S: Support, F>(
 ) where
     F: Fn(usize, &S, &mut [[f64; K]]) + Sync,
 {
-    let patch = grid.patch_side().pow(2);
+    sum_cell_patches(bins, grid.patch_side().pow(2), shapes, add, cell_sums);
+    gather_cells_to_nodes(grid, bins, cell_sums, nodal);
+}
+
+/// [`scatter_into`] into a [`NodalField`]: the same values, and work in
+/// proportion to the active nodes (of this call and the one before), not to
+/// the grid.
+pub fn scatter_into_field<const K: usize, S: Support, F>(
+    grid: &Grid,
+    bins: &ParticleBins,
+    shapes: &[S],
+    add: F,
+    cell_sums: &mut Vec<[f64; K]>,
+    nodal: &mut NodalField<[f64; K]>,
+) where
+    F: Fn(usize, &S, &mut [[f64; K]]) + Sync,
+{
+    sum_cell_patches(bins, grid.patch_side().pow(2), shapes, add, cell_sums);
+    let gather = CellGather::new(grid, bins, cell_sums);
+    nodal.refill(grid.node_count(), &bins.active_nodes, |node| {
+        gather.node(node)
+    });
+}
+
+/// The patch sums of the active cells (`patch` places each, in the order of
+/// `bins.active_cells`): every point's contributions added by `add` into
+/// its cell's patch, points in index order.
+fn sum_cell_patches<const K: usize, S: Support, F>(
+    bins: &ParticleBins,
+    patch: usize,
+    shapes: &[S],
+    add: F,
+    cell_sums: &mut Vec<[f64; K]>,
+) where
+    F: Fn(usize, &S, &mut [[f64; K]]) + Sync,
+{
     // each patch is zeroed by the task that sums it (not all in one serial pass)
     cell_sums.resize(bins.active_cells.len() * patch, [0.0; K]);
     cell_sums
@@ -353,7 +393,6 @@ pub fn scatter_into<const K: usize, S: Support, F>(
                 add(p, &shapes[p], sum);
             }
         });
-    gather_cells_to_nodes(grid, bins, cell_sums, nodal);
 }
 
 /// Add per-active-cell patch sums (`side²` places per cell, in the order of
@@ -365,38 +404,199 @@ fn gather_cells_to_nodes<const K: usize>(
     cell_sums: &[[f64; K]],
     nodal: &mut Vec<[f64; K]>,
 ) {
-    let (ncx, ncy) = (grid.cells[0] as isize, grid.cells[1] as isize);
-    let nx = grid.cells[0] + 1;
-    let side = grid.patch_side() as isize;
-    let patch = (side * side) as usize;
-    let (offset, _) = grid.patch_origin(0, 0);
-    let offset = -offset;
+    let gather = CellGather::new(grid, bins, cell_sums);
     nodal.clear();
     nodal.par_extend((0..grid.node_count()).into_par_iter().map(|node| {
-        let mut value = [0.0; K];
-        if !bins.node_active[node] {
-            return value;
+        if bins.node_active[node] {
+            gather.node(node)
+        } else {
+            [0.0; K]
         }
-        let (i, j) = ((node % nx) as isize, (node / nx) as isize);
+    }));
+}
+
+/// The sum at one node of the patch sums of the active cells that hold it.
+struct CellGather<'a, const K: usize> {
+    bins: &'a ParticleBins,
+    cell_sums: &'a [[f64; K]],
+    /// Cells along x and y.
+    cells: [isize; 2],
+    /// Nodes along x.
+    nodes_x: usize,
+    /// Nodes along a patch side.
+    side: isize,
+    /// How far a cell's patch starts before its own lower-left node.
+    offset: isize,
+}
+
+impl<'a, const K: usize> CellGather<'a, K> {
+    fn new(grid: &Grid, bins: &'a ParticleBins, cell_sums: &'a [[f64; K]]) -> Self {
+        let (offset, _) = grid.patch_origin(0, 0);
+        Self {
+            bins,
+            cell_sums,
+            cells: [grid.cells[0] as isize, grid.cells[1] as isize],
+            nodes_x: grid.cells[0] + 1,
+            side: grid.patch_side() as isize,
+            offset: -offset,
+        }
+    }
+
+    /// The value at `node`: the patches that hold it, cells in increasing
+    /// (row-major) order.
+    #[inline]
+    fn node(&self, node: usize) -> [f64; K] {
+        let [ncx, ncy] = self.cells;
+        let (side, offset) = (self.side, self.offset);
+        let patch = (side * side) as usize;
+        let (i, j) = (
+            (node % self.nodes_x) as isize,
+            (node / self.nodes_x) as isize,
+        );
+        let mut value = [0.0; K];
         // the patch of cell c starts at node c − offset and spans `side` nodes
         for cj in (j + offset - side + 1)..=(j + offset) {
             for ci in (i + offset - side + 1)..=(i + offset) {
                 if ci < 0 || cj < 0 || ci >= ncx || cj >= ncy {
                     continue;
                 }
-                let slot = bins.cell_slot[(cj * ncx + ci) as usize];
+                let slot = self.bins.cell_slot[(cj * ncx + ci) as usize];
                 if slot == NONE {
                     continue;
                 }
                 let place = ((j - (cj - offset)) * side + (i - (ci - offset))) as usize;
-                let contrib = &cell_sums[slot as usize * patch + place];
+                let contrib = &self.cell_sums[slot as usize * patch + place];
                 for k in 0..K {
                     value[k] += contrib[k];
                 }
             }
         }
         value
-    }));
+    }
+}
+
+/// Nodes handed to one rayon task at least, in the passes over nodes.
+pub const NODES_PER_TASK: usize = 512;
+
+/// The zero of a nodal value (the value of a node no point reaches).
+pub trait NodalValue: Copy + Send + Sync {
+    /// Zero.
+    const ZERO: Self;
+}
+
+impl NodalValue for f64 {
+    const ZERO: Self = 0.0;
+}
+
+impl<const K: usize> NodalValue for [f64; K] {
+    const ZERO: Self = [0.0; K];
+}
+
+/// One value per grid node, zero ([`NodalValue::ZERO`]) except at the nodes of its
+/// last refill. A refill over the active nodes touches only those and the
+/// ones of the refill before (set back to zero), so that a pass costs the
+/// active nodes, not the grid: the explicit step on a grid much larger than
+/// the body (the vertical cut's run-out room) no longer pays for the empty
+/// nodes. Read it as a slice indexed by grid node.
+#[derive(Clone, Debug)]
+pub struct NodalField<T> {
+    values: Vec<T>,
+    /// The nodes of the last refill (increasing).
+    written: Vec<u32>,
+    /// The values of the nodes being refilled, in their order.
+    staging: Vec<T>,
+}
+
+impl<T: NodalValue> NodalField<T> {
+    /// `value(node)` at the nodes `nodes` (increasing; computed in parallel)
+    /// and zero at the other nodes of a grid of `node_count` nodes.
+    pub fn refill(
+        &mut self,
+        node_count: usize,
+        nodes: &[u32],
+        value: impl Fn(usize) -> T + Sync + Send,
+    ) {
+        self.staging.clear();
+        self.staging.par_extend(
+            nodes
+                .par_iter()
+                .with_min_len(NODES_PER_TASK)
+                .map(|&node| value(node as usize)),
+        );
+        self.zero_written(node_count);
+        for (&node, &v) in nodes.iter().zip(&self.staging) {
+            self.values[node as usize] = v;
+        }
+        self.written.extend_from_slice(nodes);
+    }
+
+    /// Every value zero again (the grid has `node_count` nodes).
+    fn zero_written(&mut self, node_count: usize) {
+        if self.values.len() != node_count {
+            self.values.clear();
+            self.values.resize(node_count, T::ZERO);
+        } else {
+            for &node in &self.written {
+                self.values[node as usize] = T::ZERO;
+            }
+        }
+        self.written.clear();
+    }
+
+    /// The nodes of the last refill (increasing).
+    pub fn written(&self) -> &[u32] {
+        &self.written
+    }
+
+    /// The values, to be changed at the nodes of the last refill only (the
+    /// others must stay zero).
+    pub fn values_mut(&mut self) -> &mut [T] {
+        &mut self.values
+    }
+}
+
+impl<T> Default for NodalField<T> {
+    fn default() -> Self {
+        Self {
+            values: Vec::new(),
+            written: Vec::new(),
+            staging: Vec::new(),
+        }
+    }
+}
+
+/// [`NodalField::refill`] of several fields at once from one evaluation per
+/// node: `value(node)[k]` goes to `fields[k]`; `staging` is the buffer of the
+/// values in node order.
+pub fn refill_fields<T: NodalValue, const N: usize>(
+    fields: [&mut NodalField<T>; N],
+    node_count: usize,
+    nodes: &[u32],
+    staging: &mut Vec<[T; N]>,
+    value: impl Fn(usize) -> [T; N] + Sync + Send,
+) {
+    staging.clear();
+    staging.par_extend(
+        nodes
+            .par_iter()
+            .with_min_len(NODES_PER_TASK)
+            .map(|&node| value(node as usize)),
+    );
+    for (k, field) in fields.into_iter().enumerate() {
+        field.zero_written(node_count);
+        for (&node, v) in nodes.iter().zip(staging.iter()) {
+            field.values[node as usize] = v[k];
+        }
+        field.written.extend_from_slice(nodes);
+    }
+}
+
+impl<T> std::ops::Deref for NodalField<T> {
+    type Target = [T];
+
+    fn deref(&self) -> &[T] {
+        &self.values
+    }
 }
 
 /// Lumped nodal mass m_i = Σ_p N_ip m_p (DESIGN D10).
@@ -454,7 +654,7 @@ pub fn internal_force(
     volume: &[f64],
     stress: &[Voigt],
 ) -> Vec<[f64; 2]> {
-    let mut nodal = Vec::new();
+    let mut nodal = NodalField::default();
     internal_force_into(
         grid,
         bins,
@@ -464,12 +664,13 @@ pub fn internal_force(
         &mut Vec::new(),
         &mut nodal,
     );
-    nodal
+    nodal.to_vec()
 }
 
-/// [`internal_force`] into `nodal` (one entry per grid node), with
-/// `cell_sums` as the buffer of the patch sums ([`scatter_into`]): the same
-/// values, no allocation once both buffers have grown to the run's size.
+/// [`internal_force`] into `nodal`, with `cell_sums` as the buffer of the
+/// patch sums ([`scatter_into_field`]): the same values, no allocation once
+/// both buffers have grown to the run's size, and work in proportion to the
+/// active nodes.
 pub fn internal_force_into(
     grid: &Grid,
     bins: &ParticleBins,
@@ -477,7 +678,7 @@ pub fn internal_force_into(
     volume: &[f64],
     stress: &[Voigt],
     cell_sums: &mut Vec<[f64; 2]>,
-    nodal: &mut Vec<[f64; 2]>,
+    nodal: &mut NodalField<[f64; 2]>,
 ) {
     let add = |p: usize, s: &ShapeAt, patch: &mut [[f64; 2]]| {
         let (v, sig) = (volume[p], &stress[p]);
@@ -488,7 +689,7 @@ pub fn internal_force_into(
             patch[place][1] += v * (dy * sig[1] + dx * sig[3]);
         }
     };
-    scatter_into(grid, bins, shapes, add, cell_sums, nodal);
+    scatter_into_field(grid, bins, shapes, add, cell_sums, nodal);
 }
 
 /// Interpolate a nodal vector field at a particle: g_p = Σ_i N_ip g_i.
@@ -669,6 +870,67 @@ pub(crate) mod tests {
                 "G2P momentum {c}"
             );
         }
+    }
+
+    /// A [`NodalField`] refilled over the active nodes of clouds that move
+    /// across the grid holds, after every refill, exactly what the full-grid
+    /// scatter gives: the same sums at the active nodes (bit for bit) and zero
+    /// at every other node, those active in an earlier refill included.
+    #[test]
+    fn nodal_field_follows_a_moving_cloud() {
+        for kind in kinds() {
+            let (grid, pos, mass, vel) = setup(kind);
+            let mut field = NodalField::default();
+            let mut cell_sums = Vec::new();
+            let (mut full, mut full_cells) = (Vec::new(), Vec::new());
+            // the cloud shifted right and up, then back over part of its path
+            for shift in [[0.0, 0.0], [0.2, 0.1], [0.05, -0.03], [0.0, 0.0]] {
+                let moved: Vec<[f64; 2]> =
+                    pos.iter().map(|x| [x[0] + shift[0], x[1] + shift[1]]).collect();
+                let shapes = shapes_at(&grid, &moved).unwrap();
+                let bins = ParticleBins::new(&grid, &shapes);
+                let add = |p: usize, s: &ShapeAt, patch: &mut [[f64; 3]]| {
+                    for a in s.support() {
+                        let place = s.local[a] as usize;
+                        let nm = s.n[a] * mass[p];
+                        patch[place][0] += nm;
+                        patch[place][1] += nm * vel[p][0];
+                        patch[place][2] += nm * vel[p][1];
+                    }
+                };
+                scatter_into_field(&grid, &bins, &shapes, add, &mut cell_sums, &mut field);
+                scatter_into(&grid, &bins, &shapes, add, &mut full_cells, &mut full);
+                assert_eq!(field.len(), grid.node_count());
+                assert_eq!(field.written(), bins.active_nodes.as_slice());
+                for node in 0..grid.node_count() {
+                    let active = bins.node_active[node];
+                    assert_eq!(
+                        bins.active_nodes.binary_search(&(node as u32)).is_ok(),
+                        active
+                    );
+                    assert_eq!(field[node].map(f64::to_bits), full[node].map(f64::to_bits));
+                    if !active {
+                        assert_eq!(field[node], [0.0; 3], "node {node} after shift {shift:?}");
+                    }
+                }
+            }
+        }
+    }
+
+    /// [`refill_fields`] writes component k of every node's value to field k
+    /// and clears the nodes of the refill before, whichever field they were in.
+    #[test]
+    fn refill_fields_splits_and_clears() {
+        let mut fields = [NodalField::<f64>::default(), NodalField::default()];
+        let mut staging = Vec::new();
+        let [a, b] = &mut fields;
+        refill_fields([a, b], 10, &[1, 4, 7], &mut staging, |n| [n as f64, -(n as f64)]);
+        let [a, b] = &mut fields;
+        refill_fields([a, b], 10, &[2, 4], &mut staging, |n| [10.0 * n as f64, 0.5]);
+        let expect_a = [0.0, 0.0, 20.0, 0.0, 40.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+        let expect_b = [0.0, 0.0, 0.5, 0.0, 0.5, 0.0, 0.0, 0.0, 0.0, 0.0];
+        assert_eq!(&fields[0][..], &expect_a);
+        assert_eq!(&fields[1][..], &expect_b);
     }
 
     /// GIMP: a point near a cell edge reaches the nodes beyond it when the

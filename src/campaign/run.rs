@@ -120,30 +120,39 @@ pub fn run_campaign(
     queue.sort_by(|&a, &b| costs[a].total_cmp(&costs[b]));
     let queue = Mutex::new(queue);
     let results = Mutex::new(Vec::new());
+    let run_queued = || loop {
+        let next = queue.lock().map(|mut q| q.pop()).unwrap_or(None);
+        let Some(index) = next else {
+            break;
+        };
+        let planned = &all[index];
+        let record = execute(planned, &out.join(&planned.name), options.checkpoint_every);
+        match &record {
+            Ok(record) => eprintln!(
+                "campaign: {} finished in {:.1} s{}",
+                planned.name,
+                record.wall_seconds,
+                record
+                    .error
+                    .as_ref()
+                    .map(|e| format!(" (stopped: {e})"))
+                    .unwrap_or_default()
+            ),
+            Err(e) => eprintln!("campaign: {}: {e}", planned.name),
+        }
+        if let Ok(mut r) = results.lock() {
+            r.push((index, record));
+        }
+    };
+    let jobs = options.jobs.max(1);
+    let threads_per_job = (rayon::current_num_threads() / jobs).max(1);
     std::thread::scope(|scope| {
-        for _ in 0..options.jobs.max(1) {
-            scope.spawn(|| loop {
-                let next = queue.lock().map(|mut q| q.pop()).unwrap_or(None);
-                let Some(index) = next else {
-                    break;
-                };
-                let planned = &all[index];
-                let record = execute(planned, &out.join(&planned.name), options.checkpoint_every);
-                match &record {
-                    Ok(record) => eprintln!(
-                        "campaign: {} finished in {:.1} s{}",
-                        planned.name,
-                        record.wall_seconds,
-                        record
-                            .error
-                            .as_ref()
-                            .map(|e| format!(" (stopped: {e})"))
-                            .unwrap_or_default()
-                    ),
-                    Err(e) => eprintln!("campaign: {}: {e}", planned.name),
-                }
-                if let Ok(mut r) = results.lock() {
-                    r.push((index, record));
+        for _ in 0..jobs {
+            scope.spawn(|| {
+                // each job's parallel loops in a pool of its own, this thread one of its workers
+                match job_pool(threads_per_job) {
+                    Some(pool) => pool.install(run_queued),
+                    None => run_queued(),
                 }
             });
         }
@@ -378,4 +387,18 @@ fn gather(planned: &Planned, record: RunRecord, out: &Path) -> Result<CampaignRu
         _ => None,
     };
     Ok(run)
+}
+
+/// A thread pool of `threads` workers for one campaign job, the calling
+/// thread one of them: the job's parallel loops start on its own thread
+/// instead of handing each loop to a worker and waiting, and two jobs do not
+/// queue for the workers of one shared pool (measured: with
+/// `RAYON_NUM_THREADS=1` and `--jobs 2` both jobs shared one worker).
+/// `None` if the pool cannot be built (the job then uses the global pool).
+pub fn job_pool(threads: usize) -> Option<rayon::ThreadPool> {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .use_current_thread()
+        .build()
+        .ok()
 }

@@ -26,6 +26,9 @@ pub struct NodalResults<'a> {
     pub contact_motion: &'a [[f64; 2]],
     /// Gravity of the step's external force (DESIGN D10), m/s² along −y.
     pub gravity: f64,
+    /// The only nodes where `reaction` and `increment` can be other than
+    /// zero (increasing), when the integrator knows them; `None`: any node.
+    pub nonzero_at: Option<&'a [u32]>,
 }
 
 /// Commit the step: deformation and stresses at the points, the step's
@@ -218,16 +221,22 @@ fn volume_is_valid(volume: f64) -> bool {
     volume.is_finite() && volume > 0.0
 }
 
-/// The nodal results the model keeps must be finite.
+/// The nodal results the model keeps must be finite (checked at the nodes
+/// where they can be other than zero).
 fn check_finite_nodes(grid: &Grid, nodal: &NodalResults) -> Result<(), StepError> {
+    let finite = |v: &[f64; 2]| v[0].is_finite() && v[1].is_finite();
     for (quantity, values) in [
         ("reaction", nodal.reaction),
         ("displacement increment", nodal.increment),
     ] {
-        if let Some(node) = values
-            .iter()
-            .position(|v| !(v[0].is_finite() && v[1].is_finite()))
-        {
+        let first_bad = match nodal.nonzero_at {
+            Some(nodes) => nodes
+                .iter()
+                .map(|&node| node as usize)
+                .find(|&node| !finite(&values[node])),
+            None => values.iter().position(|v| !finite(v)),
+        };
+        if let Some(node) = first_bad {
             return Err(StepError::NonFiniteNode {
                 node,
                 quantity,

@@ -30,7 +30,7 @@ use crate::grid::{BilinearShape, Support};
 use crate::model::{Model, PointRemap};
 use crate::profile::{Profile, Stage, Work};
 use crate::scene::{FieldError, SceneError};
-use crate::transfer;
+use crate::transfer::{self, refill_fields, NodalField};
 
 /// The explicit MUSL integrator and its time-step statistics.
 #[derive(Default)]
@@ -45,9 +45,6 @@ pub struct ExplicitIntegrator {
 /// m_i, p_i = Σ N m v (x, y), f_i^int (x, y) and the body force's y
 /// component Σ N m (−g) (its x component is zero).
 type P2gSums = [f64; 6];
-
-/// Nodes handed to one rayon task at least.
-const NODES_PER_TASK: usize = 512;
 
 /// Places of the quantities in [`P2gSums`].
 const MASS: usize = 0;
@@ -73,7 +70,7 @@ struct Buffers {
     /// Patch sums of the active cells, P2G pass.
     p2g_cells: Vec<P2gSums>,
     /// Nodal sums of the P2G pass.
-    p2g: Vec<P2gSums>,
+    p2g: NodalField<P2gSums>,
     /// The grid after the momentum update.
     grid: UpdatedGrid,
     /// f_ext per node (body force, follower pressures, penalty springs).
@@ -83,9 +80,9 @@ struct Buffers {
     /// Patch sums of the active cells, re-map pass.
     remap_cells: Vec<[f64; 2]>,
     /// Σ_p N_ip m_p v_p of the updated point velocities (MUSL re-map).
-    remapped: Vec<[f64; 2]>,
+    remapped: NodalField<[f64; 2]>,
     /// Δu_i of the step.
-    increment: Vec<[f64; 2]>,
+    increment: NodalField<[f64; 2]>,
     /// Δt v_i at the nodes: moves the rigid bodies' surface points.
     contact_motion: Vec<[f64; 2]>,
     /// Trial stresses of the step.
@@ -96,21 +93,26 @@ struct Buffers {
 }
 
 /// The grid of a step: P2G results, then their momentum update (DESIGN §4
-/// steps 1–2).
+/// steps 1–2). Every field is zero at the nodes no point reaches, and the
+/// passes visit the active nodes only ([`NodalField`]).
 #[derive(Default)]
 struct UpdatedGrid {
     /// Nodal mass m_i.
-    mass: Vec<f64>,
-    /// Nodal momentum p_i, then p_i + Δt f_i (with Dirichlet conditions).
-    momentum: Vec<[f64; 2]>,
+    mass: NodalField<f64>,
+    /// Nodal momentum p_i at t.
+    momentum: NodalField<[f64; 2]>,
     /// Total nodal force f_ext + f_pen − f_int at t.
-    force: Vec<[f64; 2]>,
+    force: NodalField<[f64; 2]>,
     /// Nodal acceleration f_i / m_i (with Dirichlet conditions).
-    acceleration: Vec<[f64; 2]>,
-    /// Nodal velocity p_i / m_i after the update.
-    velocity: Vec<[f64; 2]>,
+    acceleration: NodalField<[f64; 2]>,
+    /// Nodal velocity (p_i + Δt f_i) / m_i after the update.
+    velocity: NodalField<[f64; 2]>,
     /// Support reactions at constrained dofs.
-    reaction: Vec<[f64; 2]>,
+    reaction: NodalField<[f64; 2]>,
+    /// Per active node, p_i and f_i while they are refilled.
+    staging_p2g: Vec<[[f64; 2]; 2]>,
+    /// Per active node, a_i, v_i and the reaction while they are refilled.
+    staging_update: Vec<[[f64; 2]; 3]>,
     /// Nodes at or below this mass carry nothing (1e−12 of the largest).
     tiny_mass: f64,
 }
@@ -211,7 +213,8 @@ impl Buffers {
         });
         let dt = profile.time(Stage::TimeStep, || {
             let dt = time_step(usage, model, setup, &self.grid.mass)?;
-            self.grid.update_momentum(model, dt);
+            self.grid
+                .update_momentum(model, &setup.bins.active_nodes, dt);
             Ok::<_, StepError>(dt)
         })?;
         profile.time(Stage::G2P, || {
@@ -239,6 +242,7 @@ impl Buffers {
                 increment,
                 contact_motion,
                 gravity: model.scene.loads.gravity_at(t),
+                nonzero_at: Some(&setup.bins.active_nodes),
             };
             commit_swapping(model, setup, trial, converged, nodal)
         })?;
@@ -310,7 +314,7 @@ impl Buffers {
                 sum[BODY] += nm * -g;
             }
         };
-        transfer::scatter_into(
+        transfer::scatter_into_field(
             &model.grid,
             &setup.bins,
             shapes,
@@ -348,19 +352,17 @@ impl Buffers {
             }
         }
         // m_i, p_i and f_i = f_ext − f_int, f_ext the body force alone
-        // without devices
+        // without devices, at the active nodes
         let (sums, external) = (&self.p2g, &self.external);
+        let active = &setup.bins.active_nodes;
         let grid = &mut self.grid;
-        grid.mass.resize(nodes, 0.0);
-        grid.momentum.resize(nodes, [0.0; 2]);
-        grid.force.resize(nodes, [0.0; 2]);
-        grid.mass
-            .par_iter_mut()
-            .zip(grid.momentum.par_iter_mut())
-            .zip(grid.force.par_iter_mut())
-            .enumerate()
-            .with_min_len(NODES_PER_TASK)
-            .for_each(|(node, ((mass, momentum), force))| {
+        grid.mass.refill(nodes, active, |node| sums[node][MASS]);
+        refill_fields(
+            [&mut grid.momentum, &mut grid.force],
+            nodes,
+            active,
+            &mut grid.staging_p2g,
+            |node| {
                 let s = &sums[node];
                 let e = if devices {
                     external[node]
@@ -369,10 +371,12 @@ impl Buffers {
                 } else {
                     [0.0; 2]
                 };
-                *mass = s[MASS];
-                *momentum = [s[MOMENTUM], s[MOMENTUM + 1]];
-                *force = [e[0] - s[INTERNAL], e[1] - s[INTERNAL + 1]];
-            });
+                [
+                    [s[MOMENTUM], s[MOMENTUM + 1]],
+                    [e[0] - s[INTERNAL], e[1] - s[INTERNAL + 1]],
+                ]
+            },
+        );
     }
 
     /// MUSL re-map (DESIGN §4 step 4): p_i = Σ_p N_ip m_p v_p of the updated
@@ -390,7 +394,7 @@ impl Buffers {
                 sum[1] += nm * v[1];
             }
         };
-        transfer::scatter_into(
+        transfer::scatter_into_field(
             &model.grid,
             &setup.bins,
             shapes,
@@ -400,21 +404,20 @@ impl Buffers {
         );
         let (grid, remapped) = (&self.grid, &self.remapped);
         let dof = &model.constraints.dof;
-        self.increment.clear();
-        self.increment
-            .par_extend((0..grid.mass.len()).into_par_iter().map(|node| {
-                let mut u = [0.0; 2];
-                if grid.mass[node] > grid.tiny_mass {
-                    for (c, uc) in u.iter_mut().enumerate() {
-                        *uc = match dof[2 * node + c] {
-                            DofConstraint::Fixed => 0.0,
-                            DofConstraint::Prescribed { .. } => dt * grid.velocity[node][c],
-                            DofConstraint::Free => dt * remapped[node][c] / grid.mass[node],
-                        };
-                    }
+        let nodes = (model.grid.node_count(), &setup.bins.active_nodes);
+        self.increment.refill(nodes.0, nodes.1, |node| {
+            let mut u = [0.0; 2];
+            if grid.mass[node] > grid.tiny_mass {
+                for (c, uc) in u.iter_mut().enumerate() {
+                    *uc = match dof[2 * node + c] {
+                        DofConstraint::Fixed => 0.0,
+                        DofConstraint::Prescribed { .. } => dt * grid.velocity[node][c],
+                        DofConstraint::Free => dt * remapped[node][c] / grid.mass[node],
+                    };
                 }
-                u
-            }));
+            }
+            u
+        });
     }
 
     /// Δε from the re-mapped increment and the stress update (DESIGN §4
@@ -443,37 +446,31 @@ impl Buffers {
 
 impl UpdatedGrid {
     /// p_i ← p_i + Δt f_i with local damping (D21) and Dirichlet conditions;
-    /// then the accelerations, velocities and reactions of the nodes.
-    fn update_momentum(&mut self, model: &Model, dt: f64) {
-        let n_nodes = self.mass.len();
+    /// then the accelerations, velocities and reactions of the nodes
+    /// (`active`: the active nodes, the others carry nothing).
+    fn update_momentum(&mut self, model: &Model, active: &[u32], dt: f64) {
         // a maximum: the same whatever the order
-        self.tiny_mass = 1e-12 * self.mass.par_iter().cloned().reduce(|| 0.0, f64::max);
+        let largest = active.par_iter().map(|&node| self.mass[node as usize]);
+        self.tiny_mass = 1e-12 * largest.reduce(|| 0.0, f64::max);
         let damping = model.scene.solver.damping;
-        let (tiny_mass, mass, force) = (self.tiny_mass, &self.mass, &self.force);
-        // every node's values are set below (in parallel, not zeroed first)
-        for field in [
-            &mut self.acceleration,
-            &mut self.velocity,
-            &mut self.reaction,
-        ] {
-            field.resize(n_nodes, [0.0; 2]);
-        }
-        self.momentum
-            .par_iter_mut()
-            .zip(self.acceleration.par_iter_mut())
-            .zip(self.velocity.par_iter_mut())
-            .zip(self.reaction.par_iter_mut())
-            .enumerate()
-            .with_min_len(NODES_PER_TASK)
-            .for_each(|(node, (((momentum, acceleration), velocity), reaction))| {
-                *acceleration = [0.0; 2];
-                *velocity = [0.0; 2];
-                *reaction = [0.0; 2];
+        let (tiny_mass, mass, momentum, force) =
+            (self.tiny_mass, &self.mass, &self.momentum, &self.force);
+        refill_fields(
+            [
+                &mut self.acceleration,
+                &mut self.velocity,
+                &mut self.reaction,
+            ],
+            mass.len(),
+            active,
+            &mut self.staging_update,
+            |node| {
+                let (mut acceleration, mut reaction) = ([0.0; 2], [0.0; 2]);
                 let m = mass[node];
                 if m <= tiny_mass {
-                    *momentum = [0.0; 2];
-                    return;
+                    return [[0.0; 2]; 3];
                 }
+                let mut momentum = momentum[node];
                 for c in 0..2 {
                     let v = momentum[c] / m;
                     let mut f = force[node][c];
@@ -499,8 +496,10 @@ impl UpdatedGrid {
                         }
                     }
                 }
-                *velocity = [momentum[0] / m, momentum[1] / m];
-            });
+                let velocity = [momentum[0] / m, momentum[1] / m];
+                [acceleration, velocity, reaction]
+            },
+        );
     }
 
     /// G2P of the updated grid (DESIGN §4 step 3): v_p += Δt Σ N a_i,

@@ -14,7 +14,7 @@ use crate::error::{Criterion, NewtonFailure, StepError};
 use crate::model::Model;
 use crate::profile::{Profile, Stage};
 use crate::scene::{PredictorChoice, SolverSpec};
-use crate::transfer::{self, NONE};
+use crate::transfer::{self, NodalField, NONE};
 
 /// Newmark parameters (paper eq. 2 uses γ = ½, β = ¼).
 #[derive(Clone, Copy, Debug)]
@@ -85,7 +85,7 @@ pub struct Residual {
 #[derive(Default)]
 pub struct ResidualScratch {
     /// f_int per grid node.
-    internal: Vec<[f64; 2]>,
+    internal: NodalField<[f64; 2]>,
     /// Patch sums of the internal force (`transfer::internal_force_into`).
     cell_sums: Vec<[f64; 2]>,
     /// f_pen per grid node.
@@ -305,7 +305,15 @@ impl StepSystem<'_> {
                 internal,
             )
         });
-        crate::stiffness::add_reached_cells_force(grid, bins, &self.background_block, du, internal);
+        // the nodes of the reached cells are active: written by the scatter
+        let internal_values = internal.values_mut();
+        crate::stiffness::add_reached_cells_force(
+            grid,
+            bins,
+            &self.background_block,
+            du,
+            internal_values,
+        );
         zeroed(penalty, grid.node_count());
         model.driven.add_forces(
             p,
@@ -318,10 +326,8 @@ impl StepSystem<'_> {
         let residual = &mut res.residual;
         zeroed(residual, grid.node_count());
         let (mut norm2, mut ext2, mut int2, mut inertia2) = (0.0, 0.0, 0.0, 0.0);
-        for node in 0..grid.node_count() {
-            if !bins.node_active[node] {
-                continue;
-            }
+        for &node in &bins.active_nodes {
+            let node = node as usize;
             for c in 0..2 {
                 let inertia = match &self.newmark {
                     Some(newmark) => {
