@@ -49,6 +49,8 @@ fn elastic_cases(n: usize) -> Cases {
 }
 
 fn bench(c: &mut Criterion) {
+    // the loops run on this thread, as in `mpm-geo` (mpm_geo::parallel)
+    mpm_geo::parallel::join_global_pool();
     let model = Hmc::new(HmcParameters::table1()).expect("Table 1");
     let plastic = softening_cases(&model);
     assert!(plastic.iter().all(|(s, e, st)| model

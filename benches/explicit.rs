@@ -44,6 +44,8 @@ fn block(h: f64) -> Scene {
 }
 
 fn bench_explicit(c: &mut Criterion) {
+    // the loops run on this thread, as in `mpm-geo` (mpm_geo::parallel)
+    mpm_geo::parallel::join_global_pool();
     let mut group = c.benchmark_group("explicit_step");
     group.sample_size(10);
     group.sampling_mode(SamplingMode::Flat);

@@ -105,6 +105,8 @@ fn biaxial_lattice() -> Scene {
 }
 
 fn bench_nonlocal(c: &mut Criterion) {
+    // the loops run on this thread, as in `mpm-geo` (mpm_geo::parallel)
+    mpm_geo::parallel::join_global_pool();
     let mut group = c.benchmark_group("nonlocal");
     group.sample_size(10);
     group.warm_up_time(Duration::from_millis(500));

@@ -88,6 +88,8 @@ fn cases() -> Vec<(&'static str, Simulation)> {
 }
 
 fn bench_assembly(c: &mut Criterion) {
+    // the loops run on this thread, as in `mpm-geo` (mpm_geo::parallel)
+    mpm_geo::parallel::join_global_pool();
     let mut group = c.benchmark_group("assembly");
     group.sample_size(10);
     group.sampling_mode(SamplingMode::Flat);

@@ -138,6 +138,8 @@ fn print_profile(profile: &Profile, steps: u64, kind: &str, state: &str) {
 }
 
 fn bench_step(c: &mut Criterion) {
+    // the loops run on this thread, as in `mpm-geo` (mpm_geo::parallel)
+    mpm_geo::parallel::join_global_pool();
     let scene = load();
     let twin = scene.explicit_twin().expect("explicit twin");
     let mut sim = Simulation::new(scene.clone()).expect("setup");

@@ -46,6 +46,7 @@ pub mod monitor;
 pub mod nonlocal;
 pub mod output;
 pub mod output_dir;
+pub mod parallel;
 pub mod particles;
 pub mod plot;
 pub mod point_driver;

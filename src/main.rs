@@ -172,13 +172,8 @@ fn parse_part(shard: Option<String>, collect: bool) -> Result<Part, String> {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    // This thread is one of the global pool's workers (`RAYON_NUM_THREADS` of
-    // them, as before): a parallel loop starts here instead of being handed to
-    // a worker while this thread waits. One thread: every loop runs here, with
-    // no hand-over at all. A pool already built (never, in this binary) stays.
-    let _ = rayon::ThreadPoolBuilder::new()
-        .use_current_thread()
-        .build_global();
+    // this thread runs the parallel loops itself (`mpm_geo::parallel`)
+    mpm_geo::parallel::join_global_pool();
     match cli.command {
         Command::Campaign {
             dir,

@@ -885,8 +885,10 @@ pub(crate) mod tests {
             let (mut full, mut full_cells) = (Vec::new(), Vec::new());
             // the cloud shifted right and up, then back over part of its path
             for shift in [[0.0, 0.0], [0.2, 0.1], [0.05, -0.03], [0.0, 0.0]] {
-                let moved: Vec<[f64; 2]> =
-                    pos.iter().map(|x| [x[0] + shift[0], x[1] + shift[1]]).collect();
+                let moved: Vec<[f64; 2]> = pos
+                    .iter()
+                    .map(|x| [x[0] + shift[0], x[1] + shift[1]])
+                    .collect();
                 let shapes = shapes_at(&grid, &moved).unwrap();
                 let bins = ParticleBins::new(&grid, &shapes);
                 let add = |p: usize, s: &ShapeAt, patch: &mut [[f64; 3]]| {
@@ -924,9 +926,13 @@ pub(crate) mod tests {
         let mut fields = [NodalField::<f64>::default(), NodalField::default()];
         let mut staging = Vec::new();
         let [a, b] = &mut fields;
-        refill_fields([a, b], 10, &[1, 4, 7], &mut staging, |n| [n as f64, -(n as f64)]);
+        refill_fields([a, b], 10, &[1, 4, 7], &mut staging, |n| {
+            [n as f64, -(n as f64)]
+        });
         let [a, b] = &mut fields;
-        refill_fields([a, b], 10, &[2, 4], &mut staging, |n| [10.0 * n as f64, 0.5]);
+        refill_fields([a, b], 10, &[2, 4], &mut staging, |n| {
+            [10.0 * n as f64, 0.5]
+        });
         let expect_a = [0.0, 0.0, 20.0, 0.0, 40.0, 0.0, 0.0, 0.0, 0.0, 0.0];
         let expect_b = [0.0, 0.0, 0.5, 0.0, 0.5, 0.0, 0.0, 0.0, 0.0, 0.0];
         assert_eq!(&fields[0][..], &expect_a);

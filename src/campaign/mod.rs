@@ -25,7 +25,7 @@ pub use footing::{corner_band_share, soil_inside_outline, FootingGeometry};
 pub use history::{compute_history_metrics, History, HistoryColumns, HistoryMetrics};
 pub use record::{fingerprint_text, Part, RunRecord, RECORD_FILE};
 pub use report::{compute_metrics, step_convergence, CurveColumns, RunMetrics, StepConvergence};
-pub use run::{job_pool, run_campaign, CampaignOptions};
+pub use run::{run_campaign, CampaignOptions};
 pub use spec::{Benchmark, CampaignSpec, IntegratorChoice, SPEC_FILE};
 
 use crate::run::FieldSnapshot;

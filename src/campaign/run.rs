@@ -150,7 +150,7 @@ pub fn run_campaign(
         for _ in 0..jobs {
             scope.spawn(|| {
                 // each job's parallel loops in a pool of its own, this thread one of its workers
-                match job_pool(threads_per_job) {
+                match crate::parallel::job_pool(threads_per_job) {
                     Some(pool) => pool.install(run_queued),
                     None => run_queued(),
                 }
@@ -387,18 +387,4 @@ fn gather(planned: &Planned, record: RunRecord, out: &Path) -> Result<CampaignRu
         _ => None,
     };
     Ok(run)
-}
-
-/// A thread pool of `threads` workers for one campaign job, the calling
-/// thread one of them: the job's parallel loops start on its own thread
-/// instead of handing each loop to a worker and waiting, and two jobs do not
-/// queue for the workers of one shared pool (measured: with
-/// `RAYON_NUM_THREADS=1` and `--jobs 2` both jobs shared one worker).
-/// `None` if the pool cannot be built (the job then uses the global pool).
-pub fn job_pool(threads: usize) -> Option<rayon::ThreadPool> {
-    rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .use_current_thread()
-        .build()
-        .ok()
 }

@@ -284,34 +284,3 @@ fn campaign_spec_is_read_and_checked() {
         CampaignSpec::load(&path).expect("shipped campaign.toml");
     }
 }
-
-/// A campaign job's pool has the job's thread as its worker 0: with one
-/// thread a parallel loop runs wholly on the calling thread (no hand-over),
-/// with two the calling thread takes part. (A thread can be a worker of one
-/// such pool only: each case runs on a thread of its own, as each job does.)
-#[test]
-fn job_pool_runs_loops_on_the_calling_thread() {
-    use rayon::prelude::*;
-    use std::collections::BTreeSet;
-    for threads in [1, 2] {
-        std::thread::spawn(move || {
-            let caller = format!("{:?}", std::thread::current().id());
-            let pool = job_pool(threads).expect("a pool");
-            let ran_on: BTreeSet<String> = pool.install(|| {
-                assert_eq!(rayon::current_thread_index(), Some(0));
-                assert_eq!(rayon::current_num_threads(), threads);
-                (0..10_000)
-                    .into_par_iter()
-                    .with_max_len(16)
-                    .map(|_| format!("{:?}", std::thread::current().id()))
-                    .collect()
-            });
-            assert!(ran_on.contains(&caller), "{threads} threads");
-            if threads == 1 {
-                assert_eq!(ran_on.len(), 1);
-            }
-        })
-        .join()
-        .expect("the job thread");
-    }
-}
