@@ -10,7 +10,9 @@
 //! functions are kept in compact form ([`crate::grid::BilinearShape`]), which
 //! the stages stream several times a step. The P2G sums of a step (mass,
 //! momentum, internal and body forces) are formed in one pass over the
-//! points, and each stage runs in parallel over points or nodes with its
+//! points; the node passes visit the active nodes only
+//! ([`crate::transfer::NodalField`]: a grid much larger than the body costs
+//! nothing); and each stage runs in parallel over points or nodes with its
 //! sums in the fixed order of [`crate::transfer`]: the results do not depend
 //! on the number of threads, and are those of the full shape functions.
 
@@ -404,8 +406,8 @@ impl Buffers {
         );
         let (grid, remapped) = (&self.grid, &self.remapped);
         let dof = &model.constraints.dof;
-        let nodes = (model.grid.node_count(), &setup.bins.active_nodes);
-        self.increment.refill(nodes.0, nodes.1, |node| {
+        let (node_count, active) = (model.grid.node_count(), &setup.bins.active_nodes);
+        self.increment.refill(node_count, active, |node| {
             let mut u = [0.0; 2];
             if grid.mass[node] > grid.tiny_mass {
                 for (c, uc) in u.iter_mut().enumerate() {
