@@ -5,10 +5,10 @@
 //! worker while the caller waits (a futex wake-up and a sleep per loop). An
 //! implicit step has dozens of short loops, so with one thread that hand-over
 //! cost more than the loops' work: measured on the local vertical cut at
-//! h = 0.1 m, 300 steps, `RAYON_NUM_THREADS=1`, the P2G stage took 4.1 s
-//! handed over and 0.36 s on the calling thread (wall 22.1 → 13.8 s, the same
-//! bytes out). The results never depend on the threads: every sum has a fixed
-//! order (crate::transfer).
+//! h = 0.1 m, 300 steps, `RAYON_NUM_THREADS=1`, the P2G stage took 3.1–3.4 s
+//! handed over and 0.36 s on the calling thread (wall 20.7–21.6 s → 13.8 s,
+//! the same bytes out). The results never depend on the threads: every sum
+//! has a fixed order (crate::transfer).
 
 /// Makes the calling thread worker 0 of the global pool (of
 /// `RAYON_NUM_THREADS` workers, or one per core): with one thread every loop
