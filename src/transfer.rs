@@ -311,7 +311,7 @@ pub fn scatter<const K: usize, F>(
 where
     F: Fn(usize) -> Contribution<K> + Sync,
 {
-    let mut nodal = Vec::new();
+    let mut nodal = NodalField::default();
     let add = |p: usize, s: &ShapeAt, patch: &mut [[f64; K]]| {
         let contrib = contribution(p);
         for a in s.support() {
@@ -321,36 +321,20 @@ where
             }
         }
     };
-    scatter_into(grid, bins, shapes, add, &mut Vec::new(), &mut nodal);
-    nodal
+    scatter_into_field(grid, bins, shapes, add, &mut Vec::new(), &mut nodal);
+    nodal.into_vec()
 }
 
 /// Cells handed to one rayon task at least, in the per-cell loops.
 const CELLS_PER_TASK: usize = 64;
 
-/// [`scatter`] into `nodal` (one `[f64; K]` per grid node), with `cell_sums`
-/// as the buffer of the active cells' patch sums: no allocation once both
-/// have grown to the run's size. `add(p, shape_p, patch)` adds the
-/// contributions of particle `p` to the places of its support in its cell's
-/// node patch (`patch[shape_p.place(a)]`), once per place, so that every
-/// nodal sum is formed in the order [`scatter`] documents.
-pub fn scatter_into<const K: usize, S: Support, F>(
-    grid: &Grid,
-    bins: &ParticleBins,
-    shapes: &[S],
-    add: F,
-    cell_sums: &mut Vec<[f64; K]>,
-    nodal: &mut Vec<[f64; K]>,
-) where
-    F: Fn(usize, &S, &mut [[f64; K]]) + Sync,
-{
-    sum_cell_patches(bins, grid.patch_side().pow(2), shapes, add, cell_sums);
-    gather_cells_to_nodes(grid, bins, cell_sums, nodal);
-}
-
-/// [`scatter_into`] into a [`NodalField`]: the same values, and work in
-/// proportion to the active nodes (of this call and the one before), not to
-/// the grid.
+/// [`scatter`] into `nodal`, with `cell_sums` as the buffer of the active
+/// cells' patch sums: no allocation once both have grown to the run's size,
+/// and work in proportion to the active nodes (of this call and the one
+/// before), not to the grid. `add(p, shape_p, patch)` adds the contributions
+/// of particle `p` to the places of its support in its cell's node patch
+/// (`patch[shape_p.place(a)]`), once per place, so that every nodal sum is
+/// formed in the order [`scatter`] documents.
 pub fn scatter_into_field<const K: usize, S: Support, F>(
     grid: &Grid,
     bins: &ParticleBins,
@@ -393,26 +377,6 @@ fn sum_cell_patches<const K: usize, S: Support, F>(
                 add(p, &shapes[p], sum);
             }
         });
-}
-
-/// Add per-active-cell patch sums (`side²` places per cell, in the order of
-/// `bins.active_cells`) into node values, each node summing the patches that
-/// hold it, cells in increasing (row-major) order.
-fn gather_cells_to_nodes<const K: usize>(
-    grid: &Grid,
-    bins: &ParticleBins,
-    cell_sums: &[[f64; K]],
-    nodal: &mut Vec<[f64; K]>,
-) {
-    let gather = CellGather::new(grid, bins, cell_sums);
-    nodal.clear();
-    nodal.par_extend((0..grid.node_count()).into_par_iter().map(|node| {
-        if bins.node_active[node] {
-            gather.node(node)
-        } else {
-            [0.0; K]
-        }
-    }));
 }
 
 /// The sum at one node of the patch sums of the active cells that hold it.
@@ -543,6 +507,11 @@ impl<T: NodalValue> NodalField<T> {
         self.written.clear();
     }
 
+    /// The values, one per grid node, as a vector.
+    pub fn into_vec(self) -> Vec<T> {
+        self.values
+    }
+
     /// The nodes of the last refill (increasing).
     pub fn written(&self) -> &[u32] {
         &self.written
@@ -664,7 +633,7 @@ pub fn internal_force(
         &mut Vec::new(),
         &mut nodal,
     );
-    nodal.to_vec()
+    nodal.into_vec()
 }
 
 /// [`internal_force`] into `nodal`, with `cell_sums` as the buffer of the
@@ -873,16 +842,18 @@ pub(crate) mod tests {
     }
 
     /// A [`NodalField`] refilled over the active nodes of clouds that move
-    /// across the grid holds, after every refill, exactly what the full-grid
-    /// scatter gives: the same sums at the active nodes (bit for bit) and zero
-    /// at every other node, those active in an earlier refill included.
+    /// across the grid holds, after every refill, what a field built afresh
+    /// for that cloud holds (bit for bit: nothing of the earlier refills
+    /// stays), zero at every node no point reaches, and at the others the
+    /// point-by-point sums Σ_p N_ip m_p (1, v_p) to round-off (1e-13 of the
+    /// total mass; the patch sums add in another order).
     #[test]
     fn nodal_field_follows_a_moving_cloud() {
         for kind in kinds() {
             let (grid, pos, mass, vel) = setup(kind);
+            let total_mass: f64 = mass.iter().sum();
             let mut field = NodalField::default();
             let mut cell_sums = Vec::new();
-            let (mut full, mut full_cells) = (Vec::new(), Vec::new());
             // the cloud shifted right and up, then back over part of its path
             for shift in [[0.0, 0.0], [0.2, 0.1], [0.05, -0.03], [0.0, 0.0]] {
                 let moved: Vec<[f64; 2]> = pos
@@ -901,7 +872,18 @@ pub(crate) mod tests {
                     }
                 };
                 scatter_into_field(&grid, &bins, &shapes, add, &mut cell_sums, &mut field);
-                scatter_into(&grid, &bins, &shapes, add, &mut full_cells, &mut full);
+                let mut fresh = NodalField::default();
+                scatter_into_field(&grid, &bins, &shapes, add, &mut Vec::new(), &mut fresh);
+                let mut by_point = vec![[0.0; 3]; grid.node_count()];
+                for (p, s) in shapes.iter().enumerate() {
+                    for a in s.support() {
+                        let nm = s.n[a] * mass[p];
+                        let sum = &mut by_point[s.node(a)];
+                        sum[0] += nm;
+                        sum[1] += nm * vel[p][0];
+                        sum[2] += nm * vel[p][1];
+                    }
+                }
                 assert_eq!(field.len(), grid.node_count());
                 assert_eq!(field.written(), bins.active_nodes.as_slice());
                 for node in 0..grid.node_count() {
@@ -910,9 +892,15 @@ pub(crate) mod tests {
                         bins.active_nodes.binary_search(&(node as u32)).is_ok(),
                         active
                     );
-                    assert_eq!(field[node].map(f64::to_bits), full[node].map(f64::to_bits));
+                    assert_eq!(field[node].map(f64::to_bits), fresh[node].map(f64::to_bits));
                     if !active {
                         assert_eq!(field[node], [0.0; 3], "node {node} after shift {shift:?}");
+                    }
+                    for k in 0..3 {
+                        assert!(
+                            (field[node][k] - by_point[node][k]).abs() <= 1e-13 * total_mass,
+                            "node {node}, component {k}, shift {shift:?}"
+                        );
                     }
                 }
             }
