@@ -150,3 +150,52 @@ fn tied_points_over_emptied_cells_carry_neither_force_nor_stiffness() {
         "reported {reported}, expected {expected}"
     );
 }
+
+/// Load of the footing scene at h = 0.5 m, elastic (c = 1e6 kPa), after one
+/// quasi-static step of 2.5 mm, with footprint `[lo, hi]`.
+fn elastic_footing_load(lo: f64, hi: f64) -> (f64, Vec<String>) {
+    let footprint = format!(
+        r#"bc.rigid=[{{ name = "footing", footprint = [{lo}, {hi}], velocity = [0.0, -0.0025], contact = "surface" }}]"#
+    );
+    let overrides = [
+        "grid.cell_size=0.5",
+        "materials.soil.c_ini=1e6",
+        "scene.analysis=quasi_static",
+        "scene.steps=1",
+        "output.snapshots=[]",
+        footprint.as_str(),
+    ];
+    let mut sim = common::simulation("footing/local_h250.toml", &overrides);
+    let warnings = sim.model.scene.warnings();
+    let history = common::run_history(&mut sim);
+    (history[1].1[common::column(&sim, "load")], warnings)
+}
+
+/// A footprint edge inside a cell: the surface tie holds every node of the
+/// cells it touches, so the 1.5 m footing ([6.25, 7.75] m) at h = 0.5 m acts
+/// nearly as the 2 m one ([6, 8] m, edges on grid lines; measured −0.4 %: the
+/// outer nodes are held by one penalty point each, at weight 0.29), and the
+/// scene says so; the 1 m footing of whole cells ([6.5, 7.5] m) is far softer
+/// (measured −25 %).
+#[test]
+fn footprint_edges_inside_cells_widen_the_tie_to_whole_cells() {
+    let (off_grid, warnings) = elastic_footing_load(6.25, 7.75);
+    let (wide, wide_warnings) = elastic_footing_load(6.0, 8.0);
+    let (narrow, _) = elastic_footing_load(6.5, 7.5);
+    println!("loads: [6.25, 7.75] {off_grid:.2}, [6, 8] {wide:.2}, [6.5, 7.5] {narrow:.2} kN/m");
+    assert!(
+        (off_grid / wide - 1.0).abs() < 1e-2,
+        "{off_grid} against {wide}"
+    );
+    assert!(narrow < 0.85 * wide, "{narrow} against {wide}");
+    assert!(
+        warnings
+            .iter()
+            .any(|w| w.starts_with("bc.rigid.0.footprint") && w.contains("[6.000000, 8.000000]")),
+        "{warnings:?}"
+    );
+    assert!(
+        !wide_warnings.iter().any(|w| w.contains("footprint")),
+        "{wide_warnings:?}"
+    );
+}

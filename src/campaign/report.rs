@@ -6,7 +6,7 @@ use crate::atomic_file::write_atomic;
 use std::fmt::Write as _;
 use std::path::Path;
 
-use super::footing::{corner_band_share, soil_inside_outline};
+use super::footing::{corner_band_reach, soil_inside_outline};
 use super::spec::Benchmark;
 use super::{CampaignError, CampaignRun, CurveProblem};
 use crate::metrics;
@@ -250,8 +250,8 @@ pub struct RunMetrics {
     /// Footing: soil area inside the footing's outline above its base at
     /// the last δ, m² per m ([`soil_inside_outline`]).
     pub soil_inside_footing: Option<f64>,
-    /// Footing: share of Σ V εq in the strip under the left and the right
-    /// corner ([`corner_band_share`]).
+    /// Footing: depth (in B below the base) that the deviatoric strain
+    /// reaches under the left and the right corner ([`corner_band_reach`]).
     pub corner_band: Option<[f64; 2]>,
 }
 
@@ -272,11 +272,10 @@ pub fn compute_metrics(runs: &[CampaignRun], benchmark: Benchmark) -> Vec<RunMet
                     &run.positions,
                     &run.volumes,
                 ));
-                m.corner_band = Some(corner_band_share(
+                m.corner_band = Some(corner_band_reach(
                     footing,
                     delta_end,
                     &run.positions,
-                    &run.volumes,
                     &run.eps_q,
                 ));
             }
@@ -319,14 +318,13 @@ pub fn compute_metrics(runs: &[CampaignRun], benchmark: Benchmark) -> Vec<RunMet
 }
 
 /// The footing's report section: soil inside the footing's outline and the
-/// corner-band shares per run.
+/// reach of the corner bands per run.
 fn footing_section(runs: &[CampaignRun], m: &[RunMetrics]) -> String {
-    use super::footing::{CORNER_STRIP_DEPTH, CORNER_STRIP_HALF_WIDTH};
+    use super::footing::{CORNER_BAND_STRAIN, CORNER_STRIP_HALF_WIDTH};
     let mut md = format!(
-        "\n## Footing: soil over the base and the corner band\n\nSoil inside the outline = area of soil inside the footing's footprint above its base at the last δ (the paper's 3 m footing is not modelled, so nothing keeps heaving soil out of it). Corner band = share of Σ V εq (whole soil) in a vertical strip under each footing corner, {:.2} B wide, from {} B to {} B below the base (above the main Prandtl band): the paper's \"secondary vertical band below the footing corner\" raises it.\n\n| run | soil inside outline (m²/m) | corner band left | corner band right |\n|---|---|---|---|\n",
+        "\n## Footing: soil over the base and the corner band\n\nSoil inside the outline = area of soil inside the footing's footprint above its base at the last δ (the paper's 3 m footing is not modelled, so nothing keeps heaving soil out of it). Corner-band reach = depth below the base, in units of B, of the deepest point with εq ≥ {} in a vertical strip {:.2} B wide under each footing corner: the Prandtl mechanism alone reaches about 1.1 B there (its outer log-spiral); the paper's \"secondary vertical band below the footing corner\" reaches deeper.\n\n| run | soil inside outline (m²/m) | corner-band reach left (B) | corner-band reach right (B) |\n|---|---|---|---|\n",
+        CORNER_BAND_STRAIN,
         2.0 * CORNER_STRIP_HALF_WIDTH,
-        CORNER_STRIP_DEPTH.0,
-        CORNER_STRIP_DEPTH.1
     );
     for (r, mm) in runs.iter().zip(m) {
         let _ = writeln!(
@@ -334,8 +332,8 @@ fn footing_section(runs: &[CampaignRun], m: &[RunMetrics]) -> String {
             "| {} | {} | {} | {} |",
             r.name,
             fmt_opt(mm.soil_inside_footing, 1.0, 4),
-            fmt_opt(mm.corner_band.map(|c| c[0]), 1.0, 4),
-            fmt_opt(mm.corner_band.map(|c| c[1]), 1.0, 4),
+            fmt_opt(mm.corner_band.map(|c| c[0]), 1.0, 3),
+            fmt_opt(mm.corner_band.map(|c| c[1]), 1.0, 3),
         );
     }
     md
@@ -440,7 +438,7 @@ pub(super) fn write_outputs(
     // metrics
     let m = compute_metrics(runs, benchmark);
     let metrics_path = out.join("metrics.csv");
-    let mut csv = String::from("run,family,cell_size,length_scale,status,wall_seconds,initial_slope,peak_delta,peak_load,final_load,M1_discrepancy,M2_peak_spread,M3_brittleness,M4_band_width,M4_band_width_kappa_bar,load_curve_work,M5_dissipation,external_work,internal_work,kinetic_energy,energy_loss,soil_inside_footing,corner_band_left,corner_band_right\n");
+    let mut csv = String::from("run,family,cell_size,length_scale,status,wall_seconds,initial_slope,peak_delta,peak_load,final_load,M1_discrepancy,M2_peak_spread,M3_brittleness,M4_band_width,M4_band_width_kappa_bar,load_curve_work,M5_dissipation,external_work,internal_work,kinetic_energy,energy_loss,soil_inside_footing,corner_band_reach_left,corner_band_reach_right\n");
     let mut md = format!("# Mesh-objectivity report\n\nReference of each family: its finest completed mesh (DESIGN §9). h and δ in {unit}, loads in kN/m, band width w (M4 on εq) and w_κ̄ (M4 on the nonlocal variable κ̄) in {unit}.\n\n| run | h ({unit}) | status | wall (s) | slope (kN/m/m) | peak F | δ_peak | F_end | β (M3) | M1 e_h | M2 | w ({unit}) | w/l_s | w_κ̄ ({unit}) | D (kJ/m, M5) |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     for (r, mm) in runs.iter().zip(&m) {
         let family = if r.length_scale.is_some() {
