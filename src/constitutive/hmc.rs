@@ -277,6 +277,24 @@ pub struct Hmc {
 }
 
 /// Second-order information at one (σ, κ) of the return mapping (DESIGN D30–D31).
+/// A strength with its κ-derivative (one lane) as five-lane duals whose lane 4 is κ
+/// ([`Hmc::linearise`] seeds σ in lanes 0–3).
+#[inline]
+fn kappa_lane_of_five(s: &SurfaceStrength<Dual<1>>) -> SurfaceStrength<Dual<5>> {
+    let widen = |d: Dual<1>| Dual {
+        re: d.re,
+        eps: [0.0, 0.0, 0.0, 0.0, d.eps[0]],
+    };
+    SurfaceStrength {
+        cohesion: widen(s.cohesion),
+        tan_friction: widen(s.tan_friction),
+        tensile_strength: widen(s.tensile_strength),
+        hyperbola_a: widen(s.hyperbola_a),
+        shape_x: widen(s.shape_x),
+        shape_y: widen(s.shape_y),
+    }
+}
+
 /// The strength argument κ_s as an affine function of the point's own κ, fixed
 /// for one stress update ([`StrengthVariable`]): local κ_s = κ; nonlocal
 /// κ_s = max(0, κ̄_nb + w (κ − κ_n)) with w = 1 − m the weight of the own
@@ -457,15 +475,17 @@ impl Hmc {
         if !self.softening {
             return self.fixed_strength.lift();
         }
+        // the three laws share b_post and b_res (paper eq. 4): two exponentials, not six
+        let decays = self.cohesion_law.decays(kappa);
         let cohesion = self
             .cohesion_law
-            .value(kappa)
+            .value_with_decays(decays)
             .max_by_value(T::cst(self.cohesion_min));
-        let (sin_phi, cos_phi) = self.friction_law.value(kappa).sin_cos();
+        let (sin_phi, cos_phi) = self.friction_law.value_with_decays(decays).sin_cos();
         let tensile_max = (cohesion - self.cohesion_min) * cos_phi / sin_phi;
         let tensile = self
             .tensile_law
-            .value(kappa)
+            .value_with_decays(decays)
             .min_by_value(tensile_max)
             .max_by_value(T::cst(0.0));
         SurfaceStrength::from_sin_cos(cohesion, sin_phi, cos_phi, tensile)
@@ -506,12 +526,14 @@ impl Hmc {
     fn linearise(&self, stress: &Voigt, kappa: f64, arg: StrengthArg) -> Linearisation {
         type D5 = Dual<5>;
         let sigma: [D5; 4] = std::array::from_fn(|i| D5::variable(stress[i], i));
-        let kappa = if arg.couples_kappa() {
-            arg.at_generic(D5::variable(kappa, 4))
+        // The strength depends on κ alone: one derivative lane gives its κ-lane bit for bit,
+        // without carrying the four zero σ-lanes through the softening laws.
+        let strength = if arg.couples_kappa() {
+            let with_slope = self.strength(arg.at_generic(Dual::<1>::variable(kappa, 0)));
+            kappa_lane_of_five(&with_slope)
         } else {
-            D5::cst(arg.at(kappa))
+            self.strength(arg.at(kappa)).lift()
         };
-        let strength = self.strength(kappa);
         let (f, gradient) = self.surface.value_and_gradient(&sigma, &strength);
         let m = self.flow.direction(&gradient, strength.tan_friction);
         // ‖m‖ε (D3); the tiny shift keeps the dual derivative finite if m = 0 (ω = 0 at the tip).

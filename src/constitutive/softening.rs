@@ -37,8 +37,24 @@ impl ThreeLevelSoftening {
     /// X(κ) of DESIGN D28, generic so that dX/dκ comes out of a dual evaluation.
     #[inline]
     pub fn value<T: Real>(&self, kappa: T) -> T {
-        let post_term = (kappa * (-self.rate_res)).exp() * (self.post - self.residual);
-        let peak_term = (kappa * (-self.rate_post)).exp() * (self.peak - self.post);
+        self.value_with_decays(self.decays(kappa))
+    }
+
+    /// The decay factors (e^{−b_res κ}, e^{−b_post κ}) of D28: laws with the same
+    /// rates share them.
+    #[inline]
+    pub fn decays<T: Real>(&self, kappa: T) -> (T, T) {
+        (
+            (kappa * (-self.rate_res)).exp(),
+            (kappa * (-self.rate_post)).exp(),
+        )
+    }
+
+    /// X(κ) of D28 from decay factors (e^{−b_res κ}, e^{−b_post κ}) of this law's rates.
+    #[inline]
+    pub fn value_with_decays<T: Real>(&self, (decay_res, decay_post): (T, T)) -> T {
+        let post_term = decay_res * (self.post - self.residual);
+        let peak_term = decay_post * (self.peak - self.post);
         post_term + peak_term + self.residual
     }
 
