@@ -31,7 +31,7 @@ pub enum Benchmark {
     /// Biaxial compression (paper Figs. 3–5, DESIGN §8.1): δ in mm.
     Biaxial,
     /// Rigid strip footing (paper Figs. 7–8, DESIGN §8.2): load curves plus
-    /// the soil inside the footing's outline and the corner band.
+    /// the soil inside the footing's outline and the corner-band reach.
     Footing,
     /// Vertical cut (paper Figs. 10–12, DESIGN §8.3): time histories of u_A,
     /// q_B and the run-out instead of a load curve.
