@@ -8,8 +8,9 @@
 Reads the `metrics.csv` of both campaign directories (written by `mpm-geo campaign`),
 pairs the runs by name and writes a Markdown table: for every metric of the benchmark,
 ours / the paper's. A run missing on one side (not finished yet) shows "–". The
-benchmark is told by the columns: the vertical cut's onset and run-out, the footing's
-corner-band reach, else the biaxial test. Standard library only.
+benchmark is told by the columns: the vertical cut's onset and run-out, a filled
+corner-band reach for the footing, else a load-curve campaign (the biaxial test).
+Standard library only.
 """
 import argparse
 import csv
@@ -54,8 +55,10 @@ def main():
     ours, columns = read(args.ours)
     paper, paper_columns = read(args.paper)
     columns = set(columns) | set(paper_columns)
-    table = CUT if "onset_time" in columns else FOOTING if "corner_band_reach_left" in columns \
-        else LOAD_CURVE
+    rows = list(ours.values()) + list(paper.values())
+    # every campaign writes the footing's columns; only a footing campaign fills them
+    footing = any(row.get("corner_band_reach_left") not in (None, "", "–") for row in rows)
+    table = CUT if "onset_time" in columns else FOOTING if footing else LOAD_CURVE
     print(f"Ours ({args.ours}) / the paper's literal formulation ({args.paper}).\n")
     print("| run | " + " | ".join(heading for _, heading, _ in table) + " |")
     print("|---|" + "---|" * len(table))
