@@ -32,6 +32,9 @@ FOOTING = LOAD_CURVE + [("corner_band_reach_left", "corner reach L (B)", "{:.2f}
 
 def read(directory):
     path = pathlib.Path(directory) / "metrics.csv"
+    if not path.is_file():
+        raise SystemExit(f"error: {path} does not exist: a campaign writes it once all its runs are done "
+                         f"(`mpm-geo campaign DIR --out {directory} --collect` writes it again from them)")
     with path.open(newline="") as f:
         rows = list(csv.DictReader(f))
     return {row["run"]: row for row in rows}, (rows[0].keys() if rows else [])
