@@ -152,7 +152,8 @@ fn tied_points_over_emptied_cells_carry_neither_force_nor_stiffness() {
 }
 
 /// Load of the footing scene at h = 0.5 m, elastic (c = 1e6 kPa), after one
-/// quasi-static step of 2.5 mm, with footprint `[lo, hi]`.
+/// quasi-static step (0.0025 m/s × the scene's dt = 0.02 s: only ratios of
+/// these loads are used), with footprint `[lo, hi]`, and the scene's warnings.
 fn elastic_footing_load(lo: f64, hi: f64) -> (f64, Vec<String>) {
     let footprint = format!(
         r#"bc.rigid=[{{ name = "footing", footprint = [{lo}, {hi}], velocity = [0.0, -0.0025], contact = "surface" }}]"#

@@ -276,7 +276,6 @@ pub struct Hmc {
     fixed_strength: SurfaceStrength<f64>,
 }
 
-/// Second-order information at one (σ, κ) of the return mapping (DESIGN D30–D31).
 /// A strength with its κ-derivative (one lane) as five-lane duals whose lane 4 is κ
 /// ([`Hmc::linearise`] seeds σ in lanes 0–3).
 #[inline]
@@ -353,6 +352,7 @@ impl StrengthArg {
     }
 }
 
+/// Second-order information at one (σ, κ) of the return mapping (DESIGN D30–D31).
 #[derive(Clone, Copy, Debug)]
 struct Linearisation {
     f: f64,
