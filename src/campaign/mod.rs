@@ -21,7 +21,10 @@ mod report;
 mod run;
 mod spec;
 
-pub use footing::{corner_band_reach, soil_inside_outline, FootingGeometry};
+pub use footing::{
+    corner_band_reach, soil_inside_outline, FootingGeometry, CORNER_BAND_STRAIN,
+    CORNER_STRIP_HALF_WIDTH,
+};
 pub use history::{compute_history_metrics, History, HistoryColumns, HistoryMetrics};
 pub use record::{fingerprint_text, Part, RunRecord, RECORD_FILE};
 pub use report::{compute_metrics, step_convergence, CurveColumns, RunMetrics, StepConvergence};
