@@ -71,9 +71,9 @@ pub fn soil_inside_outline(
 /// the strip |x − corner| ≤ [`CORNER_STRIP_HALF_WIDTH`] B with εq ≥
 /// [`CORNER_BAND_STRAIN`]; `[left, right]`, 0 where no point qualifies. The
 /// Prandtl mechanism alone reaches about 1.1 B under a corner (its outer
-/// log-spiral; measured 1.03–1.12 B in the nonlocal runs at δ = 0.3 m); a
+/// log-spiral; measured 1.03–1.09 B in the nonlocal runs at δ = 0.3 m); a
 /// secondary band running straight down from the corner reaches deeper (local
-/// runs: 1.09 B at h = 0.25 m, 1.40 B at h = 0.125 m).
+/// runs: 1.09, 1.40 and 1.58 B at h = 0.25, 0.125 and 0.1 m).
 pub fn corner_band_reach(
     footing: &FootingGeometry,
     delta: f64,

@@ -177,13 +177,12 @@ pub fn run_campaign(
         let record = records[i]
             .take()
             .unwrap_or_else(|| RunRecord::new(String::new()));
-        let mut run = gather(&all[i], record, &out.join(&all[i].name))?;
-        // the footing's numbers belong to the footing benchmark only (a biaxial
-        // platen is a rigid body too)
-        if spec.benchmark != Benchmark::Footing {
-            run.footing = None;
-        }
-        runs.push(run);
+        runs.push(gather(
+            &all[i],
+            record,
+            &out.join(&all[i].name),
+            spec.benchmark,
+        )?);
     }
     if let Part::Shard { .. } = options.part {
         return Ok(runs);
@@ -343,7 +342,12 @@ fn resumable(planned: &Planned, out: &Path) -> Option<Resumable> {
 
 /// The campaign run of `planned` from its record and the `curve.csv` in
 /// `out`; an unreadable curve is an error.
-fn gather(planned: &Planned, record: RunRecord, out: &Path) -> Result<CampaignRun, CampaignError> {
+fn gather(
+    planned: &Planned,
+    record: RunRecord,
+    out: &Path,
+    benchmark: Benchmark,
+) -> Result<CampaignRun, CampaignError> {
     let scene = &planned.scene;
     let mut run = CampaignRun {
         scene: planned.scene_file.clone(),
@@ -351,7 +355,11 @@ fn gather(planned: &Planned, record: RunRecord, out: &Path) -> Result<CampaignRu
         history: None,
         fields: record.fields,
         volumes: record.volumes,
-        footing: FootingGeometry::of_scene(scene),
+        // the footing's numbers belong to the footing benchmark only (a biaxial
+        // platen is a rigid body too)
+        footing: (benchmark == Benchmark::Footing)
+            .then(|| FootingGeometry::of_scene(scene))
+            .flatten(),
         effort: record.effort,
         name: planned.name.clone(),
         cell_size: scene.grid.cell_size,
