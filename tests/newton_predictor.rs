@@ -57,3 +57,33 @@ fn the_motion_predictor_is_the_exact_increment_of_uniform_motion() {
         );
     }
 }
+
+/// DESIGN §3 motion limit h/2 = 0.025 m: one step of 0.03 s moves the block at
+/// 1 m/s by 0.03 m. Without halvings the step fails, naming the point and its
+/// motion, and reports the residual history of the converged solve it rejected
+/// (one entry: the predictor is exact) instead of an empty one.
+#[test]
+fn a_step_beyond_the_motion_limit_reports_its_residual_history() {
+    let overrides = [
+        "scene.analysis=\"implicit_dynamic\"",
+        "scene.steps=1",
+        "scene.dt=0.03",
+        "solver.max_halvings=0",
+    ];
+    let mut sim = common::simulation(SCENE, &overrides);
+    let error = sim
+        .step_once()
+        .expect_err("0.03 m > h/2 in one step")
+        .to_string();
+    assert!(error.contains("moved 3.000e-2 m > h/2"), "{error}");
+    let history = error
+        .split("residual history [")
+        .nth(1)
+        .and_then(|rest| rest.split(']').next())
+        .unwrap_or_else(|| panic!("no history in: {error}"));
+    let norms: Vec<f64> = history
+        .split(", ")
+        .map(|v| v.parse().unwrap_or_else(|_| panic!("{history}")))
+        .collect();
+    assert_eq!(norms.len(), 1, "{error}");
+}

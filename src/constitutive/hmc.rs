@@ -740,9 +740,10 @@ impl Hmc {
         Err("Newton iteration limit reached")
     }
 
-    /// Integrate the whole increment with `substeps` equal sub-steps; the tangent is the
-    /// exact derivative of the sub-stepped update (chain rule through the sub-steps,
-    /// which reduces to D32 for one step).
+    /// Integrate the whole increment with `substeps` equal sub-steps; with `want_tangent`
+    /// the tangent is the exact derivative of the sub-stepped update (chain rule through the
+    /// sub-steps, which reduces to D32 for one step), else it is left zero (explicit steps:
+    /// the stress and κ are the same bits either way).
     fn integrate(
         &self,
         stress_n: &Voigt,
@@ -750,6 +751,7 @@ impl Hmc {
         kappa_n: f64,
         arg: StrengthArg,
         substeps: u32,
+        want_tangent: bool,
     ) -> Result<Integrated, &'static str> {
         let local = arg.couples_kappa();
         let n = f64::from(substeps);
@@ -775,9 +777,11 @@ impl Hmc {
             let f_trial = self.surface.value(&trial, &strength);
             if f_trial <= elastic_tolerance {
                 stress = trial;
-                for i in 0..4 {
-                    for j in 0..4 {
-                        s_sigma[(i, j)] += self.stiffness[i][j] / n;
+                if want_tangent {
+                    for i in 0..4 {
+                        for j in 0..4 {
+                            s_sigma[(i, j)] += self.stiffness[i][j] / n;
+                        }
                     }
                 }
                 continue;
@@ -786,6 +790,15 @@ impl Hmc {
             // Round-off floor for very large stresses (~500 ulp of the trial stress).
             let tolerance = tolerance_base.max(1e-13 * trial_scale);
             let step = self.plastic_step(&trial, kappa, arg, tolerance)?;
+            for (p, m) in plastic.iter_mut().zip(step.flow_direction) {
+                *p += step.plastic_multiplier * m;
+            }
+            stress = step.stress;
+            kappa = step.kappa;
+            yielded = true;
+            if !want_tangent {
+                continue;
+            }
             // Sensitivity: A dy = [C dσ_k + dΔε/n; dκ_k; 0] (linearised D29).
             let mut rhs = SMatrix::<f64, 6, 4>::zeros();
             for i in 0..4 {
@@ -808,12 +821,6 @@ impl Hmc {
             if local {
                 s_kappa = sol.fixed_view::<1, 4>(4, 0).into_owned();
             }
-            for (p, m) in plastic.iter_mut().zip(step.flow_direction) {
-                *p += step.plastic_multiplier * m;
-            }
-            stress = step.stress;
-            kappa = step.kappa;
-            yielded = true;
         }
         let tangent = std::array::from_fn(|i| std::array::from_fn(|j| s_sigma[(i, j)]));
         Ok(Integrated {
@@ -872,6 +879,19 @@ impl Hmc {
         state_n: &PointState,
         strength: StrengthVariable,
     ) -> Result<(StressUpdate, u32), ConstitutiveError> {
+        self.return_map(stress_rotated, strain_increment, state_n, strength, true)
+    }
+
+    /// [`Self::update_with_substeps`]; without `want_tangent` the tangent is left zero
+    /// and its sensitivity solves are skipped (the same stress and state bits).
+    fn return_map(
+        &self,
+        stress_rotated: &Voigt,
+        strain_increment: &Voigt,
+        state_n: &PointState,
+        strength: StrengthVariable,
+        want_tangent: bool,
+    ) -> Result<(StressUpdate, u32), ConstitutiveError> {
         let kappa_n = state_n.plastic_strain_eq;
         let arg = StrengthArg::new(strength, kappa_n);
         if stress_rotated
@@ -892,7 +912,15 @@ impl Hmc {
         let mut outcome = None;
         let mut failure = "";
         for level in 0..=MAX_SUBSTEP_LEVEL {
-            match self.integrate(stress_rotated, strain_increment, kappa_n, arg, 1 << level) {
+            let substeps = 1 << level;
+            match self.integrate(
+                stress_rotated,
+                strain_increment,
+                kappa_n,
+                arg,
+                substeps,
+                want_tangent,
+            ) {
                 Ok(result) => {
                     outcome = Some((result, 1u32 << level));
                     break;
@@ -958,8 +986,11 @@ impl Hmc {
                 result.stress, result.kappa
             )));
         }
-        // Never hand back a stress outside the surface (elastic results passed the check already).
-        let f = if result.yielded {
+        // Never hand back a stress outside the surface. A sub-stepped result already holds it:
+        // its last sub-step ended elastic with f ≤ 1e-10 c_ref or converged with
+        // |f| ≤ max(1e-11 c_ref, 1e-13 |σ_trial|), far inside the bound below, at the same
+        // strength (κ_s at the returned κ). So only a tip return (sub-steps 0) is evaluated.
+        let f = if result.yielded && substeps == 0 {
             self.surface
                 .value(&result.stress, &self.strength_f64(arg.at(result.kappa)))
         } else {
@@ -1057,6 +1088,22 @@ impl ConstitutiveModel for Hmc {
     ) -> Result<StressUpdate, ConstitutiveError> {
         self.update_with_substeps(stress_rotated, strain_increment, state_n, strength)
             .map(|(u, _)| u)
+    }
+
+    /// The return mapping without its tangent (explicit steps): no sensitivity solves.
+    fn update_stress(
+        &self,
+        stress_rotated: &Voigt,
+        strain_increment: &Voigt,
+        state_n: &PointState,
+        strength: StrengthVariable,
+        (stress, state): (&mut Voigt, &mut PointState),
+    ) -> Result<bool, ConstitutiveError> {
+        let (update, _) =
+            self.return_map(stress_rotated, strain_increment, state_n, strength, false)?;
+        *stress = update.stress;
+        *state = update.state;
+        Ok(update.yielded)
     }
 }
 

@@ -608,7 +608,7 @@ pub fn solve(
             let history = convergence.history;
             system
                 .check_motion(du)
-                .map_err(|cause| NewtonError::failed(cause, &[]))?;
+                .map_err(|cause| NewtonError::failed(cause, &history))?;
             return Ok(Solution {
                 du: current.du,
                 trial: current.trial,

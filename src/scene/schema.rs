@@ -165,6 +165,17 @@ pub enum AnalysisKind {
     Explicit,
 }
 
+impl AnalysisKind {
+    /// The value of `scene.analysis` that selects this scheme.
+    pub fn key(self) -> &'static str {
+        match self {
+            Self::QuasiStatic => "quasi_static",
+            Self::ImplicitDynamic => "implicit_dynamic",
+            Self::Explicit => "explicit",
+        }
+    }
+}
+
 /// `[scene]`: analysis type and time stepping.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]

@@ -157,9 +157,11 @@ fn predictor_is_used_by_implicit_dynamic_runs_only() {
         ];
         let s = Scene::from_str_with_overrides(MINIMAL, "t", &overrides).unwrap();
         assert_eq!(s.solver.predictor, PredictorChoice::Zero);
-        s.warnings()
-            .iter()
-            .any(|w| w.starts_with("solver.predictor is set but not used"))
+        let warning = format!(
+            "solver.predictor is set but not used with scene.analysis = \"{analysis}\" (ignored)"
+        );
+        assert_eq!(s.scene.analysis.key(), analysis, "the key parses back");
+        s.warnings().contains(&warning)
     };
     assert!(unused("quasi_static"));
     assert!(!unused("implicit_dynamic"));

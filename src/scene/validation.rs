@@ -287,8 +287,8 @@ impl Scene {
             .into_iter()
             .map(|key| {
                 format!(
-                    "{key} is set but not used by a {:?} analysis (ignored)",
-                    self.scene.analysis
+                    "{key} is set but not used with scene.analysis = \"{}\" (ignored)",
+                    self.scene.analysis.key()
                 )
             })
             .collect()

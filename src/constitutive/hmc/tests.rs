@@ -617,7 +617,8 @@ fn dual_second_derivatives_match_central_differences() {
 /// Robustness sweep: 4000 pseudo-random admissible start states and increments (up to 20× the
 /// elastic strain scale, tension and compression, local and nonlocal, four models) all return a
 /// finite stress with f ≤ 1e-8 c_ref (or, in the allowed cases, a ReturnMappingFailed error; the
-/// count of those must be 0 here).
+/// count of those must be 0 here). The tangent-free update of explicit steps
+/// ([`ConstitutiveModel::update_stress`]) returns the same bits as the full one.
 #[test]
 fn robustness_sweep() {
     let models = [
@@ -677,6 +678,24 @@ fn robustness_sweep() {
         };
         match m.update(&stress0, &inc, &state0, frozen.into()) {
             Ok(u) => {
+                // the explicit steps' update, without the tangent, gives the same bits
+                let (mut stress, mut state) = ([f64::NAN; 4], PointState::default());
+                let yielded = m
+                    .update_stress(
+                        &stress0,
+                        &inc,
+                        &state0,
+                        frozen.into(),
+                        (&mut stress, &mut state),
+                    )
+                    .expect("the update with the tangent succeeded");
+                assert_eq!(yielded, u.yielded, "case {k}");
+                assert_eq!(
+                    stress.map(f64::to_bits),
+                    u.stress.map(f64::to_bits),
+                    "case {k}"
+                );
+                assert_eq!(state, u.state, "case {k}");
                 let f = m.yield_function(&u.stress, frozen.unwrap_or(u.state.plastic_strain_eq));
                 assert!(f <= 1e-8 * m.strength_scale(), "case {k}: f = {f}");
                 assert!(u
