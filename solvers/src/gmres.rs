@@ -22,7 +22,7 @@ pub struct GmresOutcome {
 /// Solves `K x = b` by GMRES without restart, right-preconditioned by `precondition`
 /// (`z ← M⁻¹ z` in place), from x = 0; `x` overwrites `rhs`. Stops when the residual
 /// estimate reaches `tolerance · ‖b‖`, then checks the true residual. Gives up early, from
-/// the [`EARLY_CHECK`]-th step on, when the mean contraction of the residual so far
+/// the `EARLY_CHECK` (4)-th step on, when the mean contraction of the residual so far
 /// predicts more than `max_iterations` steps (a poor preconditioner costs a few steps,
 /// not `max_iterations`).
 ///

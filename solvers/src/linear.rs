@@ -31,8 +31,8 @@ pub enum Method {
     Ldl,
     /// faer's LU, whose factors then serve the following systems of the same pattern
     /// (the next Newton iterations) as the preconditioner of GMRES ([`crate::gmres`]),
-    /// to a relative residual of [`REUSE_TOLERANCE`]; K is factorised anew when GMRES needs
-    /// more than [`REUSE_MAX_ITERATIONS`] steps or the pattern changes.
+    /// to a relative residual of `REUSE_TOLERANCE` (1e-10); K is factorised anew when GMRES needs
+    /// more than `REUSE_MAX_ITERATIONS` (12) steps or the pattern changes.
     LuReuse,
 }
 
@@ -252,7 +252,7 @@ impl LinearSolver {
     }
 
     /// [`Method::LuReuse`] with earlier factors: GMRES on `k`; if it needs more than
-    /// [`REUSE_MAX_ITERATIONS`] steps, `k` is factorised and solved directly.
+    /// `REUSE_MAX_ITERATIONS` (12) steps, `k` is factorised and solved directly.
     fn solve_reusing(&mut self, k: &SparseMatrix, rhs: &mut [f64]) -> Result<Used, SolverError> {
         let direct = &mut self.direct;
         let outcome = gmres(

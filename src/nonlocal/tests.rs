@@ -956,35 +956,34 @@ fn nonlocal_first_average_fuses_denominators_and_numerators() {
     );
 }
 
-/// The tile culling of the pair pass (`Tile::gap2`, `Tile::gap2_to`) rests on the box gap
-/// never exceeding the r² the kernel rows compute: checked on 2,000 random tiles of 16 MPs
-/// (coordinates spread over 1e-3 to 1e3 m, so that rounding matters) against points inside,
-/// near and far from them, and between tiles.
+/// The culling of the pair passes (`Tile::gap2`, `Tile::gap2_to`, `Tile::chunk_gap2`) rests
+/// on a box gap never exceeding the r² the kernel rows compute: checked on 2,000 random tiles
+/// of 40 MPs (three chunks, the last one partial; coordinates spread over 1e-3 to 1e3 m, so
+/// that rounding matters) against points inside, near and far from them, and between tiles.
 #[test]
 fn box_gaps_bound_every_computed_distance_from_below() {
+    const N: usize = 40;
     let mut rng = Rng(7);
     let tile_of = |rng: &mut Rng, scale: f64, centre: [f64; 2]| {
-        let points: Vec<[f64; 2]> = (0..16)
-            .map(|_| {
-                [
-                    centre[0] + scale * rng.range(-1.0, 1.0),
-                    centre[1] + scale * rng.range(-1.0, 1.0),
-                ]
-            })
-            .collect();
-        let mut tile = Tile {
-            lo: 0,
-            hi: 16,
+        let key = BinKey {
             group: 0,
             by: 0,
-            min: [f64::INFINITY; 2],
-            max: [f64::NEG_INFINITY; 2],
+            bx: 0,
+            sub: 0,
         };
-        for p in &points {
-            tile.min = [tile.min[0].min(p[0]), tile.min[1].min(p[1])];
-            tile.max = [tile.max[0].max(p[0]), tile.max[1].max(p[1])];
+        let mut sorted = SourceList::with_capacity(N);
+        for _ in 0..N {
+            let x = centre[0] + scale * rng.range(-1.0, 1.0);
+            let y = centre[1] + scale * rng.range(-1.0, 1.0);
+            sorted.push(key, x, y, 1.0);
         }
-        (tile, points)
+        let points: Vec<[f64; 2]> = sorted
+            .x
+            .iter()
+            .zip(&sorted.y)
+            .map(|(&x, &y)| [x, y])
+            .collect();
+        (Tile::new(&sorted, 0, N), points)
     };
     let r2 = |p: [f64; 2], q: [f64; 2]| {
         let (dx, dy) = (p[0] - q[0], p[1] - q[1]);
@@ -1005,9 +1004,11 @@ fn box_gaps_bound_every_computed_distance_from_below() {
         for &p in &points_b {
             let gap = a.gap2(p);
             assert!(tiles_gap <= gap, "tile gap {tiles_gap} > point gap {gap}");
-            for &q in &points_a {
-                assert!(gap <= r2(p, q), "gap {gap} > r² {}", r2(p, q));
-                binding += usize::from(gap > 0.0 && gap >= 0.5 * r2(p, q));
+            for (k, &q) in points_a.iter().enumerate() {
+                let chunk_gap = a.chunk_gap2(k / CHUNK, p);
+                assert!(gap <= chunk_gap, "tile gap {gap} > chunk gap {chunk_gap}");
+                assert!(chunk_gap <= r2(p, q), "gap {chunk_gap} > r² {}", r2(p, q));
+                binding += usize::from(chunk_gap > 0.0 && chunk_gap >= 0.5 * r2(p, q));
             }
         }
     }
