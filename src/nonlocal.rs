@@ -1082,31 +1082,29 @@ impl Tile {
     /// lower bound of the computed `r²` as [`Self::gap2`].
     fn chunk_gap2(&self, c: usize, x: [f64; 2]) -> f64 {
         let b = &self.chunks[c];
-        let gx = (b[0] - x[0]).max(x[0] - b[2]).max(0.0);
-        let gy = (b[1] - x[1]).max(x[1] - b[3]).max(0.0);
-        gx * gx + gy * gy
+        box_gap2([b[0], b[1]], [b[2], b[3]], x, x)
     }
 
     /// Squared gap between the bounding boxes of `self` and `other` (0 if they
-    /// overlap). Rounding is monotone, so it never exceeds the computed `r²` of a
-    /// pair of their MPs.
+    /// overlap), a lower bound of the computed `r²` of every pair of their MPs.
     fn gap2_to(&self, other: &Tile) -> f64 {
-        let gx = (other.min[0] - self.max[0])
-            .max(self.min[0] - other.max[0])
-            .max(0.0);
-        let gy = (other.min[1] - self.max[1])
-            .max(self.min[1] - other.max[1])
-            .max(0.0);
-        gx * gx + gy * gy
+        box_gap2(self.min, self.max, other.min, other.max)
     }
 
     /// Squared gap between the point `x` and the bounding box (0 inside), a lower
-    /// bound of the computed `r²` from `x` to every MP of the tile, as [`Self::gap2_to`].
+    /// bound of the computed `r²` from `x` to every MP of the tile.
     fn gap2(&self, x: [f64; 2]) -> f64 {
-        let gx = (self.min[0] - x[0]).max(x[0] - self.max[0]).max(0.0);
-        let gy = (self.min[1] - x[1]).max(x[1] - self.max[1]).max(0.0);
-        gx * gx + gy * gy
+        box_gap2(self.min, self.max, x, x)
     }
+}
+
+/// Squared gap between the boxes `[min, max]` and `[other_min, other_max]` (0 if they
+/// overlap). Rounding is monotone, so for points `p` in the one box and `q` in the other
+/// it never exceeds the `r² = (p_x − q_x)² + (p_y − q_y)²` the kernel rows compute.
+fn box_gap2(min: [f64; 2], max: [f64; 2], other_min: [f64; 2], other_max: [f64; 2]) -> f64 {
+    let gap = |d: usize| (other_min[d] - max[d]).max(min[d] - other_max[d]).max(0.0);
+    let (gx, gy) = (gap(0), gap(1));
+    gx * gx + gy * gy
 }
 
 /// Partial sums of one tile pair `(I, J)` ([`SymmetricPlan::sums`]): `Σ w s_k` for each of the

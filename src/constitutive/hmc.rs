@@ -912,7 +912,7 @@ impl Hmc {
         let mut outcome = None;
         let mut failure = "";
         for level in 0..=MAX_SUBSTEP_LEVEL {
-            let substeps = 1 << level;
+            let substeps: u32 = 1 << level;
             match self.integrate(
                 stress_rotated,
                 strain_increment,
@@ -922,7 +922,7 @@ impl Hmc {
                 want_tangent,
             ) {
                 Ok(result) => {
-                    outcome = Some((result, 1u32 << level));
+                    outcome = Some((result, substeps));
                     break;
                 }
                 Err(reason) => failure = reason,
