@@ -63,9 +63,10 @@ fn top_point_contact_stiffens_the_coarse_mesh() {
 /// it adds no penalty force, no stiffness and no share of the reported
 /// rigid force, so the tangent stays the derivative of the residual (a
 /// force without its stiffness made Newton diverge at δ = 0.28 m on the
-/// footing at h = 0.1 m). The footing scene at h = 0.5 m with the material
-/// of the first tied point's cell removed: force, stiffness and reported
-/// load come from the same points, the others.
+/// footing at h = 0.1 m), and it moves with the footing, not with the soil
+/// beside it. The footing scene at h = 0.5 m with the material of the first
+/// tied point's cell removed: force, stiffness and reported load come from
+/// the same points, the others.
 #[test]
 fn tied_points_over_emptied_cells_carry_neither_force_nor_stiffness() {
     use mpm_geo::bc::DrivenPoints;
@@ -143,12 +144,30 @@ fn tied_points_over_emptied_cells_carry_neither_force_nor_stiffness() {
 
     // the reported force on the soil: the same points after the step's commit
     let mut moved = model.driven.clone();
-    moved.advect(&setup.driven_shapes, &setup.bins, &zero);
+    moved.advect(&setup.driven_shapes, &setup.bins, &zero, (t, t));
     let reported = moved.force_on_soil(0, &model.particles, t)[1];
     assert!(
         (reported / expected - 1.0).abs() < 1e-12,
         "reported {reported}, expected {expected}"
     );
+
+    // over a step from t to t + 0.5 s in which the soil rises 0.05 m, the points over
+    // soil rise with it and the one over the emptied cell moves with the footing
+    // (0.125 m/s down): soil coming back under it is tied where the footing is
+    let mut stepped = model.driven.clone();
+    let rising = vec![[0.0, 0.05]; nodes];
+    stepped.advect(&setup.driven_shapes, &setup.bins, &rising, (t, t + 0.5));
+    for (k, &bears) in bears.iter().enumerate() {
+        let moved = [
+            stepped.position[k][0] - driven.position[k][0],
+            stepped.position[k][1] - driven.position[k][1],
+        ];
+        let expected = if bears { 0.05 } else { -0.0625 };
+        assert!(
+            moved[0].abs() < 1e-12 && (moved[1] - expected).abs() < 1e-12,
+            "point {k} (bears: {bears}) moved {moved:?}, expected (0, {expected})"
+        );
+    }
 }
 
 /// Load of the footing scene at h = 0.5 m, elastic (c = 1e6 kPa), after one

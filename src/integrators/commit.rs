@@ -26,6 +26,9 @@ pub struct NodalResults<'a> {
     pub contact_motion: &'a [[f64; 2]],
     /// Gravity of the step's external force (DESIGN D10), m/s² along −y.
     pub gravity: f64,
+    /// Time at the end of the step, s (the model's time is the start): a rigid
+    /// body's surface point over no soil moves with the body over the step.
+    pub end_time: f64,
     /// The only nodes where `reaction` and `increment` can be other than
     /// zero (increasing), when the integrator knows them; `None`: any node.
     pub nonzero_at: Option<&'a [u32]>,
@@ -84,9 +87,12 @@ pub fn commit_swapping(
     model.external_work += model
         .traction
         .advect(&setup.traction_shapes, nodal.increment);
-    model
-        .driven
-        .advect(&setup.driven_shapes, &setup.bins, nodal.contact_motion);
+    model.driven.advect(
+        &setup.driven_shapes,
+        &setup.bins,
+        nodal.contact_motion,
+        (model.time, nodal.end_time),
+    );
     copy_into(&mut model.reaction, nodal.reaction);
     copy_into(&mut model.last_increment, nodal.increment);
     let remap = model.drop_lost_points();

@@ -244,6 +244,7 @@ impl Buffers {
                 increment,
                 contact_motion,
                 gravity: model.scene.loads.gravity_at(t),
+                end_time: t + dt,
                 nonzero_at: Some(&setup.bins.active_nodes),
             };
             commit_swapping(model, setup, trial, converged, nodal)

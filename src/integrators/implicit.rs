@@ -181,6 +181,7 @@ impl ImplicitIntegrator {
                 increment: &grid.du,
                 contact_motion: &grid.du,
                 gravity: model.scene.loads.gravity_at(t + dt),
+                end_time: t + dt,
                 nonzero_at: None,
             };
             commit(model, setup, &grid.trial, converged, nodal)
