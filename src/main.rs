@@ -90,8 +90,8 @@ enum Command {
         step_refinement: Option<usize>,
         /// `ours` (the scenes as written: GIMP, m as written, no double
         /// mapping) or `paper` (bilinear cells, Gauss points, m = 1, double
-        /// mapping of the stress increment); the paper's runs go to
-        /// out/campaign-<dir name>-paper by default.
+        /// mapping of the stress increment, no B-bar); the paper's runs go
+        /// to out/campaign-<dir name>-paper by default.
         #[arg(long, value_enum, default_value_t = FormulationArg::Ours)]
         formulation: FormulationArg,
         /// Run only the K-th of N disjoint parts (e.g. `--shard 2/3`), for a

@@ -2,18 +2,23 @@
 //! same problem with the explicit integrator, and with the paper's literal
 //! formulation.
 
-use super::{AnalysisKind, DoubleMapping, PointLayout, Scene, SceneError, ShapeFunctionChoice};
+use super::{
+    AnalysisKind, DoubleMapping, PointLayout, Scene, SceneError, ShapeFunctionChoice,
+    VolumetricTreatment,
+};
 
 /// Which discretisation and regularisation a campaign runs its scenes with.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Formulation {
     /// The scenes as written: uGIMP, 2 × 2 points on sub-cell centres,
     /// over-nonlocal m as written (1.1 in the benchmarks), no double mapping
-    /// (DESIGN §11 rows 23–29).
+    /// (DESIGN §11 rows 23–29); B-bar where a scene asks for it.
     #[default]
     AsWritten,
     /// The paper's literal method: bilinear cells, 2 × 2 Gauss points, m = 1
-    /// (DESIGN D35) and double mapping of the stress increment (DESIGN §7).
+    /// (DESIGN D35), double mapping of the stress increment (DESIGN §7) and
+    /// the standard volumetric strain (no B-bar: the paper accepts locking,
+    /// DESIGN §2).
     Paper,
 }
 
@@ -64,6 +69,8 @@ impl Scene {
                 nonlocal.over_nonlocal = 1.0;
             }
             scene.smoothing.double_mapping = DoubleMapping::Increment;
+            // the paper accepts volumetric locking (DESIGN §2): standard B
+            scene.grid.volumetric = VolumetricTreatment::Standard;
         }
         scene.checked()
     }
@@ -121,5 +128,16 @@ mod tests {
             scene.with_formulation(Formulation::AsWritten).unwrap(),
             scene
         );
+    }
+
+    #[test]
+    fn paper_formulation_drops_b_bar() {
+        let text = include_str!("../../validation/footing/nonlocal_h250.toml");
+        let b_bar = ["grid.volumetric=\"b_bar\"".to_string()];
+        let scene = Scene::from_str_with_overrides(text, "footing", &b_bar).unwrap();
+        assert_eq!(scene.grid.volumetric, VolumetricTreatment::BBar);
+        let paper = scene.with_formulation(Formulation::Paper).unwrap();
+        assert_eq!(paper.grid.volumetric, VolumetricTreatment::Standard);
+        assert_eq!(paper.smoothing.double_mapping, DoubleMapping::Increment);
     }
 }
