@@ -8,7 +8,9 @@ use mpm_solvers::{SolverStats, SparseMatrix};
 
 use super::commit::{commit, NodalResults};
 use super::g2p::{g2p, GridMotion, VelocityUpdate};
-use super::newton::{self, Newmark, NewtonError, NodalKinematics, Solution, StepSystem};
+use super::newton::{
+    self, Newmark, NewtonBuffers, NewtonError, NodalKinematics, Solution, StepSystem,
+};
 use super::p2g::external_force;
 use super::stresses::converged_stresses;
 use super::tangent::{background_block, Tangent};
@@ -39,6 +41,8 @@ pub struct ImplicitIntegrator {
     /// ‖R‖ per Newton iteration of the last converged (sub-)step, kN/m, and the
     /// reference force of DESIGN D18 it was compared with.
     pub last_residuals: (Vec<f64>, f64),
+    /// The Newton iterates' buffers, kept from one (sub-)step to the next.
+    newton_buffers: NewtonBuffers,
 }
 
 impl ImplicitIntegrator {
@@ -53,6 +57,7 @@ impl ImplicitIntegrator {
             setup: StepSetup::default(),
             usage: SolverUsage::default(),
             last_residuals: (Vec::new(), 0.0),
+            newton_buffers: NewtonBuffers::default(),
         })
     }
 
@@ -164,6 +169,7 @@ impl ImplicitIntegrator {
                 nonlocal.as_mut(),
                 &mut self.usage,
                 profile,
+                &mut self.newton_buffers,
             )
         })?;
         let grid = ConvergedGrid::new(&system, solution);
@@ -188,6 +194,7 @@ impl ImplicitIntegrator {
         })?;
         report.removed_points.extend(removed);
         model.time = t + dt;
+        self.newton_buffers.recycle(grid.du, grid.trial);
         Ok(grid.iterations)
     }
 
