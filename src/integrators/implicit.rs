@@ -194,7 +194,7 @@ impl ImplicitIntegrator {
         })?;
         report.removed_points.extend(removed);
         model.time = t + dt;
-        self.newton_buffers.recycle(grid.du, grid.trial);
+        self.newton_buffers.recycle(grid.trial);
         Ok(grid.iterations)
     }
 

@@ -414,10 +414,9 @@ pub struct NewtonBuffers {
 }
 
 impl NewtonBuffers {
-    /// Take back a converged step's increment and trial stresses (moved out
-    /// in its [`Solution`]) as the next solve's iterate buffers.
-    pub fn recycle(&mut self, du: Vec<[f64; 2]>, trial: TrialStresses) {
-        self.current.du = du;
+    /// Take back a converged step's trial stresses (moved out in its
+    /// [`Solution`]) as the next solve's iterate buffers.
+    pub fn recycle(&mut self, trial: TrialStresses) {
         self.current.trial = trial;
     }
 }
