@@ -5,7 +5,8 @@
 //! couples nodes up to two apart and the factors are denser), and on the
 //! first-step tangent of the finest nonlocal biaxial mesh
 //! (`biaxial_h1000`: `validation/biaxial/nonlocal_h1000.toml`, GIMP, Newmark
-//! mass term). Factorisation is single-threaded (`Par::Seq`, as in a run).
+//! mass term). faer's factorisations are single-threaded (`Par::Seq`, as in a run); the
+//! multifrontal LU factorises independent subtrees on the rayon pool.
 //!
 //! Group `assembly`, each stage of building K on its own:
 //! * `blocks`: the per-cell tangent blocks Σ V_p B_pᵀ D B_p (rayon, elastic D
@@ -27,7 +28,10 @@
 //! * `{f}_numeric`: `factorize` again on the same pattern: numeric only (the
 //!   symbolic factorisation, factor storage and workspace reused, as every
 //!   Newton iteration does while the pattern holds);
-//! * `{f}_solve`: one forward/back substitution.
+//! * `{f}_solve`: one forward/back substitution;
+//! * `multifrontal_numeric`, `multifrontal_solve`: the same for the multifrontal LU on the
+//!   pattern of K + Kᵀ (`mpm_solvers::MultifrontalLu`; its solve includes one step of
+//!   iterative refinement, i.e. two substitutions and a product with K).
 //!
 //! Both groups sample flat (10 samples of equal iteration counts), so that the
 //! 100k factorisations finish in seconds; `{f}_symbolic` pays a whole
@@ -46,7 +50,7 @@ use mpm_geo::integrators::StepSetup;
 use mpm_geo::scene::Scene;
 use mpm_geo::simulation::Simulation;
 use mpm_geo::stiffness;
-use mpm_solvers::{Assembler, DirectSolver, SolverPolicy};
+use mpm_solvers::{Assembler, DirectSolver, MultifrontalLu, SolverPolicy};
 
 fn manifest(path: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(path)
@@ -213,6 +217,25 @@ fn bench_solve(c: &mut Criterion) {
                 stats.probe_seconds
             );
         }
+        // the multifrontal LU on the pattern of K + Kᵀ (issue 15): numeric factorisation on
+        // the same pattern, and the solve with its one step of iterative refinement
+        let mut multifrontal = MultifrontalLu::new();
+        multifrontal.factorize(&k).expect("multifrontal");
+        group.bench_function(BenchmarkId::new("multifrontal_numeric", label), |b| {
+            b.iter(|| multifrontal.factorize(&k).expect("refactorize"))
+        });
+        group.bench_function(BenchmarkId::new("multifrontal_solve", label), |b| {
+            b.iter(|| {
+                let mut x = rhs.clone();
+                multifrontal.solve_refined(&k, &mut x).expect("solve");
+                x
+            })
+        });
+        println!(
+            "solve/{label}/multifrontal: factors {} entries, last refinement correction {:.1e}",
+            multifrontal.factor_nnz,
+            multifrontal.last_correction.unwrap_or(f64::NAN)
+        );
         println!("solve/{label}: {n} unknowns, nnz {}", k.nnz());
     }
     group.finish();

@@ -100,6 +100,10 @@ pub fn solver_configs(
             direct(Method::Lu, Simplicial, Ordering::Amd),
         ),
     ];
+    out.push((
+        "multifrontal LU (AMD of K + Kᵀ)".into(),
+        direct(Method::Multifrontal, Auto, Ordering::Default),
+    ));
     if n <= bench.identity_max_n {
         out.push((
             "faer LU simplicial (identity)".into(),

@@ -14,6 +14,10 @@
 //!   orderings), preconditioned conjugate gradients ([`Pcg`]: Jacobi or IC(0)) and, with the
 //!   `ldl` feature, sprs_ldl's LDLᵀ behind one front, falling back to LU (recorded) where a
 //!   method does not apply;
+//! * [`MultifrontalLu`] factorises an unsymmetric K on the symmetric pattern of K + Kᵀ (faer's
+//!   AMD analysis, dense faer LU inside each front, independent subtrees in parallel), several
+//!   times faster than faer's sparse LU on the benchmarks' tangents (`linear_solver =
+//!   "multifrontal"`);
 //! * [`mm`] writes and reads systems in Matrix Market format, and [`mod@bench`] runs every solver
 //!   on a directory of them (`mpm-solvers bench`).
 
@@ -27,6 +31,7 @@ mod ldl;
 mod linear;
 mod matrix;
 pub mod mm;
+mod multifrontal;
 mod pcg;
 
 pub use assembly::Assembler;
@@ -39,6 +44,7 @@ pub use gmres::{gmres, GmresOutcome};
 pub use ldl::LdlSolver;
 pub use linear::{LinearOptions, LinearSolver, Method, Used};
 pub use matrix::SparseMatrix;
+pub use multifrontal::{MultifrontalLu, CORRECTION_LIMIT as MULTIFRONTAL_CORRECTION_LIMIT};
 pub use pcg::{Pcg, PcgOptions, PcgOutcome, Preconditioner};
 
 /// Marker in an element dof list for an eliminated (constrained) dof: its rows and columns of

@@ -11,8 +11,8 @@ use std::time::Instant;
 use crate::gmres::gmres;
 use crate::matrix::Pattern;
 use crate::pcg::{Pcg, PcgOptions};
-use crate::SparseMatrix;
 use crate::{DirectSolver, FactorKind, SolverError, SolverOptions, SolverPolicy, SolverStats};
+use crate::{MultifrontalLu, SparseMatrix};
 
 /// Which linear solver [`LinearSolver`] uses.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -34,6 +34,11 @@ pub enum Method {
     /// to a relative residual of `REUSE_TOLERANCE` (1e-10); K is factorised anew when GMRES needs
     /// more than `REUSE_MAX_ITERATIONS` (12) steps or the pattern changes.
     LuReuse,
+    /// Multifrontal LU on the symmetric pattern of K + Kᵀ ([`crate::MultifrontalLu`]: AMD
+    /// ordering, partial pivoting within each front, independent subtrees in parallel);
+    /// every solve refines once, and a system whose refinement correction exceeds
+    /// `MULTIFRONTAL_CORRECTION_LIMIT` (1e-4) is solved by faer's LU instead (recorded).
+    Multifrontal,
 }
 
 /// Relative residual `‖b − K x‖/‖b‖` a GMRES solve of [`Method::LuReuse`] reaches (a fresh
@@ -81,6 +86,8 @@ pub enum Used {
     Ldl,
     /// GMRES preconditioned by the LU factors of an earlier K ([`Method::LuReuse`]).
     LuReused,
+    /// The multifrontal LU ([`Method::Multifrontal`]).
+    Multifrontal,
 }
 
 enum Active {
@@ -88,6 +95,7 @@ enum Active {
     /// [`Method::LuReuse`]: the factors of a matrix of the pattern `factored` precondition
     /// GMRES on `matrix`.
     Reused,
+    Multifrontal,
     Fallback,
     Pcg(Pcg),
     #[cfg(feature = "ldl")]
@@ -102,6 +110,7 @@ pub struct LinearSolver {
     fallback: DirectSolver,
     #[cfg(feature = "ldl")]
     ldl: crate::ldl::LdlSolver,
+    multifrontal: MultifrontalLu,
     active: Option<Active>,
     /// The matrix last factorised (PCG needs it for its products and for a late fallback;
     /// [`Method::LuReuse`]: the present K, for the products of GMRES).
@@ -153,6 +162,7 @@ impl LinearSolver {
             ),
             #[cfg(feature = "ldl")]
             ldl: crate::ldl::LdlSolver::new(),
+            multifrontal: MultifrontalLu::new(),
             active: None,
             matrix: None,
             factored: None,
@@ -225,6 +235,7 @@ impl LinearSolver {
                 }
             }
             Method::Ldl => self.factorize_ldl(k),
+            Method::Multifrontal => self.factorize_multifrontal(k),
             Method::LuReuse => {
                 let reusable = self
                     .factored
@@ -239,6 +250,52 @@ impl LinearSolver {
                 }
             }
         }
+    }
+
+    /// [`Method::Multifrontal`]; faer's LU for a system with a zero pivot (recorded).
+    fn factorize_multifrontal(&mut self, k: &SparseMatrix) -> Result<Used, SolverError> {
+        let mf = &mut self.multifrontal;
+        let before = (mf.symbolic_count, mf.symbolic_seconds, mf.numeric_seconds);
+        let result = mf.factorize(k);
+        self.own.symbolic += mf.symbolic_count - before.0;
+        self.own.symbolic_seconds += mf.symbolic_seconds - before.1;
+        self.own.numeric_seconds += mf.numeric_seconds - before.2;
+        self.own.numeric += 1;
+        match result {
+            Ok(()) => {
+                self.own.factor_nnz = Some(mf.factor_nnz);
+                self.own.last_factor = Some(FactorKind::Lu);
+                self.active = Some(Active::Multifrontal);
+                self.matrix = Some(k.clone());
+                Ok(Used::Multifrontal)
+            }
+            Err(e @ SolverError::Singular { .. }) => {
+                self.fall_back(k, format!("{e}: faer LU used instead"))
+            }
+            Err(e) => Err(e),
+        }
+    }
+
+    /// [`Method::Multifrontal`]'s refined solve; faer's LU when the refinement rejects the
+    /// factors (recorded).
+    fn solve_multifrontal(&mut self, rhs: &mut [f64]) -> Result<Used, SolverError> {
+        let k = self.matrix.take().ok_or(SolverError::NotFactorized)?;
+        let t = Instant::now();
+        let result = self.multifrontal.solve_refined(&k, rhs);
+        self.own.solve_seconds += t.elapsed().as_secs_f64();
+        self.own.solves += 1;
+        self.own.last_probe_error = self.multifrontal.last_correction;
+        let used = match result {
+            Ok(()) => Ok(Used::Multifrontal),
+            Err(e @ SolverError::Singular { .. }) => {
+                self.fall_back(&k, format!("{e}: faer LU used instead"))?;
+                self.fallback.solve_in_place(rhs)?;
+                Ok(Used::Lu)
+            }
+            Err(e) => Err(e),
+        };
+        self.matrix = Some(k);
+        used
     }
 
     /// [`Method::LuReuse`]: factorise `k` and keep its pattern for the systems to come.
@@ -322,6 +379,7 @@ impl LinearSolver {
                     _ => Used::Lu,
                 })
             }
+            Active::Multifrontal => self.solve_multifrontal(rhs),
             Active::Reused => {
                 let k = self.matrix.take().ok_or(SolverError::NotFactorized)?;
                 let used = self.solve_reusing(&k, rhs);
@@ -395,10 +453,10 @@ impl LinearSolver {
                 d.last_factor.or(o.last_factor)
             },
             last_pivot_ratio: d.last_pivot_ratio,
-            last_probe_error: if fallback_last {
-                f.last_probe_error
-            } else {
-                d.last_probe_error
+            last_probe_error: match self.active {
+                Some(Active::Fallback) => f.last_probe_error,
+                Some(Active::Multifrontal) => o.last_probe_error,
+                _ => d.last_probe_error,
             },
             factor_nnz: match self.active {
                 Some(Active::Fallback) => f.factor_nnz,

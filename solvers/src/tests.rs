@@ -749,7 +749,10 @@ fn inapplicable_methods_fall_back_with_a_warning() {
     // the unsymmetric system by every LU variant: agreement with faer LU
     let x_lu = lu_reference(&k_unsym, &b);
     for (label, options) in solver_configs(false, k_unsym.n(), &BenchOptions::default()) {
-        assert_eq!(options.method, Method::Lu, "{label}");
+        assert!(
+            matches!(options.method, Method::Lu | Method::Multifrontal),
+            "{label}"
+        );
         let mut s = LinearSolver::new(options).unwrap();
         s.factorize(&k_unsym, false).unwrap();
         let mut x = b.clone();
@@ -913,4 +916,57 @@ fn lu_reuse_solves_nearby_tangents_with_earlier_factors() {
     assert_eq!(used, Used::Lu);
     assert!(r <= 1e-12);
     assert_eq!(s.stats().reused_factors, 1);
+}
+
+/// The multifrontal LU through [`LinearSolver`]: the same solution as faer's LU to round-off on
+/// an unsymmetric system, the symbolic analysis made once for new values of the same
+/// pattern, and a singular system handed to faer's LU (recorded), which reports it.
+#[test]
+fn multifrontal_agrees_with_faer_lu_and_hands_singular_systems_to_it() {
+    let k = unsymmetric_system(30, 20);
+    let b = random_rhs(k.n(), 9);
+    let x_lu = lu_reference(&k, &b);
+    let mut s = LinearSolver::new(LinearOptions {
+        method: Method::Multifrontal,
+        ..Default::default()
+    })
+    .unwrap();
+    for scale in [1.0, 1.5] {
+        let mut scaled = k.clone();
+        scaled.values_mut().iter_mut().for_each(|v| *v *= scale);
+        assert_eq!(s.factorize(&scaled, false).unwrap(), Used::Multifrontal);
+        let mut x = b.clone();
+        assert_eq!(s.solve_in_place(&mut x).unwrap(), Used::Multifrontal);
+        x.iter_mut().for_each(|v| *v *= scale);
+        let d = rel_diff(&x, &x_lu);
+        assert!(d <= 1e-13, "difference to faer LU {d:e}");
+    }
+    let stats = s.stats();
+    assert_eq!((stats.symbolic, stats.numeric, stats.fallbacks), (1, 2, 0));
+    assert!(s.warnings().is_empty());
+
+    // column 3 zeroed: structurally present, numerically singular
+    let mut singular = k.clone();
+    for j in 0..singular.n() {
+        if let Some(p) = singular.position(3, j) {
+            singular.values_mut()[p] = 0.0;
+        }
+    }
+    let err = s.factorize(&singular, false).unwrap_err();
+    assert!(
+        matches!(
+            err,
+            SolverError::Singular {
+                factor: FactorKind::Lu,
+                ..
+            }
+        ),
+        "{err}"
+    );
+    assert_eq!(s.stats().fallbacks, 1);
+    assert!(
+        s.warnings()[0].contains("multifrontal"),
+        "{:?}",
+        s.warnings()
+    );
 }

@@ -213,7 +213,7 @@ impl Tangent {
         let used = used?;
         match used {
             Used::Cholesky => usage.cholesky += 1,
-            Used::Lu | Used::LuReused => usage.lu += 1,
+            Used::Lu | Used::LuReused | Used::Multifrontal => usage.lu += 1,
             Used::Pcg => usage.pcg += 1,
             Used::Ldl => usage.ldl += 1,
         }

@@ -22,6 +22,7 @@ impl SolverSpec {
                 LinearSolverChoice::Pcg => Method::Pcg,
                 LinearSolverChoice::Ldl => Method::Ldl,
                 LinearSolverChoice::LuReuse => Method::LuReuse,
+                LinearSolverChoice::Multifrontal => Method::Multifrontal,
             },
             direct: SolverOptions {
                 factorization: match self.factorization {
