@@ -29,9 +29,10 @@
 //!   symbolic factorisation, factor storage and workspace reused, as every
 //!   Newton iteration does while the pattern holds);
 //! * `{f}_solve`: one forward/back substitution;
-//! * `multifrontal_numeric`, `multifrontal_solve`: the same for the multifrontal LU on the
-//!   pattern of K + Kᵀ (`mpm_solvers::MultifrontalLu`; its solve includes one step of
-//!   iterative refinement, i.e. two substitutions and a product with K).
+//! * `multifrontal_{lu,cholesky}_{numeric,solve}`: the same for the multifrontal
+//!   factorisation on the pattern of K + Kᵀ (`mpm_solvers::MultifrontalLu`, LU or Cholesky
+//!   fronts; its solve includes one step of iterative refinement, i.e. two substitutions and
+//!   a product with K).
 //!
 //! Both groups sample flat (10 samples of equal iteration counts), so that the
 //! 100k factorisations finish in seconds; `{f}_symbolic` pays a whole
@@ -217,25 +218,28 @@ fn bench_solve(c: &mut Criterion) {
                 stats.probe_seconds
             );
         }
-        // the multifrontal LU on the pattern of K + Kᵀ (issue 15): numeric factorisation on
-        // the same pattern, and the solve with its one step of iterative refinement
-        let mut multifrontal = MultifrontalLu::new();
-        multifrontal.factorize(&k).expect("multifrontal");
-        group.bench_function(BenchmarkId::new("multifrontal_numeric", label), |b| {
-            b.iter(|| multifrontal.factorize(&k).expect("refactorize"))
-        });
-        group.bench_function(BenchmarkId::new("multifrontal_solve", label), |b| {
-            b.iter(|| {
-                let mut x = rhs.clone();
-                multifrontal.solve_refined(&k, &mut x).expect("solve");
-                x
-            })
-        });
-        println!(
-            "solve/{label}/multifrontal: factors {} entries, last refinement correction {:.1e}",
-            multifrontal.factor_nnz,
-            multifrontal.last_correction.unwrap_or(f64::NAN)
-        );
+        // the multifrontal factorisation on the pattern of K + Kᵀ (issue 15), with LU fronts
+        // (as for an unsymmetric K) and Cholesky fronts: numeric factorisation on the same
+        // pattern, and the solve with its one step of iterative refinement
+        for (name, symmetric) in [("multifrontal_lu", false), ("multifrontal_cholesky", true)] {
+            let mut multifrontal = MultifrontalLu::new();
+            multifrontal.factorize(&k, symmetric).expect("multifrontal");
+            group.bench_function(BenchmarkId::new(format!("{name}_numeric"), label), |b| {
+                b.iter(|| multifrontal.factorize(&k, symmetric).expect("refactorize"))
+            });
+            group.bench_function(BenchmarkId::new(format!("{name}_solve"), label), |b| {
+                b.iter(|| {
+                    let mut x = rhs.clone();
+                    multifrontal.solve(&k, &mut x).expect("solve");
+                    x
+                })
+            });
+            println!(
+                "solve/{label}/{name}: factors {} entries, last refinement correction {:.1e}",
+                multifrontal.factor_nnz,
+                multifrontal.last_correction.unwrap_or(f64::NAN)
+            );
+        }
         println!("solve/{label}: {n} unknowns, nnz {}", k.nnz());
     }
     group.finish();

@@ -101,7 +101,7 @@ pub fn solver_configs(
         ),
     ];
     out.push((
-        "multifrontal LU (AMD of K + Kᵀ)".into(),
+        "multifrontal (AMD of K + Kᵀ)".into(),
         direct(Method::Multifrontal, Auto, Ordering::Default),
     ));
     if n <= bench.identity_max_n {

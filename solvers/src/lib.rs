@@ -14,8 +14,8 @@
 //!   orderings), preconditioned conjugate gradients ([`Pcg`]: Jacobi or IC(0)) and, with the
 //!   `ldl` feature, sprs_ldl's LDLᵀ behind one front, falling back to LU (recorded) where a
 //!   method does not apply;
-//! * [`MultifrontalLu`] factorises an unsymmetric K on the symmetric pattern of K + Kᵀ (faer's
-//!   AMD analysis, dense faer LU inside each front, independent subtrees in parallel), several
+//! * [`MultifrontalLu`] factorises K on the symmetric pattern of K + Kᵀ (faer's AMD analysis,
+//!   dense faer LU or Cholesky inside each front, independent subtrees in parallel), several
 //!   times faster than faer's sparse LU on the benchmarks' tangents (`linear_solver =
 //!   "multifrontal"`);
 //! * [`mm`] writes and reads systems in Matrix Market format, and [`mod@bench`] runs every solver

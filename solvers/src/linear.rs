@@ -34,8 +34,9 @@ pub enum Method {
     /// to a relative residual of `REUSE_TOLERANCE` (1e-10); K is factorised anew when GMRES needs
     /// more than `REUSE_MAX_ITERATIONS` (12) steps or the pattern changes.
     LuReuse,
-    /// Multifrontal LU on the symmetric pattern of K + Kᵀ ([`crate::MultifrontalLu`]: AMD
-    /// ordering, partial pivoting within each front, independent subtrees in parallel);
+    /// Multifrontal factorisation on the symmetric pattern of K + Kᵀ ([`crate::MultifrontalLu`]:
+    /// AMD ordering, Cholesky fronts for a symmetric positive definite K, else LU fronts with
+    /// partial pivoting within each front; independent subtrees in parallel);
     /// every solve refines once, and a system whose refinement correction exceeds
     /// `MULTIFRONTAL_CORRECTION_LIMIT` (1e-4) is solved by faer's LU instead (recorded).
     Multifrontal,
@@ -235,7 +236,7 @@ impl LinearSolver {
                 }
             }
             Method::Ldl => self.factorize_ldl(k),
-            Method::Multifrontal => self.factorize_multifrontal(k),
+            Method::Multifrontal => self.factorize_multifrontal(k, symmetric),
             Method::LuReuse => {
                 let reusable = self
                     .factored
@@ -252,19 +253,24 @@ impl LinearSolver {
         }
     }
 
-    /// [`Method::Multifrontal`]; faer's LU for a system with a zero pivot (recorded).
-    fn factorize_multifrontal(&mut self, k: &SparseMatrix) -> Result<Used, SolverError> {
+    /// [`Method::Multifrontal`] (Cholesky fronts when K is symmetric and positive definite, LU
+    /// fronts otherwise); faer's LU for a system with a zero pivot (recorded).
+    fn factorize_multifrontal(
+        &mut self,
+        k: &SparseMatrix,
+        symmetric: bool,
+    ) -> Result<Used, SolverError> {
         let mf = &mut self.multifrontal;
         let before = (mf.symbolic_count, mf.symbolic_seconds, mf.numeric_seconds);
-        let result = mf.factorize(k);
+        let result = mf.factorize(k, symmetric);
         self.own.symbolic += mf.symbolic_count - before.0;
         self.own.symbolic_seconds += mf.symbolic_seconds - before.1;
         self.own.numeric_seconds += mf.numeric_seconds - before.2;
         self.own.numeric += 1;
         match result {
-            Ok(()) => {
+            Ok(kind) => {
                 self.own.factor_nnz = Some(mf.factor_nnz);
-                self.own.last_factor = Some(FactorKind::Lu);
+                self.own.last_factor = Some(kind);
                 self.active = Some(Active::Multifrontal);
                 self.matrix = Some(k.clone());
                 Ok(Used::Multifrontal)
@@ -276,12 +282,12 @@ impl LinearSolver {
         }
     }
 
-    /// [`Method::Multifrontal`]'s refined solve; faer's LU when the refinement rejects the
+    /// [`Method::Multifrontal`]'s solve; faer's LU when the refinement rejects the
     /// factors (recorded).
     fn solve_multifrontal(&mut self, rhs: &mut [f64]) -> Result<Used, SolverError> {
         let k = self.matrix.take().ok_or(SolverError::NotFactorized)?;
         let t = Instant::now();
-        let result = self.multifrontal.solve_refined(&k, rhs);
+        let result = self.multifrontal.solve(&k, rhs);
         self.own.solve_seconds += t.elapsed().as_secs_f64();
         self.own.solves += 1;
         self.own.last_probe_error = self.multifrontal.last_correction;

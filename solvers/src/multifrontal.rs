@@ -1,4 +1,4 @@
-//! Multifrontal LU on the symmetric pattern of `K + Kᵀ` (issue 15).
+//! Multifrontal LU (and Cholesky) on the symmetric pattern of `K + Kᵀ` (issue 15).
 //!
 //! The tangents of the implicit core are unsymmetric (non-associated flow, nonlocal
 //! coupling) but their pattern is symmetric up to a few entries. faer's sparse LU pivots
@@ -19,10 +19,12 @@
 //!           [F21 F22]    U12 = L11⁻¹ P F12,  L21 = F21 U11⁻¹,  C = F22 − L21 U12,
 //!   ```
 //!
-//!   and hands `C` to its parent. Pivots are never delayed to the parent, so the factors
+//!   and hands `C` to its parent. For a symmetric K the fronts are factorised by Cholesky
+//!   instead (`F11 = L11 L11ᵀ`, `L21 = F21 L11⁻ᵀ`, lower triangle of `C = F22 − L21 L21ᵀ`: half
+//!   the flops), and by LU if K proves not positive definite. Pivots are never delayed to the parent, so the factors
 //!   can be less accurate than faer's (on the softening tangents of the finest nonlocal
 //!   biaxial run a plain solve had a forward error of up to 1.2e-7 where faer's LU had
-//!   1e-11): every solve makes one step of iterative refinement, after which the error
+//!   1e-11): every solve with LU factors makes one step of iterative refinement, after which the error
 //!   was at most 1.9e-11 there. A correction larger than [`CORRECTION_LIMIT`] rejects the
 //!   factors, and the caller ([`crate::LinearSolver`]) solves that system with faer's LU.
 //! * **Parallel**: independent subtrees of the elimination tree are factorised as rayon
@@ -35,8 +37,10 @@ use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::linalg::cholesky::llt::factor::{cholesky_in_place, cholesky_in_place_scratch};
 use faer::linalg::lu::partial_pivoting::factor::{lu_in_place, lu_in_place_scratch};
 use faer::linalg::matmul::matmul;
+use faer::linalg::matmul::triangular::{self, BlockStructure};
 use faer::linalg::triangular_solve::{
     solve_lower_triangular_in_place, solve_unit_lower_triangular_in_place,
     solve_upper_triangular_in_place,
@@ -54,7 +58,7 @@ use crate::matrix::Pattern;
 use crate::{FactorKind, SolverError, SparseMatrix};
 
 /// Largest relative size `‖Δx‖∞ / ‖x‖∞` of the refinement correction of
-/// [`MultifrontalLu::solve_refined`] that is accepted: a larger one means the factors (pivots
+/// [`MultifrontalLu::solve`] that is accepted: a larger one means the factors (pivots
 /// chosen within each front only) are too far from K, or K is singular, and the caller solves
 /// with faer's LU instead. Measured on the finest nonlocal biaxial run (1,302 tangents): the
 /// correction is at most ~1e-7 (faer's LU needs none).
@@ -132,14 +136,18 @@ struct FrontFactor {
 pub struct MultifrontalLu {
     symbolic: Option<Symbolic>,
     factors: Vec<FrontFactor>,
-    factored: bool,
+    /// The kind of the present factors (`None` before a successful factorisation).
+    current: Option<FactorKind>,
+    /// Symmetric systems the Cholesky variant found not positive definite (then factorised
+    /// by the LU variant).
+    pub cholesky_failures: usize,
     /// Symbolic analyses made.
     pub symbolic_count: usize,
     /// Seconds in symbolic analyses.
     pub symbolic_seconds: f64,
     /// Seconds in numeric factorisations (probe excluded).
     pub numeric_seconds: f64,
-    /// Relative size of the last refinement correction ([`Self::solve_refined`]).
+    /// Relative size of the last refinement correction ([`Self::solve`]; `None` after a Cholesky solve).
     pub last_correction: Option<f64>,
     /// Stored entries of the last factors (L and U, fronts in full).
     pub factor_nnz: usize,
@@ -151,12 +159,20 @@ impl MultifrontalLu {
         Self::default()
     }
 
-    /// Factorises `k`; the symbolic analysis is reused while the pattern is unchanged.
+    /// Factorises `k`; the symbolic analysis is reused while the pattern is unchanged. With
+    /// `symmetric` (the caller's knowledge that K is symmetric) the fronts are factorised by
+    /// Cholesky, `F11 = L11 L11ᵀ`, `L21 = F21 L11⁻ᵀ`, `C = F22 − L21 L21ᵀ` (lower triangles only:
+    /// half the flops of the LU); a K that is not positive definite is then factorised by the
+    /// LU variant (counted in `cholesky_failures`). Returns the kind of the factors.
     ///
     /// Errors: [`SolverError::Singular`] (factor kind LU) for a zero or non-finite pivot;
     /// [`SolverError::Faer`] if faer's symbolic analysis fails.
-    pub fn factorize(&mut self, k: &SparseMatrix) -> Result<(), SolverError> {
-        self.factored = false;
+    pub fn factorize(
+        &mut self,
+        k: &SparseMatrix,
+        symmetric: bool,
+    ) -> Result<FactorKind, SolverError> {
+        self.current = None;
         let reuse = self
             .symbolic
             .as_ref()
@@ -173,23 +189,48 @@ impl MultifrontalLu {
             .symbolic
             .as_ref()
             .expect("symbolic analysis made above");
-        self.factors = symbolic.factorize(k.values())?;
-        self.factor_nnz = self.factors.iter().map(|f| f.lu.len() + f.u12.len()).sum();
+        let mut kind = if symmetric {
+            FactorKind::Cholesky
+        } else {
+            FactorKind::Lu
+        };
+        let factors = match symbolic.factorize(k.values(), kind) {
+            Err(SolverError::NotPositiveDefinite { .. }) => {
+                self.cholesky_failures += 1;
+                kind = FactorKind::Lu;
+                symbolic.factorize(k.values(), kind)
+            }
+            other => other,
+        };
         self.numeric_seconds += t.elapsed().as_secs_f64();
-        self.factored = true;
-        Ok(())
+        self.factors = factors?;
+        self.factor_nnz = self.factors.iter().map(|f| f.lu.len() + f.u12.len()).sum();
+        self.current = Some(kind);
+        Ok(kind)
     }
 
-    /// Solves `K x = rhs` for the `k` of the last successful [`Self::factorize`] with one
-    /// step of iterative refinement (`r = b − K x`, `x += (LU)⁻¹ r`); `x` overwrites `rhs`.
-    /// The size of that correction, `‖Δx‖∞ / ‖x‖∞`, estimates the error of the unrefined
-    /// solve and is kept in `last_correction`.
+    /// Solves `K x = rhs` for the `k` of the last successful [`Self::factorize`]; `x` overwrites
+    /// `rhs`. LU factors are followed by one step of iterative refinement (`r = b − K x`,
+    /// `x += (LU)⁻¹ r`), whose size `‖Δx‖∞ / ‖x‖∞` estimates the error of the plain solve and
+    /// is kept in `last_correction`; Cholesky factors (backward stable without pivoting) are
+    /// used as they are.
     ///
     /// Errors: [`SolverError::NotFactorized`], [`SolverError::RhsMismatch`];
-    /// [`SolverError::Singular`] if the correction is not finite or exceeds
+    /// [`SolverError::Singular`] if the solution is not finite or the correction exceeds
     /// [`CORRECTION_LIMIT`] (the factors are then too inaccurate to refine; `rhs` is left as
     /// it was given).
-    pub fn solve_refined(&mut self, k: &SparseMatrix, rhs: &mut [f64]) -> Result<(), SolverError> {
+    pub fn solve(&mut self, k: &SparseMatrix, rhs: &mut [f64]) -> Result<(), SolverError> {
+        if self.current == Some(FactorKind::Cholesky) {
+            self.last_correction = None;
+            self.solve_unrefined(rhs)?;
+            return match rhs.iter().position(|v| !v.is_finite()) {
+                Some(i) => Err(SolverError::Singular {
+                    factor: FactorKind::Cholesky,
+                    detail: format!("multifrontal solution is not finite (first at dof {i})"),
+                }),
+                None => Ok(()),
+            };
+        }
         let b = rhs.to_vec();
         self.solve_unrefined(rhs)?;
         let mut r = vec![0.0; b.len()];
@@ -223,10 +264,11 @@ impl MultifrontalLu {
     ///
     /// Errors: [`SolverError::NotFactorized`], [`SolverError::RhsMismatch`].
     pub fn solve_unrefined(&self, rhs: &mut [f64]) -> Result<(), SolverError> {
-        let symbolic = match (&self.symbolic, self.factored) {
-            (Some(s), true) => s,
+        let (symbolic, kind) = match (&self.symbolic, self.current) {
+            (Some(s), Some(kind)) => (s, kind),
             _ => return Err(SolverError::NotFactorized),
         };
+        let cholesky = kind == FactorKind::Cholesky;
         let n = symbolic.perm.len();
         if rhs.len() != n {
             return Err(SolverError::RhsMismatch {
@@ -242,13 +284,16 @@ impl MultifrontalLu {
             let (ns, m) = (front.pivots(), front.order());
             let ms = m - ns;
             gathered.clear();
-            gathered.extend(factor.piv.iter().map(|&i| w[front.begin + i]));
             let lu = MatRef::from_column_major_slice(&factor.lu, m, ns);
-            solve_unit_lower_triangular_in_place(
-                lu.subrows(0, ns),
-                MatMut::from_column_major_slice_mut(&mut gathered, ns, 1),
-                Par::Seq,
-            );
+            if cholesky {
+                gathered.extend_from_slice(&w[front.begin..front.end]);
+                let z = MatMut::from_column_major_slice_mut(&mut gathered, ns, 1);
+                solve_lower_triangular_in_place(lu.subrows(0, ns), z, Par::Seq);
+            } else {
+                gathered.extend(factor.piv.iter().map(|&i| w[front.begin + i]));
+                let z = MatMut::from_column_major_slice_mut(&mut gathered, ns, 1);
+                solve_unit_lower_triangular_in_place(lu.subrows(0, ns), z, Par::Seq);
+            }
             w[front.begin..front.end].copy_from_slice(&gathered);
             if ms > 0 {
                 product.clear();
@@ -277,20 +322,27 @@ impl MultifrontalLu {
             if ms > 0 {
                 product.clear();
                 product.extend(front.rows.iter().map(|&r| w[r]));
+                // U12 = L21ᵀ for Cholesky factors
+                let u12 = if cholesky {
+                    lu.subrows(ns, ms).transpose()
+                } else {
+                    MatRef::from_column_major_slice(&factor.u12, ns, ms)
+                };
                 matmul(
                     MatMut::from_column_major_slice_mut(&mut gathered, ns, 1),
                     Accum::Add,
-                    MatRef::from_column_major_slice(&factor.u12, ns, ms),
+                    u12,
                     MatRef::from_column_major_slice(&product, ms, 1),
                     -1.0,
                     Par::Seq,
                 );
             }
-            solve_upper_triangular_in_place(
-                lu.subrows(0, ns),
-                MatMut::from_column_major_slice_mut(&mut gathered, ns, 1),
-                Par::Seq,
-            );
+            let y = MatMut::from_column_major_slice_mut(&mut gathered, ns, 1);
+            if cholesky {
+                solve_upper_triangular_in_place(lu.subrows(0, ns).transpose(), y, Par::Seq);
+            } else {
+                solve_upper_triangular_in_place(lu.subrows(0, ns), y, Par::Seq);
+            }
             w[front.begin..front.end].copy_from_slice(&gathered);
         }
         for (&old, v) in symbolic.perm.iter().zip(&w) {
@@ -404,12 +456,12 @@ impl Symbolic {
     }
 
     /// The numeric factorisation: the tasks in parallel, then the top fronts in order.
-    fn factorize(&self, values: &[f64]) -> Result<Vec<FrontFactor>, SolverError> {
+    fn factorize(&self, values: &[f64], kind: FactorKind) -> Result<Vec<FrontFactor>, SolverError> {
         let count = self.fronts.len();
         let contributions: Vec<Mutex<Vec<f64>>> = (0..count).map(|_| Mutex::default()).collect();
         let factors: Vec<Mutex<FrontFactor>> = (0..count).map(|_| Mutex::default()).collect();
         let run = |s: usize| -> Result<(), SolverError> {
-            let (factor, contribution) = self.factor_front(s, values, &contributions)?;
+            let (factor, contribution) = self.factor_front(s, values, kind, &contributions)?;
             *factors[s].lock().expect("front factor lock") = factor;
             *contributions[s].lock().expect("contribution lock") = contribution;
             Ok(())
@@ -437,6 +489,7 @@ impl Symbolic {
         &self,
         s: usize,
         values: &[f64],
+        kind: FactorKind,
         contributions: &[Mutex<Vec<f64>>],
     ) -> Result<(FrontFactor, Vec<f64>), SolverError> {
         let front = &self.fronts[s];
@@ -457,61 +510,26 @@ impl Symbolic {
                 }
             }
         }
-        let mut piv = vec![0usize; ns];
-        let mut piv_inv = vec![0usize; ns];
+        let mut piv = Vec::new();
         {
             let matrix = MatMut::from_column_major_slice_mut(&mut dense, m, m);
-            let (mut f11, mut f12, mut f21, mut f22) = matrix.split_at_mut(ns, ns);
-            let mut memory = MemBuffer::new(lu_in_place_scratch::<usize, f64>(
-                ns,
-                ns,
-                Par::Seq,
-                Default::default(),
-            ));
-            lu_in_place(
-                f11.rb_mut(),
-                &mut piv,
-                &mut piv_inv,
-                Par::Seq,
-                MemStack::new(&mut memory),
-                Default::default(),
-            );
-            for i in 0..ns {
-                let pivot = f11[(i, i)];
-                if pivot == 0.0 || !pivot.is_finite() {
-                    return Err(SolverError::Singular {
-                        factor: FactorKind::Lu,
-                        detail: format!(
-                            "multifrontal LU: pivot {pivot:e} at unknown {} (permuted)",
-                            front.begin + i
-                        ),
-                    });
+            let (f11, f12, f21, f22) = matrix.split_at_mut(ns, ns);
+            match kind {
+                FactorKind::Lu => {
+                    piv = factor_lu(f11, f12, f21, f22, front.begin)?;
                 }
-            }
-            if ms > 0 {
-                let mut column = vec![0.0; ns];
-                for j in 0..ms {
-                    for (i, c) in column.iter_mut().enumerate() {
-                        *c = f12[(piv[i], j)];
-                    }
-                    for (i, c) in column.iter().enumerate() {
-                        f12[(i, j)] = *c;
-                    }
-                }
-                solve_unit_lower_triangular_in_place(f11.rb(), f12.rb_mut(), Par::Seq);
-                solve_lower_triangular_in_place(
-                    f11.rb().transpose(),
-                    f21.rb_mut().transpose_mut(),
-                    Par::Seq,
-                );
-                matmul(f22.rb_mut(), Accum::Add, f21.rb(), f12.rb(), -1.0, Par::Seq);
+                FactorKind::Cholesky => factor_cholesky(f11, f21, f22, front.begin)?,
             }
         }
-        let mut u12 = vec![0.0; ns * ms];
+        // U12 is kept for LU factors only (Cholesky's is L21ᵀ)
+        let lu = kind == FactorKind::Lu;
+        let mut u12 = vec![0.0; if lu { ns * ms } else { 0 }];
         let mut contribution = vec![0.0; ms * ms];
         for j in 0..ms {
             let column = &dense[(ns + j) * m..(ns + j + 1) * m];
-            u12[j * ns..(j + 1) * ns].copy_from_slice(&column[..ns]);
+            if lu {
+                u12[j * ns..(j + 1) * ns].copy_from_slice(&column[..ns]);
+            }
             contribution[j * ms..(j + 1) * ms].copy_from_slice(&column[ns..]);
         }
         dense.truncate(m * ns);
@@ -524,6 +542,113 @@ impl Symbolic {
             contribution,
         ))
     }
+}
+
+type Block<'a> = MatMut<'a, f64>;
+
+/// The LU step of a front (module documentation): `P F11 = L11 U11` with partial pivoting
+/// among the fully summed rows, `U12 = L11⁻¹ P F12`, `L21 = F21 U11⁻¹`, `C = F22 − L21 U12`,
+/// all in place. Returns the row permutation. `first` (the front's first permuted unknown)
+/// names a zero pivot in the error.
+fn factor_lu(
+    mut f11: Block,
+    mut f12: Block,
+    mut f21: Block,
+    mut f22: Block,
+    first: usize,
+) -> Result<Vec<usize>, SolverError> {
+    let (ns, ms) = (f11.nrows(), f12.ncols());
+    let mut piv = vec![0usize; ns];
+    let mut piv_inv = vec![0usize; ns];
+    let mut memory = MemBuffer::new(lu_in_place_scratch::<usize, f64>(
+        ns,
+        ns,
+        Par::Seq,
+        Default::default(),
+    ));
+    lu_in_place(
+        f11.rb_mut(),
+        &mut piv,
+        &mut piv_inv,
+        Par::Seq,
+        MemStack::new(&mut memory),
+        Default::default(),
+    );
+    for i in 0..ns {
+        let pivot = f11[(i, i)];
+        if pivot == 0.0 || !pivot.is_finite() {
+            return Err(SolverError::Singular {
+                factor: FactorKind::Lu,
+                detail: format!(
+                    "multifrontal LU: pivot {pivot:e} at unknown {} (permuted)",
+                    first + i
+                ),
+            });
+        }
+    }
+    if ms > 0 {
+        let mut column = vec![0.0; ns];
+        for j in 0..ms {
+            for (i, c) in column.iter_mut().enumerate() {
+                *c = f12[(piv[i], j)];
+            }
+            for (i, c) in column.iter().enumerate() {
+                f12[(i, j)] = *c;
+            }
+        }
+        solve_unit_lower_triangular_in_place(f11.rb(), f12.rb_mut(), Par::Seq);
+        solve_lower_triangular_in_place(
+            f11.rb().transpose(),
+            f21.rb_mut().transpose_mut(),
+            Par::Seq,
+        );
+        matmul(f22.rb_mut(), Accum::Add, f21.rb(), f12.rb(), -1.0, Par::Seq);
+    }
+    Ok(piv)
+}
+
+/// The Cholesky step of a front of a symmetric K: `F11 = L11 L11ᵀ`, `L21 = F21 L11⁻ᵀ`, and the
+/// lower triangle of `C = F22 − L21 L21ᵀ`, in place (the upper triangles are not read).
+///
+/// Errors: [`SolverError::NotPositiveDefinite`] if `F11` is not.
+fn factor_cholesky(
+    mut f11: Block,
+    mut f21: Block,
+    mut f22: Block,
+    first: usize,
+) -> Result<(), SolverError> {
+    let ns = f11.nrows();
+    let mut memory = MemBuffer::new(cholesky_in_place_scratch::<f64>(
+        ns,
+        Par::Seq,
+        Default::default(),
+    ));
+    cholesky_in_place(
+        f11.rb_mut(),
+        Default::default(),
+        Par::Seq,
+        MemStack::new(&mut memory),
+        Default::default(),
+    )
+    .map_err(|_| SolverError::NotPositiveDefinite {
+        method: "multifrontal Cholesky",
+        detail: format!("a pivot of the front at unknown {first} (permuted) is not positive"),
+    })?;
+    if f21.nrows() > 0 {
+        solve_lower_triangular_in_place(f11.rb(), f21.rb_mut().transpose_mut(), Par::Seq);
+        triangular::matmul(
+            f22.rb_mut(),
+            BlockStructure::TriangularLower,
+            Accum::Add,
+            f21.rb(),
+            BlockStructure::Rectangular,
+            f21.rb().transpose(),
+            BlockStructure::Rectangular,
+            -1.0,
+            Par::Seq,
+        );
+    }
+    Ok(())
 }
 
 /// Splits the elimination tree into subtrees for parallel tasks: starting from the roots,
@@ -561,6 +686,12 @@ mod tests {
     /// A 2D 5-point stencil with two unknowns per node and unsymmetric values (a convection-like
     /// skew part), diagonally dominant: every pivot is safe.
     fn grid_matrix(nx: usize, ny: usize, skew: f64) -> SparseMatrix {
+        grid_matrix_coupled(nx, ny, skew, 0.1)
+    }
+
+    /// [`grid_matrix`] with a cross-component coupling `± coupling` to the neighbours (sign by
+    /// direction: antisymmetric; `coupling = 0` and `skew = 0` give a symmetric matrix).
+    fn grid_matrix_coupled(nx: usize, ny: usize, skew: f64, coupling: f64) -> SparseMatrix {
         let node = |i: usize, j: usize| j * nx + i;
         let mut t = Vec::new();
         for j in 0..ny {
@@ -585,7 +716,7 @@ mod tests {
                     for &b in &neighbours {
                         let sign = if b > a { 1.0 } else { -1.0 };
                         t.push((2 * a + c, 2 * b + c, -1.0 + sign * skew));
-                        t.push((2 * a + c, 2 * b + 1 - c, 0.1 * sign));
+                        t.push((2 * a + c, 2 * b + 1 - c, coupling * sign));
                     }
                 }
             }
@@ -611,9 +742,9 @@ mod tests {
         let n = k.n();
         let b: Vec<f64> = (0..n).map(|i| ((i * 31) % 17) as f64 - 8.0).collect();
         let mut lu = MultifrontalLu::new();
-        lu.factorize(&k).unwrap();
+        lu.factorize(&k, false).unwrap();
         let mut x = b.clone();
-        lu.solve_refined(&k, &mut x).unwrap();
+        lu.solve(&k, &mut x).unwrap();
         let res = residual(&k, &x, &b);
         assert!(res < 1e-14, "relative residual {res:e}");
         assert!(lu.last_correction.unwrap() < 1e-13);
@@ -632,9 +763,9 @@ mod tests {
         let k = SparseMatrix::from_parts(Arc::clone(&base.pattern), values);
         let b: Vec<f64> = (0..k.n()).map(|i| 1.0 + (i % 5) as f64).collect();
         let mut lu = MultifrontalLu::new();
-        lu.factorize(&k).unwrap();
+        lu.factorize(&k, false).unwrap();
         let mut x = b.clone();
-        lu.solve_refined(&k, &mut x).unwrap();
+        lu.solve(&k, &mut x).unwrap();
         let res = residual(&k, &x, &b);
         assert!(res < 1e-11, "relative residual {res:e}");
     }
@@ -648,9 +779,9 @@ mod tests {
         }
         let b: Vec<f64> = (0..k.n()).map(|i| (i as f64).sin()).collect();
         let solve = |lu: &mut MultifrontalLu, m: &SparseMatrix| {
-            lu.factorize(m).unwrap();
+            lu.factorize(m, false).unwrap();
             let mut x = b.clone();
-            lu.solve_refined(m, &mut x).unwrap();
+            lu.solve(m, &mut x).unwrap();
             x
         };
         let mut lu = MultifrontalLu::new();
@@ -681,7 +812,42 @@ mod tests {
             }
         }
         let k = SparseMatrix::from_parts(Arc::clone(&base.pattern), values);
-        let err = MultifrontalLu::new().factorize(&k).unwrap_err();
+        let err = MultifrontalLu::new().factorize(&k, false).unwrap_err();
         assert!(matches!(err, SolverError::Singular { .. }), "{err}");
+    }
+
+    #[test]
+    fn cholesky_fronts_for_a_symmetric_matrix_and_lu_fronts_when_it_is_indefinite() {
+        let k = grid_matrix_coupled(25, 21, 0.0, 0.0);
+        assert!(k.is_symmetric(0.0));
+        let b: Vec<f64> = (0..k.n()).map(|i| ((i * 13) % 11) as f64 - 5.0).collect();
+        let mut solutions = Vec::new();
+        for symmetric in [true, false] {
+            let mut lu = MultifrontalLu::new();
+            let kind = lu.factorize(&k, symmetric).unwrap();
+            assert_eq!(kind == FactorKind::Cholesky, symmetric);
+            let mut x = b.clone();
+            lu.solve(&k, &mut x).unwrap();
+            let res = residual(&k, &x, &b);
+            assert!(res < 1e-15, "{kind:?}: relative residual {res:e}");
+            solutions.push(x);
+        }
+        let d = solutions[0]
+            .iter()
+            .zip(&solutions[1])
+            .fold(0.0f64, |m, (a, c)| m.max((a - c).abs()));
+        assert!(d < 1e-14, "Cholesky and LU fronts differ by {d:e}");
+
+        // a negative diagonal entry makes K indefinite: the LU fronts take over
+        let mut values = k.values().to_vec();
+        values[k.position(40, 40).unwrap()] = -8.0;
+        let indefinite = SparseMatrix::from_parts(Arc::clone(&k.pattern), values);
+        let mut lu = MultifrontalLu::new();
+        assert_eq!(lu.factorize(&indefinite, true).unwrap(), FactorKind::Lu);
+        assert_eq!(lu.cholesky_failures, 1);
+        let mut x = b.clone();
+        lu.solve(&indefinite, &mut x).unwrap();
+        let res = residual(&indefinite, &x, &b);
+        assert!(res < 1e-14, "relative residual {res:e}");
     }
 }

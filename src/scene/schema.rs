@@ -314,9 +314,10 @@ pub enum LinearSolverChoice {
     /// Sparse LU whose factors precondition GMRES for the next Newton iterations while the
     /// pattern holds (refactorised when GMRES needs more than 12 steps).
     LuReuse,
-    /// Multifrontal LU on the symmetric pattern of K + Kᵀ (AMD ordering, partial pivoting
-    /// within each front, independent subtrees in parallel); faer's LU for a system whose
-    /// factors fail the probe (recorded).
+    /// Multifrontal factorisation on the symmetric pattern of K + Kᵀ (AMD ordering; Cholesky
+    /// fronts for a symmetric positive definite K, else LU fronts with partial pivoting within
+    /// each front; independent subtrees in parallel; one step of iterative refinement per
+    /// solve); faer's LU for a system it cannot factorise accurately (recorded).
     Multifrontal,
 }
 
