@@ -194,11 +194,17 @@ impl MultifrontalLu {
         } else {
             FactorKind::Lu
         };
-        let factors = match symbolic.factorize(k.values(), kind) {
+        // the last factors' storage is refilled where the analysis is the same
+        let recycled = if reuse {
+            std::mem::take(&mut self.factors)
+        } else {
+            Vec::new()
+        };
+        let factors = match symbolic.factorize(k.values(), kind, recycled) {
             Err(SolverError::NotPositiveDefinite { .. }) => {
                 self.cholesky_failures += 1;
                 kind = FactorKind::Lu;
-                symbolic.factorize(k.values(), kind)
+                symbolic.factorize(k.values(), kind, Vec::new())
             }
             other => other,
         };
@@ -456,12 +462,25 @@ impl Symbolic {
     }
 
     /// The numeric factorisation: the tasks in parallel, then the top fronts in order.
-    fn factorize(&self, values: &[f64], kind: FactorKind) -> Result<Vec<FrontFactor>, SolverError> {
+    /// `recycled`: the factors of an earlier factorisation with this analysis (or empty),
+    /// whose storage is refilled (no fresh memory to map for the large fronts).
+    fn factorize(
+        &self,
+        values: &[f64],
+        kind: FactorKind,
+        recycled: Vec<FrontFactor>,
+    ) -> Result<Vec<FrontFactor>, SolverError> {
         let count = self.fronts.len();
         let contributions: Vec<Mutex<Vec<f64>>> = (0..count).map(|_| Mutex::default()).collect();
-        let factors: Vec<Mutex<FrontFactor>> = (0..count).map(|_| Mutex::default()).collect();
+        let factors: Vec<Mutex<FrontFactor>> = if recycled.len() == count {
+            recycled.into_iter().map(Mutex::new).collect()
+        } else {
+            (0..count).map(|_| Mutex::default()).collect()
+        };
         let run = |s: usize| -> Result<(), SolverError> {
-            let (factor, contribution) = self.factor_front(s, values, kind, &contributions)?;
+            let storage = std::mem::take(&mut *factors[s].lock().expect("front factor lock"));
+            let (factor, contribution) =
+                self.factor_front(s, values, kind, &contributions, storage)?;
             *factors[s].lock().expect("front factor lock") = factor;
             *contributions[s].lock().expect("contribution lock") = contribution;
             Ok(())
@@ -484,18 +503,26 @@ impl Symbolic {
     }
 
     /// Assembles front `s` (K's entries, then its children's contribution blocks in order) and
-    /// factorises its fully summed block; returns its factors and its contribution block.
+    /// factorises its fully summed block; returns its factors (in `storage`'s vectors) and
+    /// its contribution block.
     fn factor_front(
         &self,
         s: usize,
         values: &[f64],
         kind: FactorKind,
         contributions: &[Mutex<Vec<f64>>],
+        storage: FrontFactor,
     ) -> Result<(FrontFactor, Vec<f64>), SolverError> {
         let front = &self.fronts[s];
         let (ns, m) = (front.pivots(), front.order());
         let ms = m - ns;
-        let mut dense = vec![0.0; m * m];
+        let FrontFactor {
+            lu: mut dense,
+            mut u12,
+            mut piv,
+        } = storage;
+        dense.clear();
+        dense.resize(m * m, 0.0);
         for &(k, offset) in &front.entries {
             dense[offset] += values[k];
         }
@@ -510,20 +537,19 @@ impl Symbolic {
                 }
             }
         }
-        let mut piv = Vec::new();
+        piv.clear();
         {
             let matrix = MatMut::from_column_major_slice_mut(&mut dense, m, m);
             let (f11, f12, f21, f22) = matrix.split_at_mut(ns, ns);
             match kind {
-                FactorKind::Lu => {
-                    piv = factor_lu(f11, f12, f21, f22, front.begin)?;
-                }
+                FactorKind::Lu => factor_lu(f11, f12, f21, f22, front.begin, &mut piv)?,
                 FactorKind::Cholesky => factor_cholesky(f11, f21, f22, front.begin)?,
             }
         }
         // U12 is kept for LU factors only (Cholesky's is L21ᵀ)
         let lu = kind == FactorKind::Lu;
-        let mut u12 = vec![0.0; if lu { ns * ms } else { 0 }];
+        u12.clear();
+        u12.resize(if lu { ns * ms } else { 0 }, 0.0);
         let mut contribution = vec![0.0; ms * ms];
         for j in 0..ms {
             let column = &dense[(ns + j) * m..(ns + j + 1) * m];
@@ -548,7 +574,7 @@ type Block<'a> = MatMut<'a, f64>;
 
 /// The LU step of a front (module documentation): `P F11 = L11 U11` with partial pivoting
 /// among the fully summed rows, `U12 = L11⁻¹ P F12`, `L21 = F21 U11⁻¹`, `C = F22 − L21 U12`,
-/// all in place. Returns the row permutation. `first` (the front's first permuted unknown)
+/// all in place; the row permutation is written to `piv`. `first` (the front's first permuted unknown)
 /// names a zero pivot in the error.
 fn factor_lu(
     mut f11: Block,
@@ -556,9 +582,10 @@ fn factor_lu(
     mut f21: Block,
     mut f22: Block,
     first: usize,
-) -> Result<Vec<usize>, SolverError> {
+    piv: &mut Vec<usize>,
+) -> Result<(), SolverError> {
     let (ns, ms) = (f11.nrows(), f12.ncols());
-    let mut piv = vec![0usize; ns];
+    piv.resize(ns, 0);
     let mut piv_inv = vec![0usize; ns];
     let mut memory = MemBuffer::new(lu_in_place_scratch::<usize, f64>(
         ns,
@@ -568,7 +595,7 @@ fn factor_lu(
     ));
     lu_in_place(
         f11.rb_mut(),
-        &mut piv,
+        piv,
         &mut piv_inv,
         Par::Seq,
         MemStack::new(&mut memory),
@@ -604,7 +631,7 @@ fn factor_lu(
         );
         matmul(f22.rb_mut(), Accum::Add, f21.rb(), f12.rb(), -1.0, Par::Seq);
     }
-    Ok(piv)
+    Ok(())
 }
 
 /// The Cholesky step of a front of a symmetric K: `F11 = L11 L11ᵀ`, `L21 = F21 L11⁻ᵀ`, and the
@@ -788,6 +815,8 @@ mod tests {
         let x1 = solve(&mut lu, &k);
         let x2 = solve(&mut lu, &scaled);
         assert_eq!(lu.symbolic_count, 1);
+        // the recycled storage of the second factorisation gives the first one's bits again
+        assert_eq!(solve(&mut lu, &k), x1);
         assert!(residual(&scaled, &x2, &b) < 1e-14);
         let single = rayon::ThreadPoolBuilder::new()
             .num_threads(1)
