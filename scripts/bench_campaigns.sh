@@ -8,6 +8,7 @@
 #   JOBS=1 scripts/bench_campaigns.sh             # one run at a time (cleanest per-run figures)
 #   CAMPAIGNS="biaxial footing" scripts/bench_campaigns.sh
 #   scripts/bench_campaigns.sh --set scene.steps=5   # extra arguments go to every campaign
+#   scripts/bench_campaigns.sh --set 'solver.linear_solver="multifrontal"'   # the multifrontal LU (issue 15)
 #
 # A campaign resumes what its output directory already holds (same scenes):
 # delete OUT, or set OUT to a new directory, for a fresh timing.
