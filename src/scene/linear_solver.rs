@@ -76,6 +76,22 @@ impl SolverSpec {
                 refuse("solver.ordering", m);
             }
         }
+        if options.method == Method::Multifrontal {
+            // the multifrontal factorisation has its own ordering (AMD of K + Kᵀ) and is
+            // supernodal: faer's choices would be ignored
+            if self.ordering != OrderingChoice::Default {
+                refuse(
+                    "solver.ordering",
+                    "does not apply to `multifrontal` (it orders by AMD of K + Kᵀ)".into(),
+                );
+            }
+            if self.factorization != FactorizationChoice::Auto {
+                refuse(
+                    "solver.factorization",
+                    "does not apply to `multifrontal` (its fronts are dense blocks)".into(),
+                );
+            }
+        }
         if !(self.pcg_tolerance > 0.0 && self.pcg_tolerance < 1.0) {
             refuse(
                 "solver.pcg_tolerance",

@@ -65,6 +65,28 @@ fn invalid_values_are_all_reported_with_field_names() {
     );
 }
 
+/// `linear_solver = "multifrontal"` loads; with faer's ordering or factorisation keys (which it
+/// would ignore) it is refused naming them.
+#[test]
+fn multifrontal_refuses_faer_only_keys() {
+    let set = |extra: &[&str]| {
+        let mut o = vec!["solver.linear_solver=\"multifrontal\"".to_string()];
+        o.extend(extra.iter().map(|s| s.to_string()));
+        Scene::from_str_with_overrides(MINIMAL, "t", &o)
+    };
+    assert!(set(&[]).is_ok());
+    let e = set(&[
+        "solver.ordering=\"colamd\"",
+        "solver.factorization=\"simplicial\"",
+    ])
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("solver.ordering") && e.contains("solver.factorization"),
+        "{e}"
+    );
+}
+
 #[test]
 fn gravity_ramp_steps_like_the_vertical_cut() {
     let l = LoadSpec {
