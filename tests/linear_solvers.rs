@@ -308,5 +308,9 @@ fn multifrontal_reproduces_the_footing_with_faer_lu() {
         let json: serde_json::Value = serde_json::from_str(&text).unwrap();
         assert_eq!(json["solver"]["linear"]["fallbacks_to_lu"], 0, "{scene}");
         assert_eq!(json["solver"]["factorisation"]["numeric_lu"], 0, "{scene}");
+        // unsymmetric tangents: LU fronts, counted as LU factorisations
+        let usage = &json["solver"]["usage"];
+        assert!(usage["lu"].as_u64().unwrap() > 0, "{scene}");
+        assert_eq!(usage["cholesky"], 0, "{scene}");
     }
 }

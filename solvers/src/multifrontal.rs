@@ -1,11 +1,12 @@
 //! Multifrontal LU (and Cholesky) on the symmetric pattern of `K + Kᵀ` (issue 15).
 //!
-//! The tangents of the implicit core are unsymmetric (non-associated flow, nonlocal
-//! coupling) but their pattern is symmetric up to a few entries. faer's sparse LU pivots
-//! across the whole matrix, so its symbolic step must size the factors by the Cholesky
-//! factor of `KᵀK` (COLAMD): on the footing's tangent (n = 22,700) that bound holds 14.5 M
-//! entries and the numeric LU costs 5× the Cholesky of a symmetric matrix of the same
-//! pattern. This module factorises on the pattern of `K + Kᵀ` instead:
+//! The tangents of the implicit core are unsymmetric in their values (non-associated flow,
+//! nonlocal coupling), while their pattern comes from element blocks that couple nodes both
+//! ways. faer's sparse LU pivots across the whole matrix, so its symbolic step must size the
+//! factors by the Cholesky factor of `KᵀK` (COLAMD): on the footing's tangent
+//! (n = 22,700) that bound holds 14.5 M entries and the numeric LU costs 5× the Cholesky of
+//! a symmetric matrix of the same pattern. This module factorises on the pattern of
+//! `K + Kᵀ` instead:
 //!
 //! * **Symbolic** (once per pattern): AMD ordering, elimination tree and supernodes of the
 //!   Cholesky factor of `K + Kᵀ`, from faer's supernodal symbolic Cholesky. Every supernode
@@ -20,11 +21,12 @@
 //!   ```
 //!
 //!   and hands `C` to its parent. For a symmetric K the fronts are factorised by Cholesky
-//!   instead (`F11 = L11 L11ᵀ`, `L21 = F21 L11⁻ᵀ`, lower triangle of `C = F22 − L21 L21ᵀ`: half
-//!   the flops), and by LU if K proves not positive definite. Pivots are never delayed to the parent, so the factors
-//!   can be less accurate than faer's (on the softening tangents of the finest nonlocal
-//!   biaxial run a plain solve had a forward error of up to 1.2e-7 where faer's LU had
-//!   1e-11): every solve with LU factors makes one step of iterative refinement, after which the error
+//!   instead (`F11 = L11 L11ᵀ`, `L21 = F21 L11⁻ᵀ`, lower triangle of `C = F22 − L21 L21ᵀ`:
+//!   half the flops), and by LU if K proves not positive definite.
+//! * **Accuracy**: pivots are never delayed to the parent, so LU factors can be less
+//!   accurate than faer's (on the softening tangents of the finest nonlocal biaxial run a
+//!   plain solve had a forward error of up to 1.2e-7 where faer's LU had 1e-11). Every
+//!   solve with LU factors makes one step of iterative refinement, after which the error
 //!   was at most 1.9e-11 there. A correction larger than [`CORRECTION_LIMIT`] rejects the
 //!   factors, and the caller ([`crate::LinearSolver`]) solves that system with faer's LU.
 //! * **Parallel**: independent subtrees of the elimination tree are factorised as rayon

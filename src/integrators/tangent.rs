@@ -5,7 +5,7 @@
 
 use rayon::prelude::*;
 
-use mpm_solvers::{Assembler, LinearSolver, SolverStats, SparseMatrix, Used};
+use mpm_solvers::{Assembler, FactorKind, LinearSolver, SolverStats, SparseMatrix, Used};
 
 use super::export::SystemExport;
 use super::newton::StepSystem;
@@ -211,8 +211,13 @@ impl Tangent {
         // `lu_reuse` factorises in the solve when GMRES gives up
         count_factorisations(&factorised, &self.solver.stats(), profile);
         let used = used?;
+        // the multifrontal factorisation counts as the kind of its fronts
+        let multifrontal_kind = self.solver.stats().last_factor;
         match used {
             Used::Cholesky => usage.cholesky += 1,
+            Used::Multifrontal if multifrontal_kind == Some(FactorKind::Cholesky) => {
+                usage.cholesky += 1
+            }
             Used::Lu | Used::LuReused | Used::Multifrontal => usage.lu += 1,
             Used::Pcg => usage.pcg += 1,
             Used::Ldl => usage.ldl += 1,
