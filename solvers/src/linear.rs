@@ -37,7 +37,7 @@ pub enum Method {
     /// Multifrontal factorisation on the symmetric pattern of K + Kᵀ ([`crate::MultifrontalLu`]:
     /// AMD ordering, Cholesky fronts for a symmetric positive definite K, else LU fronts with
     /// partial pivoting within each front; independent subtrees in parallel);
-    /// every solve refines once, and a system whose refinement correction exceeds
+    /// every solve with LU fronts refines once, and a system whose refinement correction exceeds
     /// `MULTIFRONTAL_CORRECTION_LIMIT` (1e-4) is solved by faer's LU instead (recorded).
     Multifrontal,
 }
@@ -87,7 +87,7 @@ pub enum Used {
     Ldl,
     /// GMRES preconditioned by the LU factors of an earlier K ([`Method::LuReuse`]).
     LuReused,
-    /// The multifrontal LU ([`Method::Multifrontal`]).
+    /// The multifrontal factorisation, LU or Cholesky fronts ([`Method::Multifrontal`]).
     Multifrontal,
 }
 

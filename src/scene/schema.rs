@@ -317,7 +317,8 @@ pub enum LinearSolverChoice {
     /// Multifrontal factorisation on the symmetric pattern of K + Kᵀ (AMD ordering; Cholesky
     /// fronts for a symmetric positive definite K, else LU fronts with partial pivoting within
     /// each front; independent subtrees in parallel; one step of iterative refinement per
-    /// solve); faer's LU for a system it cannot factorise accurately (recorded).
+    /// solve with LU fronts); faer's LU for a system it cannot factorise accurately
+    /// (recorded).
     Multifrontal,
 }
 
