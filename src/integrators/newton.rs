@@ -6,7 +6,10 @@
 use mpm_solvers::SolverError;
 
 use super::tangent::Tangent;
-use super::{evaluate_stresses, NonlocalStep, SolverUsage, StepSetup, TrialStresses};
+use super::{
+    evaluate_stresses, evaluate_stresses_without_tangent, NonlocalStep, SolverUsage, StepSetup,
+    TrialStresses,
+};
 use crate::bc::DofConstraint;
 use crate::constitutive::ConstitutiveError;
 use crate::dofs::{gather_free_into, DofMap};
@@ -230,23 +233,53 @@ impl StepSystem<'_> {
         res: &mut Residual,
         profile: &Profile,
     ) -> Result<(), NewtonError> {
+        self.evaluate_with(du, nonlocal, trial, (scratch, res), profile, true)
+    }
+
+    /// [`Self::evaluate_into`] for a residual that no tangent is assembled
+    /// from (the line search's reference at a new κ̄): the same stresses and
+    /// residual, with `trial.tangent` left empty (no consistent tangents, so
+    /// no sensitivity solves in the return mappings).
+    fn residual_only_into(
+        &self,
+        du: &[[f64; 2]],
+        nonlocal: Option<&NonlocalStep>,
+        trial: &mut TrialStresses,
+        scratch: &mut ResidualScratch,
+        res: &mut Residual,
+        profile: &Profile,
+    ) -> Result<(), NewtonError> {
+        self.evaluate_with(du, nonlocal, trial, (scratch, res), profile, false)
+    }
+
+    /// The stress update (with the tangents if `tangents`) and the residual.
+    fn evaluate_with(
+        &self,
+        du: &[[f64; 2]],
+        nonlocal: Option<&NonlocalStep>,
+        trial: &mut TrialStresses,
+        (scratch, res): (&mut ResidualScratch, &mut Residual),
+        profile: &Profile,
+        tangents: bool,
+    ) -> Result<(), NewtonError> {
         let model = self.model;
         // compliances for the spin term of the tangent (`stiffness::add_spin_stiffness`),
         // included when the tangent is unsymmetric anyway (LU); symmetric
         // (Cholesky) scenes omit this unsymmetric geometric term and converge
         // linearly under large rotations.
         let spin_term = !model.symmetric_tangent();
+        let strength = nonlocal.map(|n| n.strength());
         profile
             .time(Stage::StressUpdate, || {
-                evaluate_stresses(
-                    model,
-                    self.setup,
-                    du,
-                    nonlocal.map(|n| n.strength()),
-                    spin_term,
-                    trial,
-                )
-                .counted(profile)
+                let tally = if tangents {
+                    evaluate_stresses(model, self.setup, du, strength, spin_term, trial)
+                } else {
+                    let shapes = &self.setup.shapes;
+                    evaluate_stresses_without_tangent(
+                        model, self.setup, shapes, du, strength, trial,
+                    )
+                };
+                tally.counted(profile)
             })
             .map_err(|(p, e)| NewtonError::Constitutive(p, e))?;
         self.residual(trial, du, scratch, res, profile);
@@ -649,7 +682,7 @@ pub fn solve(
                 let Candidate {
                     trial, residual, ..
                 } = &mut *spare;
-                system.evaluate_into(du, Some(nl), trial, scratch, residual, profile)?;
+                system.residual_only_into(du, Some(nl), trial, scratch, residual, profile)?;
                 residual.norm
             }
             _ => res.norm,
