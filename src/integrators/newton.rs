@@ -236,23 +236,10 @@ impl StepSystem<'_> {
         self.evaluate_with(du, nonlocal, trial, (scratch, res), profile, true)
     }
 
-    /// [`Self::evaluate_into`] for a residual that no tangent is assembled
-    /// from (the line search's reference at a new κ̄): the same stresses and
-    /// residual, with `trial.tangent` left empty (no consistent tangents, so
-    /// no sensitivity solves in the return mappings).
-    fn residual_only_into(
-        &self,
-        du: &[[f64; 2]],
-        nonlocal: Option<&NonlocalStep>,
-        trial: &mut TrialStresses,
-        scratch: &mut ResidualScratch,
-        res: &mut Residual,
-        profile: &Profile,
-    ) -> Result<(), NewtonError> {
-        self.evaluate_with(du, nonlocal, trial, (scratch, res), profile, false)
-    }
-
-    /// The stress update (with the tangents if `tangents`) and the residual.
+    /// The stress update and the residual; with `tangents` false (a residual
+    /// that no tangent is assembled from, e.g. the line search's reference at
+    /// a new κ̄) the same stresses and residual, `trial.tangent` left empty and
+    /// no sensitivity solves in the return mappings.
     fn evaluate_with(
         &self,
         du: &[[f64; 2]],
@@ -682,7 +669,16 @@ pub fn solve(
                 let Candidate {
                     trial, residual, ..
                 } = &mut *spare;
-                system.residual_only_into(du, Some(nl), trial, scratch, residual, profile)?;
+                // no tangent is assembled from this residual: none is formed
+                let tangents = false;
+                system.evaluate_with(
+                    du,
+                    Some(nl),
+                    trial,
+                    (scratch, residual),
+                    profile,
+                    tangents,
+                )?;
                 residual.norm
             }
             _ => res.norm,
