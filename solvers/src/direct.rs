@@ -117,6 +117,14 @@ impl SolverOptions {
             _ => Ok(()),
         }
     }
+
+    /// Whether these options choose one of faer's orderings or factorisation variants
+    /// (anything but [`Ordering::Default`] and [`Factorization::Auto`]): then
+    /// [`crate::Method::Auto`] factorises an unsymmetric K with faer's LU, as asked, rather
+    /// than with the multifrontal LU, which has its own ordering and dense fronts.
+    pub fn asks_for_faer(&self) -> bool {
+        self.ordering != Ordering::Default || self.factorization != Factorization::Auto
+    }
 }
 
 impl Default for SolverOptions {

@@ -17,7 +17,10 @@ use crate::{MultifrontalLu, SparseMatrix};
 /// Which linear solver [`LinearSolver`] uses.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Method {
-    /// Cholesky when the caller says K is symmetric, else LU (faer).
+    /// faer's Cholesky when the caller says K is symmetric (LU if it is not positive
+    /// definite); for an unsymmetric K the multifrontal LU ([`Method::Multifrontal`], with its
+    /// fallback to faer's LU), or faer's LU where the options ask for one of faer's orderings
+    /// or factorisations ([`SolverOptions::asks_for_faer`]).
     #[default]
     Auto,
     /// faer's sparse Cholesky (LU when K is unsymmetric or not positive definite, recorded).
@@ -207,6 +210,9 @@ impl LinearSolver {
             );
         }
         match method {
+            Method::Auto if !symmetric && !self.options.direct.asks_for_faer() => {
+                self.factorize_multifrontal(k, false)
+            }
             Method::Auto | Method::Cholesky | Method::Lu => {
                 let kind = self.direct.factorize(k, symmetric)?;
                 self.active = Some(Active::Direct);

@@ -298,7 +298,9 @@ pub enum PointLayout {
 #[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, Eq)]
 #[serde(rename_all = "snake_case")]
 pub enum LinearSolverChoice {
-    /// Cholesky when every material has a symmetric tangent, LU otherwise.
+    /// faer's Cholesky when every material has a symmetric tangent; otherwise the
+    /// multifrontal LU ([`Self::Multifrontal`]), or faer's LU when `ordering` or
+    /// `factorization` is set.
     #[default]
     Auto,
     /// Sparse Cholesky (falls back to LU if the matrix is not positive definite).
