@@ -267,14 +267,26 @@ impl LinearSolver {
         symmetric: bool,
     ) -> Result<Used, SolverError> {
         let mf = &mut self.multifrontal;
-        let before = (mf.symbolic_count, mf.symbolic_seconds, mf.numeric_seconds);
+        let before = (
+            mf.symbolic_count,
+            mf.symbolic_seconds,
+            mf.numeric_seconds,
+            mf.cholesky_failures,
+        );
         let result = mf.factorize(k, symmetric);
         self.own.symbolic += mf.symbolic_count - before.0;
         self.own.symbolic_seconds += mf.symbolic_seconds - before.1;
         self.own.numeric_seconds += mf.numeric_seconds - before.2;
-        self.own.numeric += 1;
+        // a Cholesky attempt that found K indefinite counts, as faer's does
+        let failed_cholesky = mf.cholesky_failures - before.3;
+        self.own.numeric += 1 + failed_cholesky;
+        self.own.numeric_cholesky += failed_cholesky;
         match result {
             Ok(kind) => {
+                match kind {
+                    FactorKind::Cholesky => self.own.numeric_cholesky += 1,
+                    FactorKind::Lu => self.own.numeric_lu += 1,
+                }
                 self.own.factor_nnz = Some(mf.factor_nnz);
                 self.own.last_factor = Some(kind);
                 self.active = Some(Active::Multifrontal);
@@ -451,8 +463,8 @@ impl LinearSolver {
         SolverStats {
             symbolic: d.symbolic + f.symbolic + o.symbolic,
             numeric: d.numeric + f.numeric + o.numeric,
-            numeric_cholesky: d.numeric_cholesky,
-            numeric_lu: d.numeric_lu + f.numeric_lu,
+            numeric_cholesky: d.numeric_cholesky + o.numeric_cholesky,
+            numeric_lu: d.numeric_lu + f.numeric_lu + o.numeric_lu,
             solves: d.solves + f.solves + o.solves,
             cholesky_fallbacks: d.cholesky_fallbacks,
             symbolic_seconds: d.symbolic_seconds + f.symbolic_seconds + o.symbolic_seconds,

@@ -1008,6 +1008,15 @@ fn auto_routes_unsymmetric_systems_to_the_multifrontal_lu() {
         // measured: 1e-16 to 4e-16
         // measured: 3.0e-15 (Cholesky, multifrontal) and 6.5e-15 (LU)
         assert!(r <= 3e-14, "{expected:?}: residual {r:e}");
-        assert_eq!(s.stats().fallbacks, 0, "{expected:?}");
+        let stats = s.stats();
+        assert_eq!(stats.fallbacks, 0, "{expected:?}");
+        // every factorisation is counted by its kind, the multifrontal LU's too
+        let counts = (stats.numeric_cholesky, stats.numeric_lu);
+        let one = if expected == Used::Cholesky {
+            (1, 0)
+        } else {
+            (0, 1)
+        };
+        assert_eq!(counts, one, "{expected:?}");
     }
 }
