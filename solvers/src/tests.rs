@@ -1005,7 +1005,6 @@ fn auto_routes_unsymmetric_systems_to_the_multifrontal_lu() {
         let mut x = b.clone();
         assert_eq!(s.solve_in_place(&mut x).unwrap(), expected);
         let r = rel_residual(k, &x, &b);
-        // measured: 1e-16 to 4e-16
         // measured: 3.0e-15 (Cholesky, multifrontal) and 6.5e-15 (LU)
         assert!(r <= 3e-14, "{expected:?}: residual {r:e}");
         let stats = s.stats();
