@@ -16,8 +16,9 @@
 //!   method does not apply;
 //! * [`MultifrontalLu`] factorises K on the symmetric pattern of K + Kᵀ (faer's AMD analysis,
 //!   dense faer LU or Cholesky inside each front, independent subtrees in parallel), several
-//!   times faster than faer's sparse LU on the benchmarks' tangents (`linear_solver =
-//!   "multifrontal"`);
+//!   times faster than faer's sparse LU on the benchmarks' tangents, and on two threads faster
+//!   than faer's sparse Cholesky on symmetric ones (`linear_solver = "auto"`, the default, or
+//!   `"multifrontal"`);
 //! * [`mm`] writes and reads systems in Matrix Market format, and [`mod@bench`] runs every solver
 //!   on a directory of them (`mpm-solvers bench`).
 

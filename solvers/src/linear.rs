@@ -17,10 +17,10 @@ use crate::{MultifrontalLu, SparseMatrix};
 /// Which linear solver [`LinearSolver`] uses.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Method {
-    /// faer's Cholesky when the caller says K is symmetric (LU if it is not positive
-    /// definite); for an unsymmetric K the multifrontal LU ([`Method::Multifrontal`], with its
-    /// fallback to faer's LU), or faer's LU where the options ask for one of faer's orderings
-    /// or factorisations ([`SolverOptions::asks_for_faer`]).
+    /// The multifrontal factorisation ([`Method::Multifrontal`]): Cholesky fronts when the
+    /// caller says K is symmetric (LU fronts if it is not positive definite), LU fronts for an
+    /// unsymmetric K, with its fallback to faer's LU; faer's Cholesky or LU where the options
+    /// ask for one of faer's orderings or factorisations ([`SolverOptions::asks_for_faer`]).
     #[default]
     Auto,
     /// faer's sparse Cholesky (LU when K is unsymmetric or not positive definite, recorded).
@@ -210,8 +210,8 @@ impl LinearSolver {
             );
         }
         match method {
-            Method::Auto if !symmetric && !self.options.direct.asks_for_faer() => {
-                self.factorize_multifrontal(k, false)
+            Method::Auto if !self.options.direct.asks_for_faer() => {
+                self.factorize_multifrontal(k, symmetric)
             }
             Method::Auto | Method::Cholesky | Method::Lu => {
                 let kind = self.direct.factorize(k, symmetric)?;

@@ -70,6 +70,45 @@ pub const CORRECTION_LIMIT: f64 = 1e-4;
 /// further splitting.
 const MIN_TASK_FLOPS: f64 = 2e5;
 
+/// Contribution blocks of at least this many entries (64 KiB) are recycled through
+/// [`BlockPool`]; smaller ones are left to the allocator.
+const POOL_MIN: usize = 8192;
+
+/// Storage of consumed contribution blocks, kept across factorisations: a large block
+/// allocated anew would be fresh memory, mapped and zeroed page by page by the kernel at
+/// every factorisation.
+#[derive(Debug, Default)]
+struct BlockPool(Mutex<Vec<Vec<f64>>>);
+
+impl BlockPool {
+    /// An empty vector with room for `len` entries: the smallest pooled one that has it,
+    /// else a new one.
+    fn take(&self, len: usize) -> Vec<f64> {
+        if len >= POOL_MIN {
+            if let Ok(mut pool) = self.0.lock() {
+                let fitting = (pool.iter().enumerate())
+                    .filter(|(_, b)| b.capacity() >= len)
+                    .min_by_key(|(_, b)| b.capacity())
+                    .map(|(i, _)| i);
+                if let Some(i) = fitting {
+                    return pool.swap_remove(i);
+                }
+            }
+        }
+        Vec::with_capacity(len)
+    }
+
+    /// Returns a consumed block to the pool.
+    fn give(&self, mut block: Vec<f64>) {
+        if block.capacity() >= POOL_MIN {
+            block.clear();
+            if let Ok(mut pool) = self.0.lock() {
+                pool.push(block);
+            }
+        }
+    }
+}
+
 /// One front: the supernode's columns and off-diagonal rows (permuted numbering), its
 /// children, where its rows go in the parent's front, and the entries of `K` it sums.
 #[derive(Debug)]
@@ -80,8 +119,11 @@ struct Front {
     children: Vec<usize>,
     /// For each of `rows`, its local index in the parent's front.
     to_parent: Vec<usize>,
-    /// `(position in K's values, offset in the column-major m × m front)`.
+    /// `(position in K's values, offset in the column-major m × m front)`, those in the
+    /// front's lower triangle (row ≥ column) first: a Cholesky front sums only these.
     entries: Vec<(usize, usize)>,
+    /// Number of `entries` in the lower triangle.
+    lower_entries: usize,
     /// Estimated flops of the whole subtree rooted here.
     subtree_flops: f64,
 }
@@ -125,7 +167,9 @@ struct Symbolic {
 /// The dense factors of one front.
 #[derive(Debug, Default)]
 struct FrontFactor {
-    /// `[L11\U11; L21]`, column-major, `m × ns` (leading dimension m).
+    /// `[L11\U11; L21]`, column-major, `m × ns` (leading dimension m): the first `m · ns`
+    /// entries (a Cholesky front keeps the rest of its `m × m` storage for the next
+    /// factorisation).
     lu: Vec<f64>,
     /// `U12`, column-major `ns × (m − ns)`.
     u12: Vec<f64>,
@@ -138,6 +182,8 @@ struct FrontFactor {
 pub struct MultifrontalLu {
     symbolic: Option<Symbolic>,
     factors: Vec<FrontFactor>,
+    /// Contribution blocks' storage, reused by the next factorisation.
+    pool: BlockPool,
     /// The kind of the present factors (`None` before a successful factorisation).
     current: Option<FactorKind>,
     /// Symmetric systems the Cholesky variant found not positive definite (then factorised
@@ -206,17 +252,23 @@ impl MultifrontalLu {
         } else {
             Vec::new()
         };
-        let factors = match symbolic.factorize(k.values(), kind, recycled) {
+        let factors = match symbolic.factorize(k.values(), kind, recycled, &self.pool) {
             Err(SolverError::NotPositiveDefinite { .. }) => {
                 self.cholesky_failures += 1;
                 kind = FactorKind::Lu;
-                symbolic.factorize(k.values(), kind, Vec::new())
+                symbolic.factorize(k.values(), kind, Vec::new(), &self.pool)
             }
             other => other,
         };
         self.numeric_seconds += t.elapsed().as_secs_f64();
         self.factors = factors?;
-        self.factor_nnz = self.factors.iter().map(|f| f.lu.len() + f.u12.len()).sum();
+        let symbolic = self
+            .symbolic
+            .as_ref()
+            .expect("symbolic analysis made above");
+        self.factor_nnz = (symbolic.fronts.iter().zip(&self.factors))
+            .map(|(front, f)| front.order() * front.pivots() + f.u12.len())
+            .sum();
         self.current = Some(kind);
         Ok(kind)
     }
@@ -296,7 +348,7 @@ impl MultifrontalLu {
             let (ns, m) = (front.pivots(), front.order());
             let ms = m - ns;
             gathered.clear();
-            let lu = MatRef::from_column_major_slice(&factor.lu, m, ns);
+            let lu = MatRef::from_column_major_slice(&factor.lu[..m * ns], m, ns);
             if cholesky {
                 gathered.extend_from_slice(&w[front.begin..front.end]);
                 let z = MatMut::from_column_major_slice_mut(&mut gathered, ns, 1);
@@ -327,7 +379,7 @@ impl MultifrontalLu {
         for (front, factor) in symbolic.fronts.iter().zip(&self.factors).rev() {
             let (ns, m) = (front.pivots(), front.order());
             let ms = m - ns;
-            let lu = MatRef::from_column_major_slice(&factor.lu, m, ns);
+            let lu = MatRef::from_column_major_slice(&factor.lu[..m * ns], m, ns);
             let y = &mut w[front.begin..front.end];
             gathered.clear();
             gathered.extend_from_slice(y);
@@ -416,6 +468,7 @@ impl Symbolic {
                 children: Vec::new(),
                 to_parent: Vec::new(),
                 entries: Vec::new(),
+                lower_entries: 0,
                 subtree_flops: 0.0,
             })
             .collect();
@@ -447,6 +500,19 @@ impl Symbolic {
                 front.entries.push((col_ptr[j] + k, offset));
             }
         }
+        for front in &mut fronts {
+            // every position of a front receives one entry of K at most: the order of the
+            // entries does not change a sum
+            let m = front.order();
+            front
+                .entries
+                .sort_by_key(|&(_, offset)| offset % m < offset / m);
+            front.lower_entries = front
+                .entries
+                .iter()
+                .filter(|&&(_, offset)| offset % m >= offset / m)
+                .count();
+        }
         for s in 0..count {
             let (ns, m) = (fronts[s].pivots() as f64, fronts[s].order() as f64);
             let own = ns * m * m + m * m;
@@ -475,6 +541,7 @@ impl Symbolic {
         values: &[f64],
         kind: FactorKind,
         recycled: Vec<FrontFactor>,
+        pool: &BlockPool,
     ) -> Result<Vec<FrontFactor>, SolverError> {
         let count = self.fronts.len();
         let contributions: Vec<Mutex<Vec<f64>>> = (0..count).map(|_| Mutex::default()).collect();
@@ -486,7 +553,7 @@ impl Symbolic {
         let run = |s: usize| -> Result<(), SolverError> {
             let storage = std::mem::take(&mut *factors[s].lock().expect("front factor lock"));
             let (factor, contribution) =
-                self.factor_front(s, values, kind, &contributions, storage)?;
+                self.factor_front(s, values, kind, (&contributions, pool), storage)?;
             *factors[s].lock().expect("front factor lock") = factor;
             *contributions[s].lock().expect("contribution lock") = contribution;
             Ok(())
@@ -516,7 +583,7 @@ impl Symbolic {
         s: usize,
         values: &[f64],
         kind: FactorKind,
-        contributions: &[Mutex<Vec<f64>>],
+        (contributions, pool): (&[Mutex<Vec<f64>>], &BlockPool),
         storage: FrontFactor,
     ) -> Result<(FrontFactor, Vec<f64>), SolverError> {
         let front = &self.fronts[s];
@@ -527,21 +594,30 @@ impl Symbolic {
             mut u12,
             mut piv,
         } = storage;
-        dense.clear();
-        dense.resize(m * m, 0.0);
-        for &(k, offset) in &front.entries {
+        let cholesky = kind == FactorKind::Cholesky;
+        if cholesky {
+            // Cholesky reads and writes lower triangles only (F11, F21, the lower triangle of
+            // F22): the upper one keeps whatever the storage held and is never read
+            dense.resize(m * m, 0.0);
+            for (j, column) in dense.chunks_exact_mut(m).enumerate() {
+                column[j..].fill(0.0);
+            }
+        } else {
+            dense.clear();
+            dense.resize(m * m, 0.0);
+        }
+        let entries = if cholesky {
+            &front.entries[..front.lower_entries]
+        } else {
+            &front.entries[..]
+        };
+        for &(k, offset) in entries {
             dense[offset] += values[k];
         }
         for &c in &front.children {
             let block = std::mem::take(&mut *contributions[c].lock().expect("contribution lock"));
-            let map = &self.fronts[c].to_parent;
-            let mc = map.len();
-            for (jj, &col) in map.iter().enumerate() {
-                let target = &mut dense[col * m..(col + 1) * m];
-                for (&row, v) in map.iter().zip(&block[jj * mc..(jj + 1) * mc]) {
-                    target[row] += v;
-                }
-            }
+            extend_add(&mut dense, m, &self.fronts[c].to_parent, &block, cholesky);
+            pool.give(block);
         }
         piv.clear();
         {
@@ -552,19 +628,25 @@ impl Symbolic {
                 FactorKind::Cholesky => factor_cholesky(f11, f21, f22, front.begin)?,
             }
         }
-        // U12 is kept for LU factors only (Cholesky's is L21ᵀ)
-        let lu = kind == FactorKind::Lu;
+        // U12 is kept for LU factors only (Cholesky's is L21ᵀ); a Cholesky front hands on the
+        // lower triangle of C, packed by columns
         u12.clear();
-        u12.resize(if lu { ns * ms } else { 0 }, 0.0);
-        let mut contribution = vec![0.0; ms * ms];
+        u12.resize(if cholesky { 0 } else { ns * ms }, 0.0);
+        let mut contribution = pool.take(if cholesky { ms * (ms + 1) / 2 } else { ms * ms });
         for j in 0..ms {
             let column = &dense[(ns + j) * m..(ns + j + 1) * m];
-            if lu {
+            if cholesky {
+                contribution.extend_from_slice(&column[ns + j..]);
+            } else {
                 u12[j * ns..(j + 1) * ns].copy_from_slice(&column[..ns]);
+                contribution.extend_from_slice(&column[ns..]);
             }
-            contribution[j * ms..(j + 1) * ms].copy_from_slice(&column[ns..]);
         }
-        dense.truncate(m * ns);
+        // a Cholesky front keeps its m × m storage (L in the first ns columns), which the
+        // next factorisation zeroes in its lower triangle only
+        if !cholesky {
+            dense.truncate(m * ns);
+        }
         Ok((
             FrontFactor {
                 lu: dense,
@@ -574,6 +656,24 @@ impl Symbolic {
             contribution,
         ))
     }
+}
+
+/// Extend-add: adds a child's contribution block `block` to the parent's m × m front `dense`
+/// (column-major) at the parent's local indices `map` (increasing). `lower`: the block holds
+/// the lower triangle only, packed by columns (a Cholesky front), and only the parent's lower
+/// triangle receives it; else it is the full square, column-major.
+fn extend_add(dense: &mut [f64], m: usize, map: &[usize], block: &[f64], lower: bool) {
+    let mc = map.len();
+    let mut start = 0;
+    for (jj, &col) in map.iter().enumerate() {
+        let target = &mut dense[col * m..(col + 1) * m];
+        let rows = if lower { &map[jj..] } else { map };
+        for (&row, v) in rows.iter().zip(&block[start..start + rows.len()]) {
+            target[row] += v;
+        }
+        start += rows.len();
+    }
+    debug_assert_eq!(start, if lower { mc * (mc + 1) / 2 } else { mc * mc });
 }
 
 type Block<'a> = MatMut<'a, f64>;
@@ -819,6 +919,44 @@ mod tests {
             .unwrap();
         let x1_single = single.install(|| solve(&mut MultifrontalLu::new(), &k));
         assert_eq!(x1, x1_single, "bit-identical on one thread");
+    }
+
+    /// A Cholesky front zeroes, sums and hands on its lower triangle only: with the upper
+    /// triangles of the kept storage poisoned by NaN (and the storage of LU fronts of the same
+    /// analysis recycled), a refactorisation gives the first one's bits.
+    #[test]
+    fn cholesky_fronts_never_read_their_upper_triangle() {
+        let k = grid_matrix_coupled(31, 27, 0.0, 0.0);
+        let b: Vec<f64> = (0..k.n()).map(|i| (i as f64).cos()).collect();
+        let solve = |lu: &mut MultifrontalLu, symmetric: bool| {
+            assert_eq!(
+                lu.factorize(&k, symmetric).unwrap() == FactorKind::Cholesky,
+                symmetric
+            );
+            let mut x = b.clone();
+            lu.solve(&k, &mut x).unwrap();
+            x
+        };
+        let mut lu = MultifrontalLu::new();
+        let first = solve(&mut lu, true);
+        assert!(residual(&k, &first, &b) < 1e-15);
+        let fronts = &lu.symbolic.as_ref().unwrap().fronts;
+        for (front, factor) in fronts.iter().zip(&mut lu.factors) {
+            let m = front.order();
+            assert_eq!(
+                factor.lu.len(),
+                m * m,
+                "a Cholesky front keeps its m × m storage"
+            );
+            for (j, column) in factor.lu.chunks_exact_mut(m).enumerate() {
+                column[..j].fill(f64::NAN);
+            }
+        }
+        assert_eq!(solve(&mut lu, true), first);
+        // from the storage of LU fronts (m × ns, their U11 in the upper triangle)
+        solve(&mut lu, false);
+        assert_eq!(solve(&mut lu, true), first);
+        assert_eq!(lu.symbolic_count, 1);
     }
 
     #[test]

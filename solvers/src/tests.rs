@@ -971,11 +971,11 @@ fn multifrontal_agrees_with_faer_lu_and_hands_singular_systems_to_it() {
     );
 }
 
-/// `Method::Auto` picks by symmetry: faer's Cholesky for a symmetric K, the multifrontal LU for
-/// an unsymmetric one, and faer's LU for an unsymmetric K when the options ask for one of
+/// `Method::Auto` takes the multifrontal factorisation, Cholesky fronts for a symmetric K and LU
+/// fronts for an unsymmetric one, and faer's Cholesky or LU when the options ask for one of
 /// faer's orderings or factorisations. Each answer solves its system to round-off.
 #[test]
-fn auto_routes_unsymmetric_systems_to_the_multifrontal_lu() {
+fn auto_routes_systems_to_the_multifrontal_factorisation() {
     let (_, _, k_spd) = elastic_system(20, 12);
     let k_unsym = unsymmetric_system(20, 12);
     let b = random_rhs(k_spd.n(), 11);
@@ -984,17 +984,15 @@ fn auto_routes_unsymmetric_systems_to_the_multifrontal_lu() {
         ordering: Ordering::Amd,
         ..Default::default()
     };
+    let default = SolverOptions::default();
+    // (K, symmetric, options, solver used, factorisation counted as Cholesky)
     let cases = [
-        (&k_spd, true, SolverOptions::default(), Used::Cholesky),
-        (
-            &k_unsym,
-            false,
-            SolverOptions::default(),
-            Used::Multifrontal,
-        ),
-        (&k_unsym, false, faer_amd, Used::Lu),
+        (&k_spd, true, default, Used::Multifrontal, true),
+        (&k_unsym, false, default, Used::Multifrontal, false),
+        (&k_spd, true, faer_amd, Used::Cholesky, true),
+        (&k_unsym, false, faer_amd, Used::Lu, false),
     ];
-    for (k, symmetric, direct, expected) in cases {
+    for (k, symmetric, direct, expected, cholesky) in cases {
         let mut s = LinearSolver::new(LinearOptions {
             method: Method::Auto,
             direct,
@@ -1009,13 +1007,9 @@ fn auto_routes_unsymmetric_systems_to_the_multifrontal_lu() {
         assert!(r <= 3e-14, "{expected:?}: residual {r:e}");
         let stats = s.stats();
         assert_eq!(stats.fallbacks, 0, "{expected:?}");
-        // every factorisation is counted by its kind, the multifrontal LU's too
+        // every factorisation is counted by its kind, the multifrontal ones too
         let counts = (stats.numeric_cholesky, stats.numeric_lu);
-        let one = if expected == Used::Cholesky {
-            (1, 0)
-        } else {
-            (0, 1)
-        };
-        assert_eq!(counts, one, "{expected:?}");
+        let one = if cholesky { (1, 0) } else { (0, 1) };
+        assert_eq!(counts, one, "{expected:?}, Cholesky {cholesky}");
     }
 }

@@ -298,8 +298,8 @@ pub enum PointLayout {
 #[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, Eq)]
 #[serde(rename_all = "snake_case")]
 pub enum LinearSolverChoice {
-    /// faer's Cholesky when every material has a symmetric tangent; otherwise the
-    /// multifrontal LU ([`Self::Multifrontal`]), or faer's LU when `ordering` or
+    /// The multifrontal factorisation ([`Self::Multifrontal`]), with Cholesky fronts when
+    /// every material has a symmetric tangent; faer's Cholesky or LU when `ordering` or
     /// `factorization` is set.
     #[default]
     Auto,
