@@ -30,7 +30,8 @@
 //!   was at most 1.9e-11 there. A correction larger than [`CORRECTION_LIMIT`] rejects the
 //!   factors, and the caller ([`crate::LinearSolver`]) solves that system with faer's LU.
 //! * **Parallel**: independent subtrees of the elimination tree are factorised as rayon
-//!   tasks, the fronts above them in order on one thread. Every front is computed by the
+//!   tasks, each on one thread; a front above them starts once its children are done, so the
+//!   top fronts of independent branches run side by side too. Every front is computed by the
 //!   same sequence of dense operations (faer, `Par::Seq`) whatever the thread that runs it,
 //!   and children are summed in a fixed order: the factors are bit-identical for any number
 //!   of threads.
@@ -158,10 +159,11 @@ struct Symbolic {
     /// `perm[new] = old`.
     perm: Vec<usize>,
     fronts: Vec<Front>,
-    /// Roots of the subtrees factorised as parallel tasks (each task in ascending order).
-    tasks: Vec<usize>,
-    /// Fronts above the tasks, in ascending order (children before parents).
-    top: Vec<usize>,
+    /// Roots of the elimination tree.
+    roots: Vec<usize>,
+    /// Per front: above the tasks (its children are factorised in parallel before it), or in
+    /// the subtree of a task (factorised on one thread, children before parents).
+    above_tasks: Vec<bool>,
 }
 
 /// The dense factors of one front.
@@ -523,17 +525,18 @@ impl Symbolic {
                 .sum();
             fronts[s].subtree_flops = own + below;
         }
-        let (tasks, top) = split_tasks(&fronts, &roots, rayon::current_num_threads());
+        let above_tasks = split_tasks(&fronts, &roots, rayon::current_num_threads());
         Ok(Self {
             pattern: Arc::clone(pattern),
             perm,
             fronts,
-            tasks,
-            top,
+            roots,
+            above_tasks,
         })
     }
 
-    /// The numeric factorisation: the tasks in parallel, then the top fronts in order.
+    /// The numeric factorisation: from the roots down, the children of a front above the tasks
+    /// in parallel before the front itself, a task's subtree on one thread.
     /// `recycled`: the factors of an earlier factorisation with this analysis (or empty),
     /// whose storage is refilled (no fresh memory to map for the large fronts).
     fn factorize(
@@ -558,21 +561,38 @@ impl Symbolic {
             *contributions[s].lock().expect("contribution lock") = contribution;
             Ok(())
         };
-        self.tasks.par_iter().try_for_each(|&root| {
-            let mut subtree = Vec::new();
-            let mut stack = vec![root];
-            while let Some(s) = stack.pop() {
-                subtree.push(s);
-                stack.extend_from_slice(&self.fronts[s].children);
-            }
-            subtree.sort_unstable();
-            subtree.into_iter().try_for_each(run)
-        })?;
-        self.top.iter().try_for_each(|&s| run(s))?;
+        self.roots
+            .par_iter()
+            .try_for_each(|&root| self.factor_tree(root, &run))?;
         Ok(factors
             .into_iter()
             .map(|f| f.into_inner().expect("front factor lock"))
             .collect())
+    }
+
+    /// Factorises the tree below front `s` and `s` itself with `run`: the children of a
+    /// front above the tasks in parallel (each by this function), a task's subtree on this
+    /// thread in ascending order (children before parents).
+    fn factor_tree(
+        &self,
+        s: usize,
+        run: &(impl Fn(usize) -> Result<(), SolverError> + Sync),
+    ) -> Result<(), SolverError> {
+        if self.above_tasks[s] {
+            self.fronts[s]
+                .children
+                .par_iter()
+                .try_for_each(|&c| self.factor_tree(c, run))?;
+            return run(s);
+        }
+        let mut subtree = Vec::new();
+        let mut stack = vec![s];
+        while let Some(f) = stack.pop() {
+            subtree.push(f);
+            stack.extend_from_slice(&self.fronts[f].children);
+        }
+        subtree.sort_unstable();
+        subtree.into_iter().try_for_each(run)
     }
 
     /// Assembles front `s` (K's entries, then its children's contribution blocks in order) and
@@ -787,12 +807,12 @@ fn factor_cholesky(
 /// Splits the elimination tree into subtrees for parallel tasks: starting from the roots,
 /// the subtree with the most flops is opened (its root joins the top fronts, its children
 /// become subtrees) while it holds more than `1 / (4 threads)` of the total and more than
-/// [`MIN_TASK_FLOPS`]. Returns the task roots and the top fronts in ascending order.
-fn split_tasks(fronts: &[Front], roots: &[usize], threads: usize) -> (Vec<usize>, Vec<usize>) {
+/// [`MIN_TASK_FLOPS`]. Returns, per front, whether it lies above the tasks (was opened).
+fn split_tasks(fronts: &[Front], roots: &[usize], threads: usize) -> Vec<bool> {
     let total: f64 = roots.iter().map(|&r| fronts[r].subtree_flops).sum();
     let limit = (total / (4 * threads.max(1)) as f64).max(MIN_TASK_FLOPS);
     let mut tasks: Vec<usize> = roots.to_vec();
-    let mut top = Vec::new();
+    let mut opened = vec![false; fronts.len()];
     if threads > 1 {
         while let Some((index, &largest)) = tasks.iter().enumerate().max_by(|a, b| {
             fronts[*a.1]
@@ -803,13 +823,11 @@ fn split_tasks(fronts: &[Front], roots: &[usize], threads: usize) -> (Vec<usize>
                 break;
             }
             tasks.swap_remove(index);
-            top.push(largest);
+            opened[largest] = true;
             tasks.extend_from_slice(&fronts[largest].children);
         }
     }
-    tasks.sort_unstable();
-    top.sort_unstable();
-    (tasks, top)
+    opened
 }
 
 #[cfg(test)]
