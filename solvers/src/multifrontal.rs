@@ -506,14 +506,9 @@ impl Symbolic {
             // every position of a front receives one entry of K at most: the order of the
             // entries does not change a sum
             let m = front.order();
-            front
-                .entries
-                .sort_by_key(|&(_, offset)| offset % m < offset / m);
-            front.lower_entries = front
-                .entries
-                .iter()
-                .filter(|&&(_, offset)| offset % m >= offset / m)
-                .count();
+            let lower = |&(_, offset): &(usize, usize)| offset % m >= offset / m;
+            front.entries.sort_by_key(|entry| !lower(entry));
+            front.lower_entries = front.entries.partition_point(lower);
         }
         for s in 0..count {
             let (ns, m) = (fronts[s].pivots() as f64, fronts[s].order() as f64);
