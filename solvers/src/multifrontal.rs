@@ -424,23 +424,7 @@ impl Symbolic {
     fn new(pattern: &Arc<Pattern>) -> Result<Self, SolverError> {
         let n = pattern.n();
         let (col_ptr, row_idx) = (pattern.col_ptr(), pattern.row_idx());
-        // upper triangle of the pattern of K + Kᵀ, diagonal included
-        let mut upper: Vec<Vec<usize>> = (0..n).map(|j| vec![j]).collect();
-        for j in 0..n {
-            for &i in &row_idx[col_ptr[j]..col_ptr[j + 1]] {
-                upper[i.max(j)].push(i.min(j));
-            }
-        }
-        let mut sym_ptr = Vec::with_capacity(n + 1);
-        let mut sym_idx = Vec::new();
-        sym_ptr.push(0);
-        for col in &mut upper {
-            col.sort_unstable();
-            col.dedup();
-            sym_idx.extend_from_slice(col);
-            sym_ptr.push(sym_idx.len());
-        }
-        drop(upper);
+        let (sym_ptr, sym_idx) = upper_pattern(col_ptr, row_idx);
         let sym = SymbolicSparseColMat::new_checked(n, n, sym_ptr, None, sym_idx);
         let params = CholeskySymbolicParams {
             supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SUPERNODAL,
@@ -494,22 +478,7 @@ impl Symbolic {
                 None => roots.push(s),
             }
         }
-        for j in 0..n {
-            for (k, &i) in row_idx[col_ptr[j]..col_ptr[j + 1]].iter().enumerate() {
-                let (pi, pj) = (perm_inv[i], perm_inv[j]);
-                let front = &mut fronts[front_of[pi.min(pj)]];
-                let offset = front.local(pj) * front.order() + front.local(pi);
-                front.entries.push((col_ptr[j] + k, offset));
-            }
-        }
-        for front in &mut fronts {
-            // every position of a front receives one entry of K at most: the order of the
-            // entries does not change a sum
-            let m = front.order();
-            let lower = |&(_, offset): &(usize, usize)| offset % m >= offset / m;
-            front.entries.sort_by_key(|entry| !lower(entry));
-            front.lower_entries = front.entries.partition_point(lower);
-        }
+        scatter_entries(&mut fronts, &front_of, &perm_inv, col_ptr, row_idx);
         for s in 0..count {
             let (ns, m) = (fronts[s].pivots() as f64, fronts[s].order() as f64);
             let own = ns * m * m + m * m;
@@ -670,6 +639,124 @@ impl Symbolic {
             },
             contribution,
         ))
+    }
+}
+
+/// The upper triangle (diagonal included) of the pattern of `K + Kᵀ`, in compressed columns
+/// with sorted rows, from K's pattern (`col_ptr`, `row_idx`).
+fn upper_pattern(col_ptr: &[usize], row_idx: &[usize]) -> (Vec<usize>, Vec<usize>) {
+    let n = col_ptr.len() - 1;
+    let entries = |j: usize| {
+        row_idx[col_ptr[j]..col_ptr[j + 1]]
+            .iter()
+            .map(move |&i| (i, j))
+    };
+    // entry (i, j) of K or of Kᵀ lands in column max(i, j), row min(i, j); the diagonal is
+    // added to every column
+    let mut ptr = vec![0usize; n + 1];
+    for j in 0..n {
+        ptr[j + 1] += 1;
+        for (i, j) in entries(j) {
+            ptr[i.max(j) + 1] += 1;
+        }
+    }
+    for j in 0..n {
+        ptr[j + 1] += ptr[j];
+    }
+    let mut idx = vec![0usize; ptr[n]];
+    let mut next = ptr[..n].to_vec();
+    for j in 0..n {
+        idx[next[j]] = j;
+        next[j] += 1;
+        for (i, j) in entries(j) {
+            let column = i.max(j);
+            idx[next[column]] = i.min(j);
+            next[column] += 1;
+        }
+    }
+    // sort and deduplicate each column, compacting in place
+    let mut kept = 0;
+    let mut start = 0;
+    for j in 0..n {
+        let end = ptr[j + 1];
+        idx[start..end].sort_unstable();
+        ptr[j] = kept;
+        let mut last = usize::MAX;
+        for k in start..end {
+            let row = idx[k];
+            if row != last {
+                idx[kept] = row;
+                kept += 1;
+                last = row;
+            }
+        }
+        start = end;
+    }
+    ptr[n] = kept;
+    idx.truncate(kept);
+    (ptr, idx)
+}
+
+/// Hands every entry of K (`col_ptr`, `row_idx`; `perm_inv[old] = new`) to the front that sums
+/// it, the front of its smaller permuted index, as `(position in K's values, offset in the
+/// column-major front)`, the entries in the front's lower triangle first
+/// ([`Front::entries`]).
+fn scatter_entries(
+    fronts: &mut [Front],
+    front_of: &[usize],
+    perm_inv: &[usize],
+    col_ptr: &[usize],
+    row_idx: &[usize],
+) {
+    let n = perm_inv.len();
+    // K's entries (position, permuted row, permuted column) grouped by front, in K's order
+    let mut start = vec![0usize; fronts.len() + 1];
+    let owner = |i: usize, j: usize| front_of[perm_inv[i].min(perm_inv[j])];
+    for j in 0..n {
+        for &i in &row_idx[col_ptr[j]..col_ptr[j + 1]] {
+            start[owner(i, j) + 1] += 1;
+        }
+    }
+    for s in 0..fronts.len() {
+        start[s + 1] += start[s];
+    }
+    let mut grouped = vec![(0usize, 0usize, 0usize); row_idx.len()];
+    let mut next = start[..fronts.len()].to_vec();
+    for j in 0..n {
+        for (k, &i) in (col_ptr[j]..).zip(&row_idx[col_ptr[j]..col_ptr[j + 1]]) {
+            let s = owner(i, j);
+            grouped[next[s]] = (k, perm_inv[i], perm_inv[j]);
+            next[s] += 1;
+        }
+    }
+    // local index of a front's rows, refilled front by front
+    let mut local_of_row = vec![0usize; n];
+    for (s, front) in fronts.iter_mut().enumerate() {
+        let (ns, m) = (front.pivots(), front.order());
+        for (r, &x) in front.rows.iter().enumerate() {
+            local_of_row[x] = ns + r;
+        }
+        let local = |x: usize| {
+            if x < front.end {
+                x - front.begin
+            } else {
+                local_of_row[x]
+            }
+        };
+        let placed: Vec<(usize, usize, bool)> = grouped[start[s]..start[s + 1]]
+            .iter()
+            .map(|&(k, pi, pj)| {
+                let (row, column) = (local(pi), local(pj));
+                (k, column * m + row, row >= column)
+            })
+            .collect();
+        // every position of a front receives one entry of K at most: the order of the
+        // entries does not change a sum
+        front.entries = (placed.iter().filter(|e| e.2))
+            .chain(placed.iter().filter(|e| !e.2))
+            .map(|&(k, offset, _)| (k, offset))
+            .collect();
+        front.lower_entries = placed.iter().filter(|e| e.2).count();
     }
 }
 
