@@ -35,6 +35,9 @@
 //!   same sequence of dense operations (faer, `Par::Seq`) whatever the thread that runs it,
 //!   and children are summed in a fixed order: the factors are bit-identical for any number
 //!   of threads.
+//! * **Solves** run in parallel over the tree too ([`solve`]: independent subtrees as
+//!   sequential supernodal solves, the fronts above them multifrontally), cut by a fixed
+//!   rule: the solution is bit-identical for any number of threads as well.
 
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
@@ -46,7 +49,6 @@ use faer::linalg::matmul::matmul;
 use faer::linalg::matmul::triangular::{self, BlockStructure};
 use faer::linalg::triangular_solve::{
     solve_lower_triangular_in_place, solve_unit_lower_triangular_in_place,
-    solve_upper_triangular_in_place,
 };
 use faer::reborrow::{Reborrow, ReborrowMut};
 use faer::sparse::linalg::cholesky::{
@@ -54,10 +56,12 @@ use faer::sparse::linalg::cholesky::{
 };
 use faer::sparse::linalg::SupernodalThreshold;
 use faer::sparse::SymbolicSparseColMat;
-use faer::{Accum, MatMut, MatRef, Par, Side};
+use faer::{Accum, MatMut, Par, Side};
 use rayon::prelude::*;
 
 use crate::matrix::Pattern;
+
+mod solve;
 use crate::{FactorKind, SolverError, SparseMatrix};
 
 /// Largest relative size `‖Δx‖∞ / ‖x‖∞` of the refinement correction of
@@ -118,6 +122,8 @@ struct Front {
     end: usize,
     rows: Vec<usize>,
     children: Vec<usize>,
+    /// The parent front (`None` for a root).
+    parent: Option<usize>,
     /// For each of `rows`, its local index in the parent's front.
     to_parent: Vec<usize>,
     /// `(position in K's values, offset in the column-major m × m front)`, those in the
@@ -164,6 +170,8 @@ struct Symbolic {
     /// Per front: above the tasks (its children are factorised in parallel before it), or in
     /// the subtree of a task (factorised on one thread, children before parents).
     above_tasks: Vec<bool>,
+    /// The solves' cut of the tree (fixed, whatever the threads).
+    solve_plan: solve::SolvePlan,
 }
 
 /// The dense factors of one front.
@@ -186,6 +194,8 @@ pub struct MultifrontalLu {
     factors: Vec<FrontFactor>,
     /// Contribution blocks' storage, reused by the next factorisation.
     pool: BlockPool,
+    /// The permuted vector and the units' row vectors of a solve, kept for the next one.
+    solve_storage: Mutex<(Vec<f64>, Vec<f64>)>,
     /// The kind of the present factors (`None` before a successful factorisation).
     current: Option<FactorKind>,
     /// Symmetric systems the Cholesky variant found not positive definite (then factorised
@@ -342,76 +352,12 @@ impl MultifrontalLu {
                 found: rhs.len(),
             });
         }
-        let mut w: Vec<f64> = symbolic.perm.iter().map(|&old| rhs[old]).collect();
-        let mut gathered = Vec::new();
-        let mut product = Vec::new();
-        // forward: L y = P b, children before parents
-        for (front, factor) in symbolic.fronts.iter().zip(&self.factors) {
-            let (ns, m) = (front.pivots(), front.order());
-            let ms = m - ns;
-            gathered.clear();
-            let lu = MatRef::from_column_major_slice(&factor.lu[..m * ns], m, ns);
-            if cholesky {
-                gathered.extend_from_slice(&w[front.begin..front.end]);
-                let z = MatMut::from_column_major_slice_mut(&mut gathered, ns, 1);
-                solve_lower_triangular_in_place(lu.subrows(0, ns), z, Par::Seq);
-            } else {
-                gathered.extend(factor.piv.iter().map(|&i| w[front.begin + i]));
-                let z = MatMut::from_column_major_slice_mut(&mut gathered, ns, 1);
-                solve_unit_lower_triangular_in_place(lu.subrows(0, ns), z, Par::Seq);
-            }
-            w[front.begin..front.end].copy_from_slice(&gathered);
-            if ms > 0 {
-                product.clear();
-                product.resize(ms, 0.0);
-                matmul(
-                    MatMut::from_column_major_slice_mut(&mut product, ms, 1),
-                    Accum::Replace,
-                    lu.subrows(ns, ms),
-                    MatRef::from_column_major_slice(&gathered, ns, 1),
-                    1.0,
-                    Par::Seq,
-                );
-                for (&r, v) in front.rows.iter().zip(&product) {
-                    w[r] -= v;
-                }
-            }
-        }
-        // backward: U x = y, parents before children
-        for (front, factor) in symbolic.fronts.iter().zip(&self.factors).rev() {
-            let (ns, m) = (front.pivots(), front.order());
-            let ms = m - ns;
-            let lu = MatRef::from_column_major_slice(&factor.lu[..m * ns], m, ns);
-            let y = &mut w[front.begin..front.end];
-            gathered.clear();
-            gathered.extend_from_slice(y);
-            if ms > 0 {
-                product.clear();
-                product.extend(front.rows.iter().map(|&r| w[r]));
-                // U12 = L21ᵀ for Cholesky factors
-                let u12 = if cholesky {
-                    lu.subrows(ns, ms).transpose()
-                } else {
-                    MatRef::from_column_major_slice(&factor.u12, ns, ms)
-                };
-                matmul(
-                    MatMut::from_column_major_slice_mut(&mut gathered, ns, 1),
-                    Accum::Add,
-                    u12,
-                    MatRef::from_column_major_slice(&product, ms, 1),
-                    -1.0,
-                    Par::Seq,
-                );
-            }
-            let y = MatMut::from_column_major_slice_mut(&mut gathered, ns, 1);
-            if cholesky {
-                solve_upper_triangular_in_place(lu.subrows(0, ns).transpose(), y, Par::Seq);
-            } else {
-                solve_upper_triangular_in_place(lu.subrows(0, ns), y, Par::Seq);
-            }
-            w[front.begin..front.end].copy_from_slice(&gathered);
-        }
-        for (&old, v) in symbolic.perm.iter().zip(&w) {
+        let mut storage = self.solve_storage.lock().expect("solve storage lock");
+        let (w, at_rows) = &mut *storage;
+        w.clear();
+        w.extend(symbolic.perm.iter().map(|&old| rhs[old]));
+        solve::solve(symbolic, &self.factors, cholesky, w, at_rows);
+        for (&old, v) in symbolic.perm.iter().zip(w.iter()) {
             rhs[old] = *v;
         }
         Ok(())
@@ -452,6 +398,7 @@ impl Symbolic {
                 end: supernodal.supernode_end()[s],
                 rows: supernodal.supernode(s).pattern().to_vec(),
                 children: Vec::new(),
+                parent: None,
                 to_parent: Vec::new(),
                 entries: Vec::new(),
                 lower_entries: 0,
@@ -473,6 +420,7 @@ impl Symbolic {
                         .map(|&x| fronts[parent].local(x))
                         .collect();
                     fronts[s].to_parent = to_parent;
+                    fronts[s].parent = Some(parent);
                     fronts[parent].children.push(s);
                 }
                 None => roots.push(s),
@@ -490,12 +438,14 @@ impl Symbolic {
             fronts[s].subtree_flops = own + below;
         }
         let above_tasks = split_tasks(&fronts, &roots, rayon::current_num_threads());
+        let solve_plan = solve::SolvePlan::new(&fronts, &roots);
         Ok(Self {
             pattern: Arc::clone(pattern),
             perm,
             fronts,
             roots,
             above_tasks,
+            solve_plan,
         })
     }
 
@@ -549,14 +499,7 @@ impl Symbolic {
                 .try_for_each(|&c| self.factor_tree(c, run))?;
             return run(s);
         }
-        let mut subtree = Vec::new();
-        let mut stack = vec![s];
-        while let Some(f) = stack.pop() {
-            subtree.push(f);
-            stack.extend_from_slice(&self.fronts[f].children);
-        }
-        subtree.sort_unstable();
-        subtree.into_iter().try_for_each(run)
+        subtree(&self.fronts, s).into_iter().try_for_each(run)
     }
 
     /// Assembles front `s` (K's entries, then its children's contribution blocks in order) and
@@ -886,6 +829,18 @@ fn factor_cholesky(
     Ok(())
 }
 
+/// The fronts of the subtree rooted at `s`, ascending (children before parents).
+fn subtree(fronts: &[Front], s: usize) -> Vec<usize> {
+    let mut subtree = Vec::new();
+    let mut stack = vec![s];
+    while let Some(f) = stack.pop() {
+        subtree.push(f);
+        stack.extend_from_slice(&fronts[f].children);
+    }
+    subtree.sort_unstable();
+    subtree
+}
+
 /// Splits the elimination tree into subtrees for parallel tasks: starting from the roots,
 /// the subtree with the most flops is opened (its root joins the top fronts, its children
 /// become subtrees) while it holds more than `1 / (4 threads)` of the total and more than
@@ -925,7 +880,12 @@ mod tests {
 
     /// [`grid_matrix`] with a cross-component coupling `± coupling` to the neighbours (sign by
     /// direction: antisymmetric; `coupling = 0` and `skew = 0` give a symmetric matrix).
-    fn grid_matrix_coupled(nx: usize, ny: usize, skew: f64, coupling: f64) -> SparseMatrix {
+    pub(super) fn grid_matrix_coupled(
+        nx: usize,
+        ny: usize,
+        skew: f64,
+        coupling: f64,
+    ) -> SparseMatrix {
         let node = |i: usize, j: usize| j * nx + i;
         let mut t = Vec::new();
         for j in 0..ny {
