@@ -15,7 +15,8 @@
 //!   `ldl` feature, sprs_ldl's LDLᵀ behind one front, falling back to LU (recorded) where a
 //!   method does not apply;
 //! * [`MultifrontalLu`] factorises K on the symmetric pattern of K + Kᵀ (faer's AMD analysis,
-//!   dense faer LU or Cholesky inside each front, independent subtrees in parallel), several
+//!   dense faer LU or Cholesky inside each front, independent subtrees in parallel in the
+//!   factorisation and in the solves), several
 //!   times faster than faer's sparse LU on the benchmarks' tangents, and on two threads faster
 //!   than faer's sparse Cholesky on symmetric ones (`linear_solver = "auto"`, the default, or
 //!   `"multifrontal"`);
