@@ -60,9 +60,9 @@ use faer::{Accum, MatMut, Par, Side};
 use rayon::prelude::*;
 
 use crate::matrix::Pattern;
+use crate::{FactorKind, SolverError, SparseMatrix};
 
 mod solve;
-use crate::{FactorKind, SolverError, SparseMatrix};
 
 /// Largest relative size `‖Δx‖∞ / ‖x‖∞` of the refinement correction of
 /// [`MultifrontalLu::solve`] that is accepted: a larger one means the factors (pivots
