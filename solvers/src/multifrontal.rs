@@ -686,20 +686,17 @@ fn scatter_entries(
                 local_of_row[x]
             }
         };
-        let placed: Vec<(usize, usize, bool)> = grouped[start[s]..start[s + 1]]
-            .iter()
-            .map(|&(k, pi, pj)| {
-                let (row, column) = (local(pi), local(pj));
-                (k, column * m + row, row >= column)
-            })
-            .collect();
         // every position of a front receives one entry of K at most: the order of the
         // entries does not change a sum
-        front.entries = (placed.iter().filter(|e| e.2))
-            .chain(placed.iter().filter(|e| !e.2))
-            .map(|&(k, offset, _)| (k, offset))
+        let (mut lower, upper): (Vec<_>, Vec<_>) = grouped[start[s]..start[s + 1]]
+            .iter()
+            .map(|&(k, pi, pj)| (k, local(pi), local(pj)))
+            .partition(|&(_, row, column)| row >= column);
+        front.lower_entries = lower.len();
+        lower.extend(upper);
+        front.entries = (lower.into_iter())
+            .map(|(k, row, column)| (k, column * m + row))
             .collect();
-        front.lower_entries = placed.iter().filter(|e| e.2).count();
     }
 }
 

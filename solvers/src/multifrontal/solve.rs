@@ -228,11 +228,7 @@ impl<'b> Run<'_, 'b> {
                         }
                     }
                 }
-                let mut product = vec![0.0; rows.len()];
-                self.front_forward(s, pivots, &mut product, &mut Vec::new());
-                for (r, v) in rows.iter_mut().zip(&product) {
-                    *r -= v;
-                }
+                self.front_forward(s, pivots, rows, Accum::Add, &mut Vec::new());
             }
         }
     }
@@ -278,20 +274,21 @@ impl<'b> Run<'_, 'b> {
         let mut slot = self.lock(unit);
         let Slot { pivots: own, rows } = &mut *slot;
         rows.fill(0.0);
-        let (mut product, mut scratch) = (Vec::new(), Vec::new());
+        let (mut update, mut scratch) = (Vec::new(), Vec::new());
         for &f in fronts {
             let front = &self.symbolic.fronts[f];
-            product.clear();
-            product.resize(front.rows.len(), 0.0);
+            update.clear();
+            update.resize(front.rows.len(), 0.0);
             let range = front.begin - lo..front.end - lo;
-            self.front_forward(f, &mut own[range], &mut product, &mut scratch);
+            let pivots = &mut own[range];
+            self.front_forward(f, pivots, &mut update, Accum::Replace, &mut scratch);
             let outside = &self.symbolic.solve_plan.outside[f];
-            let (to_own, to_root) = product.split_at(product.len() - outside.len());
+            let (to_own, to_root) = update.split_at(update.len() - outside.len());
             for (&x, v) in front.rows.iter().zip(to_own) {
-                own[x - lo] -= v;
+                own[x - lo] += v;
             }
             for (&place, v) in outside.iter().zip(to_root) {
-                rows[place] -= v;
+                rows[place] += v;
             }
         }
     }
@@ -312,17 +309,19 @@ impl<'b> Run<'_, 'b> {
         }
     }
 
-    /// Front `s` forward: `pivots ← L11⁻¹ P pivots`, `product = L21 pivots` (`scratch`: room
-    /// for the row permutation of LU factors).
+    /// Front `s` forward: `pivots ← L11⁻¹ P pivots`, then `update ← update − L21 pivots`
+    /// (`Accum::Add`) or `update ← −L21 pivots` (`Accum::Replace`); `scratch`: room for the
+    /// row permutation of LU factors.
     fn front_forward(
         &self,
         s: usize,
         pivots: &mut [f64],
-        product: &mut [f64],
+        update: &mut [f64],
+        accum: Accum,
         scratch: &mut Vec<f64>,
     ) {
         let (factor, m) = (&self.factors[s], self.symbolic.fronts[s].order());
-        let (ns, ms) = (pivots.len(), product.len());
+        let (ns, ms) = (pivots.len(), update.len());
         let lu = MatRef::from_column_major_slice(&factor.lu[..m * ns], m, ns);
         if !self.cholesky {
             scratch.clear();
@@ -337,11 +336,11 @@ impl<'b> Run<'_, 'b> {
         }
         if ms > 0 {
             matmul(
-                MatMut::from_column_major_slice_mut(product, ms, 1),
-                Accum::Replace,
+                MatMut::from_column_major_slice_mut(update, ms, 1),
+                accum,
                 lu.subrows(ns, ms),
                 MatRef::from_column_major_slice(pivots, ns, 1),
-                1.0,
+                -1.0,
                 Par::Seq,
             );
         }
