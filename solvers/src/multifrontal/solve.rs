@@ -61,6 +61,16 @@ enum Unit {
     },
 }
 
+impl Unit {
+    /// The unit's root front: the front itself, or the task's root (its last front).
+    fn root(&self) -> usize {
+        match self {
+            Unit::Above(s) => *s,
+            Unit::Task { fronts, .. } => *fronts.last().expect("a task has a root"),
+        }
+    }
+}
+
 /// One unit's share of the vectors of a solve: its unknowns' entries of the permuted vector,
 /// and a vector over its (root's) rows: the forward pass's update to its parent, then the
 /// solution at those rows in the backward pass.
@@ -109,10 +119,6 @@ impl SolvePlan {
 
     /// The plan of `units`, sorted here in ascending order of their unknowns.
     fn with_units(fronts: &[Front], mut units: Vec<Unit>, outside: Vec<Vec<usize>>) -> Self {
-        let root = |unit: &Unit| match unit {
-            Unit::Above(s) => *s,
-            Unit::Task { fronts, .. } => *fronts.last().expect("a task has a root"),
-        };
         let first = |unit: &Unit| match unit {
             Unit::Above(s) => fronts[*s].begin,
             Unit::Task { lo, .. } => *lo,
@@ -125,7 +131,7 @@ impl SolvePlan {
                 Unit::Task { fronts, .. } => fronts.iter().for_each(|&f| unit_of[f] = u),
             }
         }
-        let row_count = units.iter().map(|u| fronts[root(u)].rows.len()).sum();
+        let row_count = units.iter().map(|u| fronts[u.root()].rows.len()).sum();
         Self {
             units,
             unit_of,
@@ -179,12 +185,13 @@ fn slots<'a>(
     let fronts = &symbolic.fronts;
     let mut slots = Vec::with_capacity(symbolic.solve_plan.units.len());
     for unit in &symbolic.solve_plan.units {
-        let (unknowns, root) = match unit {
-            Unit::Above(s) => (fronts[*s].pivots(), *s),
-            Unit::Task { fronts: f, lo, hi } => (hi - lo, *f.last().expect("a task has a root")),
+        let unknowns = match unit {
+            Unit::Above(s) => fronts[*s].pivots(),
+            Unit::Task { lo, hi, .. } => hi - lo,
         };
         let (pivots, rest) = std::mem::take(&mut w).split_at_mut(unknowns);
-        let (rows, rest_rows) = std::mem::take(&mut at_rows).split_at_mut(fronts[root].rows.len());
+        let root_rows = fronts[unit.root()].rows.len();
+        let (rows, rest_rows) = std::mem::take(&mut at_rows).split_at_mut(root_rows);
         (w, at_rows) = (rest, rest_rows);
         slots.push(Mutex::new(Slot { pivots, rows }));
     }
@@ -204,10 +211,12 @@ impl<'b> Run<'_, 'b> {
         self.slots[unit].lock().expect("solve slot lock")
     }
 
-    /// The forward pass of the tree below front `s` and of `s` (children before parents).
+    /// The forward pass of the tree below front `s` (a unit's root) and of `s` (children
+    /// before parents).
     fn forward(&self, s: usize) {
         let plan = &self.symbolic.solve_plan;
         let unit = plan.unit_of[s];
+        debug_assert_eq!(plan.units[unit].root(), s);
         match &plan.units[unit] {
             Unit::Task { fronts, lo, .. } => self.task_forward(unit, fronts, *lo),
             Unit::Above(_) => {
@@ -233,10 +242,12 @@ impl<'b> Run<'_, 'b> {
         }
     }
 
-    /// The backward pass of front `s` and of the tree below it (parents before children).
+    /// The backward pass of front `s` (a unit's root: a front above the tasks or a task's
+    /// root) and of the tree below it (parents before children).
     fn backward(&self, s: usize) {
         let plan = &self.symbolic.solve_plan;
         let unit = plan.unit_of[s];
+        debug_assert_eq!(plan.units[unit].root(), s);
         let (fronts, lo) = match &plan.units[unit] {
             Unit::Task { fronts, lo, .. } => (Some(fronts), *lo),
             Unit::Above(_) => (None, 0),
@@ -244,9 +255,8 @@ impl<'b> Run<'_, 'b> {
         {
             let mut slot = self.lock(unit);
             let Slot { pivots, rows } = &mut *slot;
-            // the task root's rows, or the front's, from the parent
-            let root = fronts.map_or(s, |f| *f.last().expect("a task has a root"));
-            let front = &self.symbolic.fronts[root];
+            // the solution at the rows of `s` (the task's root, or the front), from the parent
+            let front = &self.symbolic.fronts[s];
             if let Some(parent) = front.parent {
                 let from = self.lock(plan.unit_of[parent]);
                 let np = self.symbolic.fronts[parent].pivots();
