@@ -297,8 +297,8 @@ impl Grid {
         if !self.contains(x) || !x[0].is_finite() || !x[1].is_finite() {
             return None;
         }
-        let fx = ((x[0] - self.origin[0]) / self.cell_size).floor() as isize;
-        let fy = ((x[1] - self.origin[1]) / self.cell_size).floor() as isize;
+        let fx = shape::floor_int((x[0] - self.origin[0]) / self.cell_size) as isize;
+        let fy = shape::floor_int((x[1] - self.origin[1]) / self.cell_size) as isize;
         let ci = fx.clamp(0, self.cells[0] as isize - 1) as usize;
         let cj = fy.clamp(0, self.cells[1] as isize - 1) as usize;
         Some((ci, cj))
