@@ -103,7 +103,7 @@ enum Tangents {
 /// The stress update of every point for the increment `du` (interpolated
 /// with `shapes`), with the tangents `tangents` asks for
 /// ([`evaluate_stresses`]). Without B-bar each point's gradient is formed in
-/// the same pass as its update.
+/// the same run of [`POINTS_PER_RUN`] points as its update.
 fn evaluate<S: Support>(
     model: &Model,
     setup: &StepSetup,
@@ -136,75 +136,86 @@ fn evaluate<S: Support>(
     };
     let gradient_known = b_bar.is_some();
     let correction = &trial.volumetric_correction;
-    // the update of point p: its gradient (unless known), trial stress,
-    // state, rotated stress and (when asked for) tangent stored in place
+    // Each task takes a run of points in two passes: the gradients and the
+    // rotated stresses first (a loop without calls, so the divisions of
+    // consecutive points' rotations overlap), then the constitutive updates.
+    let kinematics = |p0: usize, rotated: &mut [Voigt], gradient: &mut [[f64; 4]]| {
+        for (k, (rotated, l)) in rotated.iter_mut().zip(gradient.iter_mut()).enumerate() {
+            if !gradient_known {
+                *l = transfer::gradient(&shapes[p0 + k], du);
+            }
+            let spin = transfer::strain_and_spin(l).1;
+            *rotated = transfer::rotate_stress(&particles.stress[p0 + k], spin);
+        }
+    };
+    // the update of point p: trial stress, state and (when asked for)
+    // tangent stored in place, from its rotated stress and gradient
     let update_point = |tally: &mut UpdateTally,
                         p: usize,
-                        (stress, state, rotated_out, l): (
-        &mut Voigt,
-        &mut PointState,
-        &mut Voigt,
-        &mut [f64; 4],
-    ),
+                        (stress, state): (&mut Voigt, &mut PointState),
+                        (rotated, l): (&Voigt, &[f64; 4]),
                         tangent: Option<&mut Mat4>| {
-        if !gradient_known {
-            *l = transfer::gradient(&shapes[p], du);
-        }
-        let (strain, spin) = transfer::strain_and_spin(l);
+        let strain = transfer::strain_and_spin(l).0;
         let strain_increment = match correction.get(p) {
             Some(&c) => volumetric::corrected_strain(&strain, c),
             None => strain,
         };
-        let rotated = transfer::rotate_stress(&particles.stress[p], spin);
-        *rotated_out = rotated;
         let material = &materials[particles.material[p] as usize];
         let strength = strength.map_or(StrengthVariable::Local, |s| s.at(p));
         tally.updates += 1;
         tally.yield_checks += u64::from(!material.is_elastic());
         let (state_n, strain) = (&particles.state[p], &strain_increment);
         let updated = match tangent {
-            None => material.update_stress(&rotated, strain, state_n, strength, (stress, state)),
-            Some(tangent) => material.update_into(
-                &rotated,
-                strain,
-                state_n,
-                strength,
-                (stress, state, tangent),
-            ),
+            None => material.update_stress(rotated, strain, state_n, strength, (stress, state)),
+            Some(tangent) => {
+                material.update_into(rotated, strain, state_n, strength, (stress, state, tangent))
+            }
         };
         match updated {
             Ok(yielded) => tally.return_mappings += u64::from(yielded),
             Err(e) => tally.fail(p, e),
         }
     };
-    let points = trial
+    let runs = trial
         .stress
-        .par_iter_mut()
-        .zip(trial.state.par_iter_mut())
-        .zip(trial.rotated.par_iter_mut())
-        .zip(trial.gradient.par_iter_mut())
+        .par_chunks_mut(POINTS_PER_RUN)
+        .zip(trial.state.par_chunks_mut(POINTS_PER_RUN))
+        .zip(trial.rotated.par_chunks_mut(POINTS_PER_RUN))
+        .zip(trial.gradient.par_chunks_mut(POINTS_PER_RUN))
         .enumerate()
-        .with_min_len(POINTS_PER_TASK);
+        .with_min_len(POINTS_PER_TASK / POINTS_PER_RUN);
     let tally = if tangents == Tangents::None {
         trial.tangent.clear();
-        points
-            .fold(
-                UpdateTally::default,
-                |mut tally, (p, (((stress, state), rotated), l))| {
-                    update_point(&mut tally, p, (stress, state, rotated, l), None);
-                    tally
-                },
-            )
-            .reduce(UpdateTally::default, UpdateTally::merge)
+        runs.fold(
+            UpdateTally::default,
+            |mut tally, (run, (((stress, state), rotated), gradient))| {
+                let p0 = run * POINTS_PER_RUN;
+                kinematics(p0, rotated, gradient);
+                let points = stress.iter_mut().zip(state.iter_mut());
+                for (k, (point, kinematic)) in
+                    points.zip(rotated.iter().zip(gradient.iter())).enumerate()
+                {
+                    update_point(&mut tally, p0 + k, point, kinematic, None);
+                }
+                tally
+            },
+        )
+        .reduce(UpdateTally::default, UpdateTally::merge)
     } else {
         trial.tangent.resize(n, [[0.0; 4]; 4]);
-        points
-            .zip(trial.tangent.par_iter_mut())
+        runs.zip(trial.tangent.par_chunks_mut(POINTS_PER_RUN))
             .fold(
                 UpdateTally::default,
-                |mut tally, ((p, (((stress, state), rotated), l)), tangent)| {
-                    let point = (stress, state, rotated, l);
-                    update_point(&mut tally, p, point, Some(tangent));
+                |mut tally, ((run, (((stress, state), rotated), gradient)), tangent)| {
+                    let p0 = run * POINTS_PER_RUN;
+                    kinematics(p0, rotated, gradient);
+                    let points = stress.iter_mut().zip(state.iter_mut());
+                    let kinematics = rotated.iter().zip(gradient.iter());
+                    for (k, ((point, kinematic), tangent)) in
+                        points.zip(kinematics).zip(tangent.iter_mut()).enumerate()
+                    {
+                        update_point(&mut tally, p0 + k, point, kinematic, Some(tangent));
+                    }
                     tally
                 },
             )
@@ -230,6 +241,10 @@ fn evaluate<S: Support>(
 
 /// Points handed to one rayon task at least.
 const POINTS_PER_TASK: usize = 256;
+
+/// Points of one run of [`evaluate`]: their gradients and rotated stresses
+/// are formed in one pass, then their constitutive updates.
+const POINTS_PER_RUN: usize = 32;
 
 /// What the parallel stress-update loop of [`evaluate_stresses`] did, summed
 /// over the points, and its first failure.
