@@ -192,9 +192,8 @@ fn evaluate<S: Support>(
                 let p0 = run * POINTS_PER_RUN;
                 kinematics(p0, rotated, gradient);
                 let points = stress.iter_mut().zip(state.iter_mut());
-                for (k, (point, kinematic)) in
-                    points.zip(rotated.iter().zip(gradient.iter())).enumerate()
-                {
+                let formed = rotated.iter().zip(gradient.iter());
+                for (k, (point, kinematic)) in points.zip(formed).enumerate() {
                     update_point(&mut tally, p0 + k, point, kinematic, None);
                 }
                 tally
@@ -210,9 +209,9 @@ fn evaluate<S: Support>(
                     let p0 = run * POINTS_PER_RUN;
                     kinematics(p0, rotated, gradient);
                     let points = stress.iter_mut().zip(state.iter_mut());
-                    let kinematics = rotated.iter().zip(gradient.iter());
+                    let formed = rotated.iter().zip(gradient.iter());
                     for (k, ((point, kinematic), tangent)) in
-                        points.zip(kinematics).zip(tangent.iter_mut()).enumerate()
+                        points.zip(formed).zip(tangent.iter_mut()).enumerate()
                     {
                         update_point(&mut tally, p0 + k, point, kinematic, Some(tangent));
                     }
