@@ -86,11 +86,8 @@ fn wave_limit(model: &Model, moving: bool) -> f64 {
             c + speed
         })
         .reduce(|| 0.0, f64::max);
-    if fastest > 0.0 {
-        h / fastest
-    } else {
-        f64::INFINITY
-    }
+    // no points, or none with a speed: h / 0 = ∞, as the minimum over none was
+    h / fastest
 }
 
 /// k_i = Σ_{p∈D} k_p N_ip at every node.
