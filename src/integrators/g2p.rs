@@ -5,6 +5,7 @@
 
 use rayon::prelude::*;
 
+use super::POINTS_PER_TASK;
 use crate::grid::Support;
 use crate::particles::Particles;
 use crate::transfer::interpolate;
@@ -53,9 +54,6 @@ pub fn g2p<S: Support>(particles: &mut Particles, shapes: &[S], motion: &GridMot
         .with_min_len(POINTS_PER_TASK)
         .for_each(|(((x, v), a), shape)| move_point(shape, motion, x, v, a));
 }
-
-/// Points handed to one rayon task at least.
-const POINTS_PER_TASK: usize = 256;
 
 /// The G2P update of one point with shape functions `shape`.
 #[inline]

@@ -11,7 +11,7 @@ use super::g2p::{g2p, GridMotion, VelocityUpdate};
 use super::newton::{
     self, Newmark, NewtonBuffers, NewtonError, NodalKinematics, Solution, StepSystem,
 };
-use super::p2g::external_force;
+use super::p2g::{external_force, nodal_kinematics, KinematicsBuffers};
 use super::stresses::converged_stresses;
 use super::tangent::{background_block, Tangent};
 use super::{NonlocalStep, SolverUsage, StepReport, StepSetup, TrialStresses};
@@ -21,7 +21,6 @@ use crate::error::StepError;
 use crate::model::Model;
 use crate::profile::{Profile, Stage, Work};
 use crate::scene::AnalysisKind;
-use crate::transfer;
 
 /// The implicit integrator and its caches.
 pub struct ImplicitIntegrator {
@@ -43,6 +42,8 @@ pub struct ImplicitIntegrator {
     pub last_residuals: (Vec<f64>, f64),
     /// The Newton iterates' buffers, kept from one (sub-)step to the next.
     newton_buffers: NewtonBuffers,
+    /// The P2G pass's buffers, kept from one (sub-)step to the next.
+    p2g: KinematicsBuffers,
 }
 
 impl ImplicitIntegrator {
@@ -58,6 +59,7 @@ impl ImplicitIntegrator {
             usage: SolverUsage::default(),
             last_residuals: (Vec::new(), 0.0),
             newton_buffers: NewtonBuffers::default(),
+            p2g: KinematicsBuffers::default(),
         })
     }
 
@@ -220,38 +222,38 @@ impl ImplicitIntegrator {
         }
     }
 
-    /// P2G: nodal mass, v_n and a_n (dynamic only; Dirichlet dofs neither
-    /// move nor accelerate; the mass counted in `profile`) and the external
-    /// force at `t1` (DESIGN D10).
+    /// P2G: nodal mass, v_n and a_n (dynamic only, in one pass; Dirichlet
+    /// dofs neither move nor accelerate; the mass counted in `profile`) and
+    /// the external force at `t1` (DESIGN D10).
     fn map_to_grid(
-        &self,
+        &mut self,
         model: &Model,
         setup: &StepSetup,
         t1: f64,
         profile: &Profile,
     ) -> NodalKinematics {
-        let (grid, p) = (&model.grid, &model.particles);
-        let (bins, shapes) = (&setup.bins, &setup.shapes);
-        let (mut mass, mut velocity, mut acceleration) = (Vec::new(), Vec::new(), Vec::new());
-        if self.newmark.is_some() {
-            mass = transfer::nodal_mass(grid, bins, shapes, &p.mass);
-            profile.count(Work::MassMatrix, 1);
-            let momentum = transfer::nodal_mass_weighted(grid, bins, shapes, &p.mass, &p.velocity);
-            let ma = transfer::nodal_mass_weighted(grid, bins, shapes, &p.mass, &p.acceleration);
-            velocity = divide_by_mass(&momentum, &mass);
-            acceleration = divide_by_mass(&ma, &mass);
-            for (d, c) in model.constraints.dof.iter().enumerate() {
-                if *c == DofConstraint::Fixed {
-                    velocity[d / 2][d % 2] = 0.0;
-                    acceleration[d / 2][d % 2] = 0.0;
-                }
+        if self.newmark.is_none() {
+            return NodalKinematics {
+                mass: Vec::new(),
+                velocity: Vec::new(),
+                acceleration: Vec::new(),
+                external: external_force(model, setup, t1),
+            };
+        }
+        let nodal = nodal_kinematics(model, setup, t1, &mut self.p2g);
+        profile.count(Work::MassMatrix, 1);
+        let (mut velocity, mut acceleration) = (nodal.velocity, nodal.acceleration);
+        for (d, c) in model.constraints.dof.iter().enumerate() {
+            if *c == DofConstraint::Fixed {
+                velocity[d / 2][d % 2] = 0.0;
+                acceleration[d / 2][d % 2] = 0.0;
             }
         }
         NodalKinematics {
-            mass,
+            mass: nodal.mass,
             velocity,
             acceleration,
-            external: external_force(model, setup, t1),
+            external: nodal.external,
         }
     }
 
@@ -358,18 +360,4 @@ fn step_setup(model: &Model) -> Result<(StepSetup, DofMap), StepError> {
 fn refresh_setup(model: &Model, setup: &mut StepSetup) -> Result<DofMap, StepError> {
     setup.refresh(model)?;
     Ok(DofMap::new(&setup.bins, &model.constraints))
-}
-
-fn divide_by_mass(weighted: &[[f64; 2]], mass: &[f64]) -> Vec<[f64; 2]> {
-    weighted
-        .iter()
-        .zip(mass)
-        .map(|(w, &m)| {
-            if m > 0.0 {
-                [w[0] / m, w[1] / m]
-            } else {
-                [0.0; 2]
-            }
-        })
-        .collect()
 }

@@ -4,11 +4,12 @@
 //! ([`Convergence`]), and the loop that joins them ([`solve`]).
 
 use mpm_solvers::SolverError;
+use rayon::prelude::*;
 
 use super::tangent::Tangent;
 use super::{
     evaluate_stresses, evaluate_stresses_without_tangent, NonlocalStep, SolverUsage, StepSetup,
-    TrialStresses,
+    TrialStresses, POINTS_PER_TASK,
 };
 use crate::bc::DofConstraint;
 use crate::constitutive::ConstitutiveError;
@@ -377,16 +378,21 @@ impl StepSystem<'_> {
         if self.newmark.is_none() {
             return Ok(());
         }
+        // the first point of the largest motion (in parallel: the reduction
+        // keeps the order of the points, so ties go to the lowest index)
+        let first_larger = |a: (usize, f64), b: (usize, f64)| if b.1 > a.1 { b } else { a };
         let (particle, distance) = self
             .setup
             .shapes
-            .iter()
+            .par_iter()
+            .with_min_len(POINTS_PER_TASK)
             .map(|s| {
                 let u = transfer::interpolate(s, du);
                 (u[0] * u[0] + u[1] * u[1]).sqrt()
             })
             .enumerate()
-            .fold((0, 0.0), |a, b| if b.1 > a.1 { b } else { a });
+            .fold(|| (0, 0.0), first_larger)
+            .reduce(|| (0, 0.0), first_larger);
         if distance > 0.5 * self.model.grid.cell_size {
             return Err(NewtonFailure::Motion {
                 particle,

@@ -5,7 +5,7 @@
 use rayon::prelude::*;
 
 use super::regularisation::NonlocalStrength;
-use super::StepSetup;
+use super::{StepSetup, POINTS_PER_TASK};
 use crate::constitutive::{
     mat4_mul_vec, ConstitutiveError, Mat4, PointState, StrengthVariable, Voigt,
 };
@@ -237,9 +237,6 @@ fn evaluate<S: Support>(
     }
     tally
 }
-
-/// Points handed to one rayon task at least.
-const POINTS_PER_TASK: usize = 256;
 
 /// Points of one run of [`evaluate`]: their gradients and rotated stresses
 /// are formed in one pass, then their constitutive updates.

@@ -11,13 +11,14 @@ use super::export::SystemExport;
 use super::newton::StepSystem;
 use super::{SolverUsage, TrialStresses};
 use crate::constitutive::LinearElastic;
+use crate::dofs::DofMap;
 use crate::error::StepError;
 use crate::grid::Grid;
 use crate::model::Model;
 use crate::profile::{Profile, Stage, Work};
 use crate::scene::{FieldError, Scene, SceneError};
 use crate::stiffness;
-use crate::transfer::NONE;
+use crate::transfer::{ParticleBins, NONE};
 use crate::volumetric::CellMeanGradients;
 
 /// The tangent of the implicit integrator and its caches.
@@ -26,8 +27,9 @@ pub struct Tangent {
     solver: LinearSolver,
     /// `[output] systems`: the systems to write, once the output directory is known.
     export: Option<SystemExport>,
-    /// The elements' system dofs and the assembler of the pattern they make.
-    pattern: Option<(Vec<Vec<u32>>, Assembler)>,
+    /// What the elements' system dofs were made of, and the assembler of
+    /// the pattern they make.
+    pattern: Option<(PatternKey, Assembler)>,
     /// Whether `pattern` belongs to the current step.
     pattern_current: bool,
     /// Every material's tangent is symmetric: Cholesky allowed.
@@ -242,18 +244,44 @@ impl Tangent {
     /// element keeps its dofs, else a new one (GIMP patches drop the
     /// couplings of nodes three apart, `stiffness::patch_coupling`).
     fn update_pattern(&mut self, system: &StepSystem) -> Result<(), StepError> {
-        let grid = &system.model.grid;
-        let element_dofs = system.dofs.element_dofs(grid, &system.setup.bins);
-        let n = system.dofs.n_free;
-        let same =
-            matches!(&self.pattern, Some((key, a)) if *key == element_dofs && a.n_dofs() == n);
+        let (grid, bins, dofs) = (&system.model.grid, &system.setup.bins, &system.dofs);
+        let same = matches!(&self.pattern, Some((key, _)) if key.holds(bins, dofs));
         if !same {
+            let element_dofs = dofs.element_dofs(grid, bins);
             let coupling = stiffness::patch_coupling(grid, system.model.b_bar());
-            let assembler = Assembler::with_couplings(n, &element_dofs, coupling)?;
-            self.pattern = Some((element_dofs, assembler));
+            let assembler = Assembler::with_couplings(dofs.n_free, &element_dofs, coupling)?;
+            self.pattern = Some((PatternKey::new(bins, dofs), assembler));
         }
         self.pattern_current = true;
         Ok(())
+    }
+}
+
+/// What a step's elements and their system dofs are made of
+/// (`DofMap::element_dofs`): the active cells, the reached cells and the
+/// numbering of the unknowns. Steps with equal keys have the same elements
+/// with the same dofs, so the same pattern; comparing the key costs a pass
+/// over three arrays, not the forming of every element's dof list.
+struct PatternKey {
+    active_cells: Vec<u32>,
+    reached_cells: Vec<u32>,
+    dof_index: Vec<u32>,
+}
+
+impl PatternKey {
+    fn new(bins: &ParticleBins, dofs: &DofMap) -> Self {
+        Self {
+            active_cells: bins.active_cells.clone(),
+            reached_cells: bins.reached_cells.clone(),
+            dof_index: dofs.index.clone(),
+        }
+    }
+
+    /// Whether the elements of `bins` and `dofs` have this key's dofs.
+    fn holds(&self, bins: &ParticleBins, dofs: &DofMap) -> bool {
+        self.active_cells == bins.active_cells
+            && self.reached_cells == bins.reached_cells
+            && self.dof_index == dofs.index
     }
 }
 
