@@ -127,8 +127,10 @@ struct Front {
     /// For each of `rows`, its local index in the parent's front.
     to_parent: Vec<usize>,
     /// `(position in K's values, offset in the column-major m × m front)`, those in the
-    /// front's lower triangle (row ≥ column) first: a Cholesky front sums only these.
-    entries: Vec<(usize, usize)>,
+    /// front's lower triangle (row ≥ column) first: a Cholesky front sums only these
+    /// (`u32`: K's positions are, [`crate::Assembler`], and a front's are for any front that
+    /// fits in memory; half the bytes every numeric factorisation reads).
+    entries: Vec<(u32, u32)>,
     /// Number of `entries` in the lower triangle.
     lower_entries: usize,
     /// Estimated flops of the whole subtree rooted here.
@@ -426,7 +428,7 @@ impl Symbolic {
                 None => roots.push(s),
             }
         }
-        scatter_entries(&mut fronts, &front_of, &perm_inv, col_ptr, row_idx);
+        scatter_entries(&mut fronts, &front_of, &perm_inv, col_ptr, row_idx)?;
         for s in 0..count {
             let (ns, m) = (fronts[s].pivots() as f64, fronts[s].order() as f64);
             let own = ns * m * m + m * m;
@@ -539,7 +541,7 @@ impl Symbolic {
             &front.entries[..]
         };
         for &(k, offset) in entries {
-            dense[offset] += values[k];
+            dense[offset as usize] += values[k as usize];
         }
         for &c in &front.children {
             let block = std::mem::take(&mut *contributions[c].lock().expect("contribution lock"));
@@ -650,8 +652,25 @@ fn scatter_entries(
     perm_inv: &[usize],
     col_ptr: &[usize],
     row_idx: &[usize],
-) {
+) -> Result<(), SolverError> {
     let n = perm_inv.len();
+    // K's positions fit (the assembler refuses larger patterns); a front's offsets do for
+    // any front of fewer than 65,536 unknowns (a dense 32 GB block)
+    let too_large = |m: usize| {
+        SolverError::Unsupported(format!(
+            "a multifrontal front of order {m} exceeds 32-bit offsets"
+        ))
+    };
+    if row_idx.len() > u32::MAX as usize {
+        return Err(SolverError::TooManyNonZeros { nnz: row_idx.len() });
+    }
+    if let Some(m) = fronts
+        .iter()
+        .map(Front::order)
+        .find(|&m| m * m > u32::MAX as usize)
+    {
+        return Err(too_large(m));
+    }
     // K's entries (position, permuted row, permuted column) grouped by front, in K's order
     let mut start = vec![0usize; fronts.len() + 1];
     let owner = |i: usize, j: usize| front_of[perm_inv[i].min(perm_inv[j])];
@@ -663,12 +682,12 @@ fn scatter_entries(
     for s in 0..fronts.len() {
         start[s + 1] += start[s];
     }
-    let mut grouped = vec![(0usize, 0usize, 0usize); row_idx.len()];
+    let mut grouped = vec![(0u32, 0u32, 0u32); row_idx.len()];
     let mut next = start[..fronts.len()].to_vec();
     for j in 0..n {
         for (k, &i) in (col_ptr[j]..).zip(&row_idx[col_ptr[j]..col_ptr[j + 1]]) {
             let s = owner(i, j);
-            grouped[next[s]] = (k, perm_inv[i], perm_inv[j]);
+            grouped[next[s]] = (k as u32, perm_inv[i] as u32, perm_inv[j] as u32);
             next[s] += 1;
         }
     }
@@ -679,7 +698,8 @@ fn scatter_entries(
         for (r, &x) in front.rows.iter().enumerate() {
             local_of_row[x] = ns + r;
         }
-        let local = |x: usize| {
+        let local = |x: u32| {
+            let x = x as usize;
             if x < front.end {
                 x - front.begin
             } else {
@@ -687,17 +707,21 @@ fn scatter_entries(
             }
         };
         // every position of a front receives one entry of K at most: the order of the
-        // entries does not change a sum
-        let (mut lower, upper): (Vec<_>, Vec<_>) = grouped[start[s]..start[s + 1]]
-            .iter()
-            .map(|&(k, pi, pj)| (k, local(pi), local(pj)))
-            .partition(|&(_, row, column)| row >= column);
-        front.lower_entries = lower.len();
-        lower.extend(upper);
-        front.entries = (lower.into_iter())
-            .map(|(k, row, column)| (k, column * m + row))
-            .collect();
+        // entries does not change a sum; the lower triangle's first, each part in K's order
+        let group = &grouped[start[s]..start[s + 1]];
+        let placed = || group.iter().map(|&(k, pi, pj)| (k, local(pi), local(pj)));
+        let mut entries = Vec::with_capacity(group.len());
+        for lower in [true, false] {
+            for (k, row, column) in placed().filter(|&(_, row, column)| (row >= column) == lower) {
+                entries.push((k, (column * m + row) as u32));
+            }
+            if lower {
+                front.lower_entries = entries.len();
+            }
+        }
+        front.entries = entries;
     }
+    Ok(())
 }
 
 /// Extend-add: adds a child's contribution block `block` to the parent's m × m front `dense`
