@@ -22,29 +22,9 @@ pub fn add_particle_stiffness(
     volume: f64,
     tangent: &Mat4,
 ) {
-    // the bilinear support (2 × 2 nodes in a 2 × 2 patch) with its size
-    // known to the compiler, which unrolls the loops: the same operations in
-    // the same order, ~2× faster (criterion `assembly/blocks/10k`); GIMP
-    // patches gained nothing from it
-    match (shape.count, dofs) {
-        (4, 8) => add_support_stiffness(block, 8, shape, 4, volume, tangent),
-        (count, _) => add_support_stiffness(block, dofs, shape, count as usize, volume, tangent),
-    }
-}
-
-/// [`add_particle_stiffness`] over the first `count` nodes of the support.
-#[inline(always)]
-fn add_support_stiffness(
-    block: &mut [f64],
-    dofs: usize,
-    shape: &ShapeAt,
-    count: usize,
-    volume: f64,
-    tangent: &Mat4,
-) {
     // DB_b (4×2) for every node b of the support
     let mut db = [[[0.0; 2]; 4]; MAX_SUPPORT];
-    for b in 0..count {
+    for b in shape.support() {
         let [dx, dy] = shape.dn[b];
         for r in 0..4 {
             db[b][r] = [
@@ -53,10 +33,10 @@ fn add_support_stiffness(
             ];
         }
     }
-    for a in 0..count {
+    for a in shape.support() {
         let [dx, dy] = shape.dn[a];
         let row = 2 * shape.local[a] as usize;
-        for b in 0..count {
+        for b in shape.support() {
             let col = 2 * shape.local[b] as usize;
             for c in 0..2 {
                 // rows of B_aᵀ: x-row = [dx, 0, 0, dy], y-row = [0, dy, 0, dx]
