@@ -181,6 +181,9 @@ pub struct ParticleBins {
     pub node_active: Vec<bool>,
     /// Indices of the active nodes, increasing.
     pub active_nodes: Vec<u32>,
+    /// The holding cell of every point at the last [`Self::rebuild_bilinear`] (empty
+    /// after any other rebuild): while no point leaves its cell, the bins stay.
+    holding_cells: Vec<u32>,
 }
 
 impl ParticleBins {
@@ -196,6 +199,7 @@ impl ParticleBins {
     /// [`Self::new`] gives, without allocating once the arrays have grown.
     pub fn rebuild<S: Support>(&mut self, grid: &Grid, shapes: &[S], reached: &mut Vec<bool>) {
         let n_cells = grid.cell_count();
+        self.holding_cells.clear();
         self.sort_points(n_cells, shapes.len(), |p| shapes[p].holding_cell());
         reached.clear();
         reached.resize(n_cells, false);
@@ -208,11 +212,20 @@ impl ParticleBins {
     }
 
     /// [`Self::rebuild`] for bilinear shape functions (whose support never
-    /// leaves the holding cell) from the holding cell of every point.
+    /// leaves the holding cell) from the holding cell of every point. The
+    /// bins depend on nothing else: when every point is in the cell it was
+    /// in at the last call (the common case of an explicit step, whose points
+    /// move a fraction of a cell), they are kept as they are.
     pub fn rebuild_bilinear(&mut self, grid: &Grid, cells: &[u32]) {
         debug_assert_eq!(grid.patch_side(), 2, "a bilinear grid");
+        let binned = self.cell_start.len() == grid.cell_count() + 1;
+        if binned && self.holding_cells == cells {
+            return;
+        }
         self.sort_points(grid.cell_count(), cells.len(), |p| cells[p]);
         self.number_cells(grid, &[]);
+        self.holding_cells.clear();
+        self.holding_cells.extend_from_slice(cells);
     }
 
     /// `cell_start` and `order`: the points of every cell in index order
@@ -905,6 +918,54 @@ pub(crate) mod tests {
                 }
             }
         }
+    }
+
+    /// The bins a [`ParticleBins::rebuild_bilinear`] keeps or rebuilds are
+    /// those binned afresh: after moves within the cells (kept), a move of one
+    /// point into the next cell, the loss of a point, and a [`ParticleBins::rebuild`]
+    /// in between.
+    #[test]
+    fn kept_bilinear_bins_are_the_fresh_ones() {
+        let (grid, pos, _, _) = setup(ShapeFunctions::Bilinear);
+        let cells_of = |x: &[[f64; 2]]| -> Vec<u32> {
+            let (mut shapes, mut cells) = (Vec::new(), Vec::new());
+            bilinear_shapes_into(&grid, x, &mut shapes, &mut cells).unwrap();
+            cells
+        };
+        let same = |a: &ParticleBins, b: &ParticleBins| {
+            a.cell_start == b.cell_start
+                && a.order == b.order
+                && a.active_cells == b.active_cells
+                && a.reached_cells == b.reached_cells
+                && a.cell_slot == b.cell_slot
+                && a.node_active == b.node_active
+                && a.active_nodes == b.active_nodes
+        };
+        let mut kept = ParticleBins::default();
+        let mut moved = pos.clone();
+        // 0: first binning; 1: every point moved by 1e-9 m (no cell changes);
+        // 2: point 7 moved by a cell; 3: the last point lost; 4: after a full rebuild
+        for stage in 0..5 {
+            match stage {
+                1 => moved.iter_mut().for_each(|x| x[0] += 1e-9),
+                2 => moved[7][0] += grid.cell_size,
+                3 => {
+                    moved.pop();
+                }
+                4 => kept.rebuild(&grid, &shapes_at(&grid, &moved).unwrap(), &mut Vec::new()),
+                _ => {}
+            }
+            let cells = cells_of(&moved);
+            kept.rebuild_bilinear(&grid, &cells);
+            let mut fresh = ParticleBins::default();
+            fresh.rebuild_bilinear(&grid, &cells);
+            assert!(same(&kept, &fresh), "stage {stage}");
+        }
+        assert_ne!(
+            cells_of(&pos)[7],
+            cells_of(&moved)[7],
+            "point 7 changed cells"
+        );
     }
 
     /// [`refill_fields`] writes component k of every node's value to field k
