@@ -240,21 +240,15 @@ impl ImplicitIntegrator {
                 external: external_force(model, setup, t1),
             };
         }
-        let nodal = nodal_kinematics(model, setup, t1, &mut self.p2g);
+        let mut nodal = nodal_kinematics(model, setup, t1, &mut self.p2g);
         profile.count(Work::MassMatrix, 1);
-        let (mut velocity, mut acceleration) = (nodal.velocity, nodal.acceleration);
         for (d, c) in model.constraints.dof.iter().enumerate() {
             if *c == DofConstraint::Fixed {
-                velocity[d / 2][d % 2] = 0.0;
-                acceleration[d / 2][d % 2] = 0.0;
+                nodal.velocity[d / 2][d % 2] = 0.0;
+                nodal.acceleration[d / 2][d % 2] = 0.0;
             }
         }
-        NodalKinematics {
-            mass: nodal.mass,
-            velocity,
-            acceleration,
-            external: nodal.external,
-        }
+        nodal
     }
 
     /// The next step's linearisation at a given free-dof displacement increment

@@ -37,13 +37,13 @@ pub(crate) use stress::{evaluate_stresses, evaluate_stresses_without_tangent, Tr
 
 use mpm_solvers::SolverStats;
 
-/// Points handed to one rayon task at least, in the passes over points.
-const POINTS_PER_TASK: usize = 256;
-
 use crate::error::{StepError, TimeStepLimit};
 use crate::model::{Model, PointRemap};
 use crate::profile::Profile;
 use crate::scene::{AnalysisKind, SceneError};
+
+/// Points handed to one rayon task at least, in the passes over points.
+const POINTS_PER_TASK: usize = 256;
 
 /// What one completed step did.
 #[derive(Clone, Debug, Default)]

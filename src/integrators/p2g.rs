@@ -4,6 +4,7 @@
 
 use rayon::prelude::*;
 
+use super::newton::NodalKinematics;
 use super::StepSetup;
 use crate::grid::ShapeAt;
 use crate::model::Model;
@@ -46,30 +47,17 @@ pub struct KinematicsBuffers {
     sums: NodalField<KinematicSums>,
 }
 
-/// What the implicit dynamic step maps to the grid (DESIGN D10), per grid
-/// node (zero at the nodes no point reaches).
-pub struct NodalKinematicsAt {
-    /// Lumped mass m_i = Σ_p N_ip m_p.
-    pub mass: Vec<f64>,
-    /// v_i = Σ_p N_ip m_p v_p / m_i.
-    pub velocity: Vec<[f64; 2]>,
-    /// a_i = Σ_p N_ip m_p a_p / m_i.
-    pub acceleration: Vec<[f64; 2]>,
-    /// f_i^ext at `t` (the body force and the follower pressures, as
-    /// [`external_force`]).
-    pub external: Vec<[f64; 2]>,
-}
-
 /// The nodal mass, velocity, acceleration and external force at time `t` of
-/// an implicit dynamic step, the point sums in one pass (the same values, bit
-/// for bit, as [`transfer::nodal_mass`], [`transfer::nodal_mass_weighted`]
-/// of v and a divided by the mass, and [`external_force`]).
+/// an implicit dynamic step, per grid node (zero at the nodes no point
+/// reaches), the point sums in one pass: the same values, bit for bit, as
+/// [`transfer::nodal_mass`], [`transfer::nodal_mass_weighted`] of v and a
+/// divided by the mass, and [`external_force`].
 pub fn nodal_kinematics(
     model: &Model,
     setup: &StepSetup,
     t: f64,
     buffers: &mut KinematicsBuffers,
-) -> NodalKinematicsAt {
+) -> NodalKinematics {
     let p = &model.particles;
     let g = model.scene.loads.gravity_at(t);
     let (mass, velocity, acceleration) = (&p.mass, &p.velocity, &p.acceleration);
@@ -102,7 +90,7 @@ pub fn nodal_kinematics(
     model
         .traction
         .add_forces(&setup.traction_shapes, &mut external);
-    NodalKinematicsAt {
+    NodalKinematics {
         mass: sums
             .par_iter()
             .with_min_len(NODES_PER_TASK)
