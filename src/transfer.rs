@@ -181,8 +181,9 @@ pub struct ParticleBins {
     pub node_active: Vec<bool>,
     /// Indices of the active nodes, increasing.
     pub active_nodes: Vec<u32>,
-    /// The holding cell of every point at the last [`Self::rebuild_bilinear`] (empty
-    /// after any other rebuild): while no point leaves its cell, the bins stay.
+    /// The holding cell of every point at the last rebuild on a bilinear grid
+    /// (empty after one on a GIMP grid): while no point leaves its cell, the
+    /// bins stay.
     holding_cells: Vec<u32>,
 }
 
@@ -197,16 +198,30 @@ impl ParticleBins {
     /// Bin the particles whose shapes are `shapes` again, reusing the
     /// arrays (and `reached`, a buffer of one flag per cell): what
     /// [`Self::new`] gives, without allocating once the arrays have grown.
+    /// On a bilinear grid the bins are those of the points' holding cells
+    /// and are kept while no point leaves its cell
+    /// ([`Self::rebuild_bilinear`]).
     pub fn rebuild<S: Support>(&mut self, grid: &Grid, shapes: &[S], reached: &mut Vec<bool>) {
         let n_cells = grid.cell_count();
+        if grid.patch_side() == 2 {
+            let unmoved = self.cell_start.len() == n_cells + 1
+                && self.holding_cells.len() == shapes.len()
+                && (shapes.iter().zip(&self.holding_cells)).all(|(s, &c)| s.holding_cell() == c);
+            if !unmoved {
+                self.holding_cells.clear();
+                self.holding_cells
+                    .extend(shapes.iter().map(Support::holding_cell));
+                self.sort_points(n_cells, shapes.len(), |p| shapes[p].holding_cell());
+                self.number_cells(grid, &[]);
+            }
+            return;
+        }
         self.holding_cells.clear();
         self.sort_points(n_cells, shapes.len(), |p| shapes[p].holding_cell());
         reached.clear();
         reached.resize(n_cells, false);
-        if grid.patch_side() > 2 {
-            for s in shapes {
-                mark_cells_reached(grid, s, reached);
-            }
+        for s in shapes {
+            mark_cells_reached(grid, s, reached);
         }
         self.number_cells(grid, reached);
     }
@@ -920,10 +935,10 @@ pub(crate) mod tests {
         }
     }
 
-    /// The bins a [`ParticleBins::rebuild_bilinear`] keeps or rebuilds are
-    /// those binned afresh: after moves within the cells (kept), a move of one
-    /// point into the next cell, the loss of a point, and a [`ParticleBins::rebuild`]
-    /// in between.
+    /// The bins a [`ParticleBins::rebuild_bilinear`] or a [`ParticleBins::rebuild`]
+    /// on a bilinear grid keeps or rebuilds are those binned afresh: after
+    /// moves within the cells (kept), a move of one point into the next cell,
+    /// the loss of a point.
     #[test]
     fn kept_bilinear_bins_are_the_fresh_ones() {
         let (grid, pos, _, _) = setup(ShapeFunctions::Bilinear);
@@ -944,7 +959,8 @@ pub(crate) mod tests {
         let mut kept = ParticleBins::default();
         let mut moved = pos.clone();
         // 0: first binning; 1: every point moved by 1e-9 m (no cell changes);
-        // 2: point 7 moved by a cell; 3: the last point lost; 4: after a full rebuild
+        // 2: point 7 moved by a cell; 3: the last point lost; 4: point 3 moved
+        // by a cell and binned from its full shape functions first
         for stage in 0..5 {
             match stage {
                 1 => moved.iter_mut().for_each(|x| x[0] += 1e-9),
@@ -952,7 +968,14 @@ pub(crate) mod tests {
                 3 => {
                     moved.pop();
                 }
-                4 => kept.rebuild(&grid, &shapes_at(&grid, &moved).unwrap(), &mut Vec::new()),
+                4 => {
+                    moved[3][1] += grid.cell_size;
+                    let shapes = shapes_at(&grid, &moved).unwrap();
+                    kept.rebuild(&grid, &shapes, &mut Vec::new());
+                    let mut fresh = ParticleBins::default();
+                    fresh.rebuild_bilinear(&grid, &cells_of(&moved));
+                    assert!(same(&kept, &fresh), "full rebuild");
+                }
                 _ => {}
             }
             let cells = cells_of(&moved);
