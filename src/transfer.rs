@@ -164,6 +164,8 @@ pub const MAX_PATCH: usize = 16;
 /// a cell is active if it holds ≥ 1 point; a node is active if some point's
 /// shape functions reach it: the nodes of the active cells, and for GIMP also
 /// those of the cells that a point's domain overlaps across a cell edge).
+/// One `ParticleBins` serves one grid: a rebuild on a bilinear grid keeps the
+/// bins of the last one when no point changed cell.
 #[derive(Clone, Debug, Default)]
 pub struct ParticleBins {
     /// `order[cell_start[c]..cell_start[c+1]]` are the particles of cell `c`, in index order.
