@@ -8,9 +8,10 @@
 //! Second derivatives of the return mapping come from forward-mode dual numbers
 //! (exact), see [`super::dual`].
 
-use nalgebra::{SMatrix, SVector};
+use nalgebra::SVector;
 use serde::{Deserialize, Serialize};
 
+use super::dense_lu::DenseLu;
 use super::dual::{Dual, Real};
 use super::flow_rule::{strain_norm, PressureScaledFlow};
 use super::softening::ThreeLevelSoftening;
@@ -366,7 +367,7 @@ struct Linearisation {
     h_kappa: f64,
 }
 
-type Mat6 = SMatrix<f64, 6, 6>;
+type Mat6 = [[f64; 6]; 6];
 type Vec6 = SVector<f64, 6>;
 
 /// A converged plastic (sub)step.
@@ -375,7 +376,7 @@ struct PlasticStep {
     kappa: f64,
     plastic_multiplier: f64,
     flow_direction: Voigt,
-    jacobian: nalgebra::LU<f64, nalgebra::Const<6>, nalgebra::Const<6>>,
+    jacobian: DenseLu<6>,
 }
 
 /// Result of integrating the whole increment with `n` sub-steps.
@@ -621,24 +622,24 @@ impl Hmc {
     #[inline]
     fn jacobian(&self, lin: &Linearisation, multiplier: f64, local: bool) -> Mat6 {
         let e = self.parameters.youngs_modulus;
-        let mut a = Mat6::zeros();
+        let mut a: Mat6 = [[0.0; 6]; 6];
         for i in 0..4 {
             for j in 0..4 {
-                a[(i, j)] = self.compliance[i][j] + multiplier * lin.m_sigma[i][j];
+                a[i][j] = self.compliance[i][j] + multiplier * lin.m_sigma[i][j];
             }
-            a[(i, 5)] = lin.m[i];
-            a[(5, i)] = lin.f_sigma[i] / e;
+            a[i][5] = lin.m[i];
+            a[5][i] = lin.f_sigma[i] / e;
         }
         if local {
             for i in 0..4 {
-                a[(i, 4)] = multiplier * lin.m_kappa[i];
-                a[(4, i)] = -multiplier * lin.h_sigma[i];
+                a[i][4] = multiplier * lin.m_kappa[i];
+                a[4][i] = -multiplier * lin.h_sigma[i];
             }
-            a[(4, 4)] = 1.0 - multiplier * lin.h_kappa;
-            a[(4, 5)] = -lin.h;
-            a[(5, 4)] = lin.f_kappa / e;
+            a[4][4] = 1.0 - multiplier * lin.h_kappa;
+            a[4][5] = -lin.h;
+            a[5][4] = lin.f_kappa / e;
         } else {
-            a[(4, 4)] = 1.0;
+            a[4][4] = 1.0;
         }
         a
     }
@@ -663,7 +664,7 @@ impl Hmc {
             );
             let r_sigma = r[0].abs().max(r[1].abs()).max(r[2].abs()).max(r[3].abs());
             let jacobian = self.jacobian(&lin, multiplier, local);
-            let lu = jacobian.lu();
+            let lu = DenseLu::new(jacobian);
             if r_sigma * e <= tolerance && lin.f.abs() <= tolerance && r[4].abs() <= KAPPA_TOLERANCE
             {
                 if multiplier < 0.0 {
@@ -685,7 +686,9 @@ impl Hmc {
                     jacobian: lu,
                 });
             }
-            let step = lu.solve(&(-r)).ok_or("singular Jacobian")?;
+            let step = lu
+                .solve(std::array::from_fn(|i| -r[i]))
+                .ok_or("singular Jacobian")?;
             if step.iter().any(|x| !x.is_finite()) {
                 return Err("non-finite Newton step");
             }
@@ -762,8 +765,8 @@ impl Hmc {
         let mut plastic = [0.0; 4];
         let mut yielded = false;
         // Sensitivities dσ/dΔε (4×4) and dκ/dΔε (1×4) of the total increment.
-        let mut s_sigma = SMatrix::<f64, 4, 4>::zeros();
-        let mut s_kappa = SMatrix::<f64, 1, 4>::zeros();
+        let mut s_sigma = [[0.0; 4]; 4];
+        let mut s_kappa = [0.0; 4];
         let tolerance_base = NEWTON_TOLERANCE * self.strength_scale;
         let elastic_tolerance = ELASTIC_TOLERANCE * self.strength_scale;
         for _ in 0..substeps {
@@ -780,7 +783,7 @@ impl Hmc {
                 if want_tangent {
                     for i in 0..4 {
                         for j in 0..4 {
-                            s_sigma[(i, j)] += self.stiffness[i][j] / n;
+                            s_sigma[i][j] += self.stiffness[i][j] / n;
                         }
                     }
                 }
@@ -800,29 +803,29 @@ impl Hmc {
                 continue;
             }
             // Sensitivity: A dy = [C dσ_k + dΔε/n; dκ_k; 0] (linearised D29).
-            let mut rhs = SMatrix::<f64, 6, 4>::zeros();
+            let mut rhs = [[0.0; 4]; 6];
             for i in 0..4 {
                 for j in 0..4 {
                     let mut c_s = 0.0;
                     for k in 0..4 {
-                        c_s += self.compliance[i][k] * s_sigma[(k, j)];
+                        c_s += self.compliance[i][k] * s_sigma[k][j];
                     }
-                    rhs[(i, j)] = c_s + if i == j { 1.0 / n } else { 0.0 };
+                    rhs[i][j] = c_s + if i == j { 1.0 / n } else { 0.0 };
                 }
                 if local {
-                    rhs[(4, i)] = s_kappa[(0, i)];
+                    rhs[4][i] = s_kappa[i];
                 }
             }
             let sol = step
                 .jacobian
-                .solve(&rhs)
+                .solve_columns(&rhs)
                 .ok_or("singular Jacobian in the tangent")?;
-            s_sigma = sol.fixed_view::<4, 4>(0, 0).into_owned();
+            s_sigma = [sol[0], sol[1], sol[2], sol[3]];
             if local {
-                s_kappa = sol.fixed_view::<1, 4>(4, 0).into_owned();
+                s_kappa = sol[4];
             }
         }
-        let tangent = std::array::from_fn(|i| std::array::from_fn(|j| s_sigma[(i, j)]));
+        let tangent = s_sigma;
         Ok(Integrated {
             stress,
             kappa,

@@ -8,6 +8,7 @@
 //! Sign convention (DESIGN D1–D2): stress is tension-positive, Voigt order
 //! `[xx, yy, zz, xy]`; strains carry engineering shear `γxy = 2 εxy`.
 
+pub mod dense_lu;
 pub mod dual;
 pub mod elastic;
 pub mod flow_rule;
