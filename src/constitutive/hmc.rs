@@ -370,6 +370,14 @@ struct Linearisation {
 type Mat6 = [[f64; 6]; 6];
 type Vec6 = SVector<f64, 6>;
 
+/// Starting point y⁰ = (σ, κ, Δλ) of the Newton iteration on D29.
+#[derive(Clone, Copy, Debug)]
+struct NewtonStart {
+    stress: Voigt,
+    kappa: f64,
+    multiplier: f64,
+}
+
 /// A converged plastic (sub)step.
 struct PlasticStep {
     stress: Voigt,
@@ -644,19 +652,64 @@ impl Hmc {
         a
     }
 
-    /// Closest-point projection of one (sub)step from the trial stress (DESIGN D29–D30).
+    /// A second start for a (sub)step whose Newton iteration from the trial state failed, when
+    /// the trial stress lies on the tension side of the apex (p_trial < −p_t): the apex
+    /// σ⁰ = p_t (1,1,1,0) with the plastic strain that carries the trial stress there,
+    /// Δε^p = C (σ_trial − σ⁰), as in the tip return (DESIGN §5.6 step 4); κ⁰ = κ_n + ‖Δε^p‖ε
+    /// (p_t taken at κ⁰ by fixed-point iteration when κ_s depends on κ) and Δλ⁰ = ‖Δε^p‖ε / ‖m‖ε
+    /// with m at the apex. From the trial state, where the surface near the apex has a radius
+    /// of curvature ~a and the strength softens with κ, the iteration can creep towards the
+    /// apex by line-search steps of a few per cent each and exhaust its iterations;
+    /// started at the apex it is near its solution. `None` where the trial stress does not lie
+    /// beyond the apex (the sub-stepping of step 3 follows).
+    fn apex_start(&self, trial: &Voigt, kappa_n: f64, arg: StrengthArg) -> Option<NewtonStart> {
+        let trial_mean = -(trial[0] + trial[1] + trial[2]) / 3.0;
+        let mut kappa = kappa_n;
+        let mut apex = [0.0; 4];
+        let mut plastic_norm = 0.0;
+        for _ in 0..50 {
+            let tensile = self.strength_f64(arg.at(kappa)).tensile_strength;
+            if trial_mean >= -tensile {
+                return None;
+            }
+            apex = [tensile, tensile, tensile, 0.0];
+            let diff: Voigt = std::array::from_fn(|i| trial[i] - apex[i]);
+            plastic_norm = strain_norm(&mat4_mul_vec(&self.compliance, &diff));
+            let kappa_new = kappa_n + plastic_norm;
+            let change = (kappa_new - kappa).abs();
+            kappa = kappa_new;
+            if !arg.couples_kappa() || change <= KAPPA_TOLERANCE {
+                break;
+            }
+        }
+        let strength = self.strength_f64(arg.at(kappa));
+        let (_, gradient) = self.surface.value_and_gradient(&apex, &strength);
+        let flow_norm = strain_norm(&self.flow.direction(&gradient, strength.tan_friction));
+        let multiplier = plastic_norm / flow_norm;
+        multiplier.is_finite().then_some(NewtonStart {
+            stress: apex,
+            kappa: if arg.couples_kappa() { kappa } else { kappa_n },
+            multiplier,
+        })
+    }
+
+    /// Closest-point projection of one (sub)step of trial stress `trial` (DESIGN D29–D30), the
+    /// Newton iteration started at `start`.
     fn plastic_step(
         &self,
         trial: &Voigt,
         kappa_n: f64,
         arg: StrengthArg,
         tolerance: f64,
+        start: NewtonStart,
     ) -> Result<PlasticStep, &'static str> {
         let local = arg.couples_kappa();
         let e = self.parameters.youngs_modulus;
-        let mut stress = *trial;
-        let mut kappa = kappa_n;
-        let mut multiplier = 0.0;
+        let NewtonStart {
+            mut stress,
+            mut kappa,
+            mut multiplier,
+        } = start;
         let mut lin = self.linearise(&stress, kappa, arg);
         for _ in 0..MAX_NEWTON_ITERATIONS {
             let r = self.assemble_residual(
@@ -792,7 +845,20 @@ impl Hmc {
             let trial_scale = trial.iter().fold(0.0f64, |acc, x| acc.max(x.abs()));
             // Round-off floor for very large stresses (~500 ulp of the trial stress).
             let tolerance = tolerance_base.max(1e-13 * trial_scale);
-            let step = self.plastic_step(&trial, kappa, arg, tolerance)?;
+            let from_trial = NewtonStart {
+                stress: trial,
+                kappa,
+                multiplier: 0.0,
+            };
+            // DESIGN §5.6 step 2 from y⁰ = (σ_trial, κ, 0); where that fails beyond the apex,
+            // once more from the apex before the sub-stepping of step 3 (`apex_start`)
+            let step = match self.plastic_step(&trial, kappa, arg, tolerance, from_trial) {
+                Ok(step) => step,
+                Err(reason) => {
+                    let from_apex = self.apex_start(&trial, kappa, arg).ok_or(reason)?;
+                    self.plastic_step(&trial, kappa, arg, tolerance, from_apex)?
+                }
+            };
             for (p, m) in plastic.iter_mut().zip(step.flow_direction) {
                 *p += step.plastic_multiplier * m;
             }

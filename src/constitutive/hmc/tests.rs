@@ -778,3 +778,108 @@ fn projection_after_double_mapping_keeps_p_and_theta() {
         [pt, pt, pt, 0.0]
     );
 }
+
+/// A large tensile increment in a softened local point (a state met in the fragmenting band of
+/// `validation/biaxial/local_h500.toml`): from the trial state the Newton iteration creeps
+/// towards the apex and exhausts its iterations; started at the apex ([`Hmc::apex_start`]) it
+/// converges in the one step, to a closest-point projection (D29 holds at the result) whose
+/// consistent tangent matches finite differences.
+#[test]
+fn apex_start_rescues_a_creeping_return() {
+    let m = model(|_| {});
+    let stress_n: Voigt = [-150.0, -400.0, -120.0, 50.0];
+    let trial: Voigt = [13038.956, 4305.750, 3382.195, 4490.950];
+    let diff: Voigt = std::array::from_fn(|i| trial[i] - stress_n[i]);
+    let increment = mat4_mul_vec(&m.compliance, &diff);
+    let kappa_n = 5.9048e-3;
+    let state_n = PointState {
+        plastic_strain_eq: kappa_n,
+        plastic_strain_eq_nonlocal: kappa_n,
+        ..Default::default()
+    };
+    let arg = StrengthArg::LOCAL;
+    let trial = add(&stress_n, &mat4_mul_vec(&m.stiffness, &increment));
+    let tolerance = (NEWTON_TOLERANCE * m.strength_scale()).max(1e-13 * 13039.0);
+    let from_trial = NewtonStart {
+        stress: trial,
+        kappa: kappa_n,
+        multiplier: 0.0,
+    };
+    assert!(
+        m.plastic_step(&trial, kappa_n, arg, tolerance, from_trial)
+            .is_err(),
+        "the case no longer exercises the apex start"
+    );
+    let start = m.apex_start(&trial, kappa_n, arg).expect("beyond the apex");
+    assert!(m
+        .plastic_step(&trial, kappa_n, arg, tolerance, start)
+        .is_ok());
+
+    let (u, substeps) = m
+        .update_with_substeps(&stress_n, &increment, &state_n, StrengthVariable::Local)
+        .expect("converges");
+    assert_eq!(substeps, 1, "one step, no sub-stepping and no tip return");
+    let kappa = u.state.plastic_strain_eq;
+    // D29 at the result, within the return mapping's own tolerances (|f| ≤ 1e-11 c_ref,
+    // |r_κ| ≤ 1e-12, ‖r_σ‖ E ≤ 1e-11 c_ref, i.e. 1e-13 in strain here): f = 0,
+    // Δκ = ‖Δε^p‖ε and Δε^p = Δλ m (normality)
+    let elastic = mat4_mul_vec(
+        &m.compliance,
+        &std::array::from_fn(|i| u.stress[i] - stress_n[i]),
+    );
+    let plastic: Voigt = std::array::from_fn(|i| increment[i] - elastic[i]);
+    let f = m.yield_function(&u.stress, kappa);
+    assert!(
+        f.abs() <= NEWTON_TOLERANCE * m.strength_scale(),
+        "f = {f} kPa"
+    );
+    let plastic_norm = strain_norm_f64(&plastic);
+    assert!(
+        (kappa - kappa_n - plastic_norm).abs() <= KAPPA_TOLERANCE,
+        "Δκ = {} against ‖Δε^p‖ = {plastic_norm}",
+        kappa - kappa_n
+    );
+    let flow = m.flow_direction(&u.stress, kappa);
+    let multiplier = plastic_norm / strain_norm_f64(&flow);
+    for i in 0..4 {
+        assert!(
+            (plastic[i] - multiplier * flow[i]).abs() <= 1e-12 * plastic_norm,
+            "Δε^p {plastic:?} against Δλ m {:?}",
+            flow.map(|x| multiplier * x)
+        );
+    }
+    // the consistent tangent of the one-step return, by central differences
+    let eta = 1e-6 * strain_norm_f64(&increment);
+    let dmax = u
+        .tangent
+        .iter()
+        .flatten()
+        .fold(0.0f64, |a, x| a.max(x.abs()));
+    let mut worst: f64 = 0.0;
+    for j in 0..4 {
+        let (mut ip, mut im) = (increment, increment);
+        ip[j] += eta;
+        im[j] -= eta;
+        let up = m
+            .update(&stress_n, &ip, &state_n, StrengthVariable::Local)
+            .unwrap();
+        let um = m
+            .update(&stress_n, &im, &state_n, StrengthVariable::Local)
+            .unwrap();
+        for i in 0..4 {
+            let fd = (up.stress[i] - um.stress[i]) / (2.0 * eta);
+            worst = worst.max((fd - u.tangent[i][j]).abs());
+        }
+    }
+    let normality = (0..4).fold(0.0f64, |a, i| {
+        a.max((plastic[i] - multiplier * flow[i]).abs())
+    });
+    eprintln!(
+        "apex start: κ {kappa_n} → {kappa}, σ = {:?}, f = {f:.1e}, Δκ error {:.1e}, normality {:.1e}, tangent error {:.2e}",
+        u.stress,
+        (kappa - kappa_n - plastic_norm).abs() / plastic_norm,
+        normality / plastic_norm,
+        worst / dmax
+    );
+    assert!(worst / dmax <= 1e-8, "tangent error {:e}", worst / dmax);
+}
