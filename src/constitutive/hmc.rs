@@ -652,43 +652,39 @@ impl Hmc {
         a
     }
 
-    /// A second start for a (sub)step whose Newton iteration from the trial state failed, when
-    /// the trial stress lies on the tension side of the apex (p_trial < −p_t): the apex
-    /// σ⁰ = p_t (1,1,1,0) with the plastic strain that carries the trial stress there,
-    /// Δε^p = C (σ_trial − σ⁰), as in the tip return (DESIGN §5.6 step 4); κ⁰ = κ_n + ‖Δε^p‖ε
-    /// (p_t taken at κ⁰ by fixed-point iteration when κ_s depends on κ) and Δλ⁰ = ‖Δε^p‖ε / ‖m‖ε
-    /// with m at the apex. From the trial state, where the surface near the apex has a radius
-    /// of curvature ~a and the strength softens with κ, the iteration can creep towards the
-    /// apex by line-search steps of a few per cent each and exhaust its iterations;
-    /// started at the apex it is near its solution. `None` where the trial stress does not lie
-    /// beyond the apex (the sub-stepping of step 3 follows).
-    fn apex_start(&self, trial: &Voigt, kappa_n: f64, arg: StrengthArg) -> Option<NewtonStart> {
+    /// A second start for a (sub)step from `stress_start` by `increment` (trial stress
+    /// `trial`) whose Newton iteration from the trial state failed, when the trial stress lies
+    /// on the tension side of the apex (p_trial < −p_t at κ): the tip return's state (DESIGN
+    /// §5.6 step 4, [`Self::tip_return`]), σ⁰ = p_t (1,1,1,0) and κ⁰ from the plastic strain
+    /// Δε^p that carries the trial stress there, with Δλ⁰ = ‖Δε^p‖ε / ‖m‖ε for m at σ⁰.
+    /// From the trial state, where the surface near the apex has a radius of curvature ~a and
+    /// the strength softens with κ, the iteration can creep towards the apex by line-search
+    /// steps of a few per cent each and exhaust its iterations; started at the apex it is near
+    /// its solution. `None` where the trial stress does not lie beyond the apex (the
+    /// sub-stepping of step 3 follows).
+    fn apex_start(
+        &self,
+        (stress_start, increment, trial): (&Voigt, &Voigt, &Voigt),
+        kappa: f64,
+        arg: StrengthArg,
+    ) -> Option<NewtonStart> {
         let trial_mean = -(trial[0] + trial[1] + trial[2]) / 3.0;
-        let mut kappa = kappa_n;
-        let mut apex = [0.0; 4];
-        let mut plastic_norm = 0.0;
-        for _ in 0..50 {
-            let tensile = self.strength_f64(arg.at(kappa)).tensile_strength;
-            if trial_mean >= -tensile {
-                return None;
-            }
-            apex = [tensile, tensile, tensile, 0.0];
-            let diff: Voigt = std::array::from_fn(|i| trial[i] - apex[i]);
-            plastic_norm = strain_norm(&mat4_mul_vec(&self.compliance, &diff));
-            let kappa_new = kappa_n + plastic_norm;
-            let change = (kappa_new - kappa).abs();
-            kappa = kappa_new;
-            if !arg.couples_kappa() || change <= KAPPA_TOLERANCE {
-                break;
-            }
+        if trial_mean >= -self.strength_f64(arg.at(kappa)).tensile_strength {
+            return None;
         }
-        let strength = self.strength_f64(arg.at(kappa));
-        let (_, gradient) = self.surface.value_and_gradient(&apex, &strength);
-        let flow_norm = strain_norm(&self.flow.direction(&gradient, strength.tan_friction));
-        let multiplier = plastic_norm / flow_norm;
+        let tip = self.tip_return(stress_start, increment, kappa, arg);
+        let strength = self.strength_f64(arg.at(tip.kappa));
+        let (_, gradient) = self.surface.value_and_gradient(&tip.stress, &strength);
+        let flow = self.flow.direction(&gradient, strength.tan_friction);
+        let multiplier = strain_norm(&tip.plastic_strain_increment) / strain_norm(&flow);
         multiplier.is_finite().then_some(NewtonStart {
-            stress: apex,
-            kappa: if arg.couples_kappa() { kappa } else { kappa_n },
+            stress: tip.stress,
+            // nonlocal: κ is not an unknown of the iteration (D29 without its κ row)
+            kappa: if arg.couples_kappa() {
+                tip.kappa
+            } else {
+                kappa
+            },
             multiplier,
         })
     }
@@ -855,7 +851,9 @@ impl Hmc {
             let step = match self.plastic_step(&trial, kappa, arg, tolerance, from_trial) {
                 Ok(step) => step,
                 Err(reason) => {
-                    let from_apex = self.apex_start(&trial, kappa, arg).ok_or(reason)?;
+                    let from_apex = self
+                        .apex_start((&stress, &sub_increment, &trial), kappa, arg)
+                        .ok_or(reason)?;
                     self.plastic_step(&trial, kappa, arg, tolerance, from_apex)?
                 }
             };

@@ -810,7 +810,9 @@ fn apex_start_rescues_a_creeping_return() {
             .is_err(),
         "the case no longer exercises the apex start"
     );
-    let start = m.apex_start(&trial, kappa_n, arg).expect("beyond the apex");
+    let start = m
+        .apex_start((&stress_n, &increment, &trial), kappa_n, arg)
+        .expect("beyond the apex");
     assert!(m
         .plastic_step(&trial, kappa_n, arg, tolerance, start)
         .is_ok());
