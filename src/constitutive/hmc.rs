@@ -91,6 +91,13 @@ pub struct HmcParameters {
     pub softening_rate_res: f64,
     /// `omega`: non-associativity constant ω (DESIGN D26).
     pub omega: f64,
+    /// `apex_start`: a (sub)step whose return mapping from the trial state fails beyond the
+    /// apex is tried once more from the apex before it is sub-stepped ([`Hmc`]'s
+    /// `apex_start`; default `false`, DESIGN §5.6 as written). A numerical option, not a
+    /// material property: it leaves every update that converges from the trial state as it
+    /// is and changes the few that sub-stepped.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub apex_start: bool,
 }
 
 impl HmcParameters {
@@ -111,6 +118,7 @@ impl HmcParameters {
             softening_rate_post: 10.0,
             softening_rate_res: 2.0,
             omega: 1.0,
+            apex_start: false,
         }
     }
 
@@ -847,9 +855,11 @@ impl Hmc {
                 multiplier: 0.0,
             };
             // DESIGN §5.6 step 2 from y⁰ = (σ_trial, κ, 0); where that fails beyond the apex,
-            // once more from the apex before the sub-stepping of step 3 (`apex_start`)
+            // with the `apex_start` option once more from the apex before the sub-stepping of
+            // step 3
             let step = match self.plastic_step(&trial, kappa, arg, tolerance, from_trial) {
                 Ok(step) => step,
+                Err(reason) if !self.parameters.apex_start => return Err(reason),
                 Err(reason) => {
                     let from_apex = self
                         .apex_start((&stress, &sub_increment, &trial), kappa, arg)

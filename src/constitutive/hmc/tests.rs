@@ -781,12 +781,13 @@ fn projection_after_double_mapping_keeps_p_and_theta() {
 
 /// A large tensile increment in a softened local point (a state met in the fragmenting band of
 /// `validation/biaxial/local_h500.toml`): from the trial state the Newton iteration creeps
-/// towards the apex and exhausts its iterations; started at the apex ([`Hmc::apex_start`]) it
-/// converges in the one step, to a closest-point projection (D29 holds at the result) whose
+/// towards the apex and exhausts its iterations (DESIGN §5.6 then sub-steps); with the
+/// `apex_start` option, started at the apex ([`Hmc::apex_start`]) it converges in the one step, to a closest-point projection (D29 holds at the result) whose
 /// consistent tangent matches finite differences.
 #[test]
 fn apex_start_rescues_a_creeping_return() {
-    let m = model(|_| {});
+    let as_written = model(|_| {});
+    let m = model(|p| p.apex_start = true);
     let stress_n: Voigt = [-150.0, -400.0, -120.0, 50.0];
     let trial: Voigt = [13038.956, 4305.750, 3382.195, 4490.950];
     let diff: Voigt = std::array::from_fn(|i| trial[i] - stress_n[i]);
@@ -817,6 +818,11 @@ fn apex_start_rescues_a_creeping_return() {
         .plastic_step(&trial, kappa_n, arg, tolerance, start)
         .is_ok());
 
+    // DESIGN §5.6 as written sub-steps this update; with the option it takes one step
+    let (_, substeps) = as_written
+        .update_with_substeps(&stress_n, &increment, &state_n, StrengthVariable::Local)
+        .expect("converges");
+    assert!(substeps > 1, "{substeps} sub-steps without the option");
     let (u, substeps) = m
         .update_with_substeps(&stress_n, &increment, &state_n, StrengthVariable::Local)
         .expect("converges");
