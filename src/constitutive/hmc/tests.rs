@@ -782,8 +782,9 @@ fn projection_after_double_mapping_keeps_p_and_theta() {
 /// A large tensile increment in a softened local point (a state met in the fragmenting band of
 /// `validation/biaxial/local_h500.toml`): from the trial state the Newton iteration creeps
 /// towards the apex and exhausts its iterations (DESIGN §5.6 then sub-steps); with the
-/// `apex_start` option, started at the apex ([`Hmc::apex_start`]) it converges in the one step, to a closest-point projection (D29 holds at the result) whose
-/// consistent tangent matches finite differences.
+/// `apex_start` option, started at the apex ([`Hmc::apex_start`]), it converges in the one
+/// step, to a closest-point projection (D29 holds at the result) whose consistent tangent
+/// matches finite differences.
 #[test]
 fn apex_start_rescues_a_creeping_return() {
     let as_written = model(|_| {});
