@@ -206,16 +206,7 @@ impl ParticleBins {
     pub fn rebuild<S: Support>(&mut self, grid: &Grid, shapes: &[S], reached: &mut Vec<bool>) {
         let n_cells = grid.cell_count();
         if grid.patch_side() == 2 {
-            let unmoved = self.cell_start.len() == n_cells + 1
-                && self.holding_cells.len() == shapes.len()
-                && (shapes.iter().zip(&self.holding_cells)).all(|(s, &c)| s.holding_cell() == c);
-            if !unmoved {
-                self.holding_cells.clear();
-                self.holding_cells
-                    .extend(shapes.iter().map(Support::holding_cell));
-                self.sort_points(n_cells, shapes.len(), |p| shapes[p].holding_cell());
-                self.number_cells(grid, &[]);
-            }
+            self.keep_or_rebin_bilinear(grid, shapes.len(), |p| shapes[p].holding_cell());
             return;
         }
         self.holding_cells.clear();
@@ -235,14 +226,29 @@ impl ParticleBins {
     /// move a fraction of a cell), they are kept as they are.
     pub fn rebuild_bilinear(&mut self, grid: &Grid, cells: &[u32]) {
         debug_assert_eq!(grid.patch_side(), 2, "a bilinear grid");
-        let binned = self.cell_start.len() == grid.cell_count() + 1;
-        if binned && self.holding_cells == cells {
+        self.keep_or_rebin_bilinear(grid, cells.len(), |p| cells[p]);
+    }
+
+    /// The bilinear rebuild, point `p` held by cell `cell_of(p)`: the bins
+    /// are kept when every point is in the cell it was in at the last
+    /// rebuild, else sorted and numbered afresh (no cell is reached without
+    /// holding a point).
+    fn keep_or_rebin_bilinear(
+        &mut self,
+        grid: &Grid,
+        n_points: usize,
+        cell_of: impl Fn(usize) -> u32,
+    ) {
+        let unmoved = self.cell_start.len() == grid.cell_count() + 1
+            && self.holding_cells.len() == n_points
+            && (self.holding_cells.iter().enumerate()).all(|(p, &c)| cell_of(p) == c);
+        if unmoved {
             return;
         }
-        self.sort_points(grid.cell_count(), cells.len(), |p| cells[p]);
-        self.number_cells(grid, &[]);
         self.holding_cells.clear();
-        self.holding_cells.extend_from_slice(cells);
+        self.holding_cells.extend((0..n_points).map(&cell_of));
+        self.sort_points(grid.cell_count(), n_points, &cell_of);
+        self.number_cells(grid, &[]);
     }
 
     /// `cell_start` and `order`: the points of every cell in index order
