@@ -293,6 +293,7 @@ impl Grid {
 
     /// Cell `(ci, cj)` containing `x`, by floor((x − x0)/h) clamped to the grid
     /// (DESIGN §2). Returns `None` when `x` is outside the grid.
+    #[inline]
     pub fn locate(&self, x: [f64; 2]) -> Option<(usize, usize)> {
         if !self.contains(x) || !x[0].is_finite() || !x[1].is_finite() {
             return None;
@@ -329,6 +330,7 @@ impl Grid {
     }
 
     /// [`Self::shape_in_cell`] in compact form.
+    #[inline]
     pub fn bilinear_shape(&self, ci: usize, cj: usize, x: [f64; 2]) -> BilinearShape {
         let h = self.cell_size;
         let xc = self.origin[0] + (ci as f64 + 0.5) * h;

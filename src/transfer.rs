@@ -128,20 +128,27 @@ pub fn bilinear_shapes_into(
     debug_assert_eq!(grid.patch_side(), 2, "a bilinear grid");
     shapes.resize(positions.len(), BilinearShape::default());
     cells.resize(positions.len(), 0);
+    // runs of points in a plain loop (no early exit: a point outside the
+    // grid is rare, and is found again below)
+    const RUN: usize = 1024;
     let outside = shapes
-        .par_iter_mut()
-        .zip(cells.par_iter_mut())
-        .zip(positions)
-        .with_min_len(1024)
-        .map(|((shape, cell), &x)| match grid.locate(x) {
-            Some((ci, cj)) => {
-                *shape = grid.bilinear_shape(ci, cj, x);
-                *cell = shape.cell;
-                false
+        .par_chunks_mut(RUN)
+        .zip(cells.par_chunks_mut(RUN))
+        .zip(positions.par_chunks(RUN))
+        .map(|((shapes, cells), positions)| {
+            let mut outside = false;
+            for ((shape, cell), &x) in shapes.iter_mut().zip(cells).zip(positions) {
+                match grid.locate(x) {
+                    Some((ci, cj)) => {
+                        *shape = grid.bilinear_shape(ci, cj, x);
+                        *cell = shape.cell;
+                    }
+                    None => outside = true,
+                }
             }
-            None => true,
+            outside
         })
-        .any(|out| out);
+        .reduce(|| false, |a, b| a || b);
     match outside {
         true => {
             let p = positions
