@@ -576,6 +576,27 @@ fn dot4(a: &[f64; 4], b: &[f64; 4]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3]
 }
 
+/// One point's term of [`dissipation_increment`] per unit volume,
+/// σ(n+1) · (Δε − C(σ(n+1) − σ^R(n))), with compliance `c`, `stress_new` =
+/// σ(n+1), `stress_rot_old` = σ^R(n) and `dstrain` = Δε.
+pub fn dissipation_density(
+    c: &Compliance,
+    stress_new: &[f64; 4],
+    stress_rot_old: &[f64; 4],
+    dstrain: &[f64; 4],
+) -> f64 {
+    let (s1, s0, de) = (stress_new, stress_rot_old, dstrain);
+    let ds = [s1[0] - s0[0], s1[1] - s0[1], s1[2] - s0[2], s1[3] - s0[3]];
+    let de_el = mat_vec(c, &ds);
+    let dep = [
+        de[0] - de_el[0],
+        de[1] - de_el[1],
+        de[2] - de_el[2],
+        de[3] - de_el[3],
+    ];
+    dot4(s1, &dep)
+}
+
 /// One step's dissipation increment \[D43, with σ(n+1) for the trapezoid\]:
 ///
 /// ΔD = Σ_p V_p(n) · σ_p(n+1) · Δε^p_p,
@@ -613,18 +634,7 @@ pub fn dissipation_increment(
             ComplianceSource::Uniform(c) => c,
             ComplianceSource::PerPoint(c) => &c[p],
         };
-        let s1 = &stress_new[p];
-        let s0 = &stress_rot_old[p];
-        let ds = [s1[0] - s0[0], s1[1] - s0[1], s1[2] - s0[2], s1[3] - s0[3]];
-        let de_el = mat_vec(c, &ds);
-        let de = &dstrain[p];
-        let dep = [
-            de[0] - de_el[0],
-            de[1] - de_el[1],
-            de[2] - de_el[2],
-            de[3] - de_el[3],
-        ];
-        d += volumes[p] * dot4(s1, &dep);
+        d += volumes[p] * dissipation_density(c, &stress_new[p], &stress_rot_old[p], &dstrain[p]);
     }
     if !d.is_finite() {
         return Err(MetricsError::NonFinite("dissipation increment"));

@@ -77,6 +77,10 @@ pub struct Model {
     pub reaction: Vec<[f64; 2]>,
     /// Nodal displacement increment of the last (sub-)step, per grid node, m.
     pub last_increment: Vec<[f64; 2]>,
+    /// The nodes outside which `reaction` and `last_increment` are zero
+    /// (increasing), when known; `None`: any node may hold a value. Lets
+    /// the commit write the nodes of the body only.
+    pub nodal_results_at: Option<Vec<u32>>,
     /// Accumulated plastic dissipation D (DESIGN D43), kJ per metre run.
     pub dissipated_energy: f64,
     /// Work W of the external loads on the soil so far, kJ per metre run: the
@@ -216,6 +220,7 @@ impl Model {
             step: 0,
             reaction: vec![[0.0; 2]; n_nodes],
             last_increment: vec![[0.0; 2]; n_nodes],
+            nodal_results_at: Some(Vec::new()),
             dissipated_energy: 0.0,
             external_work: 0.0,
             internal_work: 0.0,

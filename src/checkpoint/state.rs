@@ -213,6 +213,7 @@ impl SavedState {
         model.step = self.step;
         model.reaction = self.reaction;
         model.last_increment = self.last_increment;
+        model.nodal_results_at = None;
         model.dissipated_energy = self.dissipated_energy;
         model.external_work = self.external_work;
         model.internal_work = self.internal_work;

@@ -93,17 +93,58 @@ pub fn commit_swapping(
         nodal.contact_motion,
         (model.time, nodal.end_time),
     );
-    copy_into(&mut model.reaction, nodal.reaction);
-    copy_into(&mut model.last_increment, nodal.increment);
+    keep_nodal_results(model, &nodal);
     let remap = model.drop_lost_points();
     model.mass_height = model.current_mass_height();
     remap
 }
 
-/// `to = from`, reusing the array of `to`.
-fn copy_into<T: Copy>(to: &mut Vec<T>, from: &[T]) {
-    to.clear();
-    to.extend_from_slice(from);
+/// The step's reactions and increments into the model's arrays, written at
+/// the nodes where they or the last step's can be nonzero when both are
+/// known (a grid much larger than the body costs nothing), else copied
+/// whole.
+fn keep_nodal_results(model: &mut Model, nodal: &NodalResults) {
+    let before = model.nodal_results_at.take();
+    let (now, before_nodes) = (nodal.nonzero_at, before.as_deref());
+    copy_nodal(&mut model.reaction, nodal.reaction, before_nodes, now);
+    copy_nodal(
+        &mut model.last_increment,
+        nodal.increment,
+        before_nodes,
+        now,
+    );
+    model.nodal_results_at = now.map(|now| {
+        let mut nodes = before.unwrap_or_default();
+        nodes.clear();
+        nodes.extend_from_slice(now);
+        nodes
+    });
+}
+
+/// `to = from` for a nodal array, where `from` is zero outside the nodes
+/// `now` and `to` outside the nodes `before` (each when given): with both
+/// known, `to` is zeroed at `before` and written at `now` only; otherwise
+/// the whole array is copied (reusing the array of `to`).
+fn copy_nodal(
+    to: &mut Vec<[f64; 2]>,
+    from: &[[f64; 2]],
+    before: Option<&[u32]>,
+    now: Option<&[u32]>,
+) {
+    match (before, now) {
+        (Some(before), Some(now)) if to.len() == from.len() => {
+            for &node in before {
+                to[node as usize] = [0.0; 2];
+            }
+            for &node in now {
+                to[node as usize] = from[node as usize];
+            }
+        }
+        _ => {
+            to.clear();
+            to.extend_from_slice(from);
+        }
+    }
 }
 
 /// The lowest-index points that fail the checks of the committed state.
@@ -307,5 +348,42 @@ mod tests {
         let mut nan = f64::NAN;
         deform(&mut f, &mut nan, &mut e, &stretch, 1.0);
         assert!(nan.is_nan(), "a NaN volume became {nan}");
+    }
+
+    /// The nodal results kept over a run of steps whose nonzero nodes move
+    /// (and one whose nodes are unknown) are the step's arrays, bit for bit,
+    /// whichever way they are written.
+    #[test]
+    fn kept_nodal_results_are_the_steps() {
+        let node_count = 50;
+        // a field zero outside `nodes`, its values from the step number
+        let field = |step: usize, nodes: &[u32]| {
+            let mut values = vec![[0.0; 2]; node_count];
+            for &n in nodes {
+                let x = (step * 100 + n as usize) as f64;
+                values[n as usize] = [x.sin(), -x.cos()];
+            }
+            values
+        };
+        let steps: [Option<Vec<u32>>; 5] = [
+            Some((10..20).collect()),
+            Some((15..30).collect()),
+            None,
+            Some((0..5).collect()),
+            Some(vec![]),
+        ];
+        let mut kept = vec![[0.0; 2]; node_count];
+        let mut before: Option<Vec<u32>> = Some(vec![]);
+        for (step, nonzero_at) in steps.iter().enumerate() {
+            let all: Vec<u32> = (0..node_count as u32).collect();
+            let values = field(step, nonzero_at.as_deref().unwrap_or(&all));
+            copy_nodal(&mut kept, &values, before.as_deref(), nonzero_at.as_deref());
+            let same = kept
+                .iter()
+                .zip(&values)
+                .all(|(a, b)| a[0].to_bits() == b[0].to_bits() && a[1].to_bits() == b[1].to_bits());
+            assert!(same, "step {step}: the kept array differs from the step's");
+            before = nonzero_at.clone();
+        }
     }
 }

@@ -6,10 +6,10 @@
 use rayon::prelude::*;
 
 use super::{NonlocalStep, StepSetup, TrialStresses};
-use crate::constitutive::{Mat4, PointState, Voigt};
+use crate::constitutive::{PointState, Voigt};
 use crate::dofs::DofMap;
 use crate::error::StepError;
-use crate::metrics::{dissipation_increment, ComplianceSource};
+use crate::metrics::dissipation_density;
 use crate::model::Model;
 use crate::profile::{Profile, Stage, Work};
 use crate::scene::DoubleMapping;
@@ -28,6 +28,8 @@ pub struct ConvergedStresses {
     pub dissipation: f64,
     /// Internal work of each point, kJ/m (buffer of [`step_energies`]).
     point_work: Vec<f64>,
+    /// Dissipation of each point, kJ/m (buffer of [`step_energies`]).
+    point_dissipation: Vec<f64>,
 }
 
 /// The converged step's stresses and states to commit (times its nonlocal
@@ -83,8 +85,10 @@ fn converge(
         internal_work,
         dissipation,
         point_work,
+        point_dissipation,
     } = converged;
-    (*internal_work, *dissipation) = step_energies(model, trial, stress, point_work);
+    (*internal_work, *dissipation) =
+        step_energies(model, trial, stress, (point_work, point_dissipation));
     let kappa_bar = match nonlocal {
         Some(nl) => Some(profile.time(Stage::Nonlocal, || {
             nl.committed(&model.particles, |p| state[p].plastic_strain_eq, profile)
@@ -165,17 +169,18 @@ fn smooth(
 /// - internal work Σ_p V_p(n) · ½(σ_p(n+1) + σ_p^R(n)) · Δε_p (elastic
 ///   energy stored plus dissipation);
 /// - plastic dissipation (DESIGN D43 with σ(n+1), see
-///   [`dissipation_increment`]) Σ_p V_p(n) · σ_p(n+1) · Δε^p_p with
-///   Δε^p = Δε − C(σ(n+1) − σ^R(n)); elastic materials contribute nothing.
+///   [`crate::metrics::dissipation_increment`]) Σ_p V_p(n) · σ_p(n+1) · Δε^p_p
+///   with Δε^p = Δε − C(σ(n+1) − σ^R(n)); elastic materials contribute
+///   nothing, and a sum that is not finite is NaN.
 ///
-/// The constitutive stresses are `stress` (the trial's). The points' work
-/// is formed in parallel into `point_work` and summed in point order (the
-/// same sum whatever the number of threads).
+/// The constitutive stresses are `stress` (the trial's). The points' terms
+/// are formed in parallel into `point_work` and `point_dissipation` and
+/// summed in point order (the same sums whatever the number of threads).
 fn step_energies(
     model: &Model,
     trial: &TrialStresses,
     stress: &[Voigt],
-    point_work: &mut Vec<f64>,
+    (point_work, point_dissipation): (&mut Vec<f64>, &mut Vec<f64>),
 ) -> (f64, f64) {
     let p = &model.particles;
     point_work.clear();
@@ -189,29 +194,21 @@ fn step_energies(
     if model.materials.iter().all(|m| m.is_elastic()) {
         return (internal_work, 0.0);
     }
-    let strain: Vec<Voigt> = (0..p.len()).map(|i| trial.strain_increment(i)).collect();
-    // elastic points dissipate nothing: give them zero weight
-    let volumes: Vec<f64> = (0..p.len())
-        .map(|i| {
-            if model.materials[p.material[i] as usize].is_elastic() {
-                0.0
-            } else {
-                p.volume[i]
-            }
-        })
-        .collect();
-    let compliance: Vec<Mat4> = p
-        .material
-        .iter()
-        .map(|&m| model.compliances[m as usize])
-        .collect();
-    let dissipation = dissipation_increment(
-        &volumes,
-        stress,
-        &trial.rotated,
-        &strain,
-        ComplianceSource::PerPoint(&compliance),
-    )
-    .unwrap_or(f64::NAN);
-    (internal_work, dissipation)
+    point_dissipation.clear();
+    point_dissipation.par_extend((0..p.len()).into_par_iter().with_min_len(1024).map(|i| {
+        let material = p.material[i] as usize;
+        // elastic points dissipate nothing: give them zero weight
+        let volume = match model.materials[material].is_elastic() {
+            true => 0.0,
+            false => p.volume[i],
+        };
+        let compliance = &model.compliances[material];
+        let strain = trial.strain_increment(i);
+        volume * dissipation_density(compliance, &stress[i], &trial.rotated[i], &strain)
+    }));
+    let dissipation = point_dissipation.iter().fold(0.0, |sum, d| sum + d);
+    match dissipation.is_finite() {
+        true => (internal_work, dissipation),
+        false => (internal_work, f64::NAN),
+    }
 }
