@@ -6,6 +6,8 @@
 //! neighbouring cells in a fixed order), so results are bit-identical whatever
 //! the number of rayon threads.
 
+use std::ops::Range;
+
 use rayon::prelude::*;
 
 use crate::constitutive::Voigt;
@@ -46,7 +48,8 @@ pub fn shapes_at(grid: &Grid, positions: &[[f64; 2]]) -> Result<Vec<ShapeAt>, Ou
 pub struct ShapeScratch {
     /// Cell `(ci, cj)` of every point, `None` outside the grid.
     located: Vec<Option<(usize, usize)>>,
-    /// Whether each cell holds points (GIMP only: it clips the domains).
+    /// Whether each cell holds points (GIMP only: it clips the domains; all
+    /// false between calls).
     holds_points: Vec<bool>,
 }
 
@@ -70,15 +73,23 @@ pub fn shapes_into(
             position: positions[p],
         });
     }
-    // which cells hold points (needed only to clip GIMP domains)
-    holds_points.clear();
-    if grid.patch_side() > 2 {
-        holds_points.resize(grid.cell_count(), false);
+    // which cells hold points (needed only to clip GIMP domains): the
+    // flags are all false between calls, so that marking and clearing them
+    // costs the points, not the grid
+    let gimp = grid.patch_side() > 2;
+    let mark = |holds_points: &mut Vec<bool>, value: bool| {
         for &(ci, cj) in located.iter().flatten() {
-            holds_points[cj * grid.cells[0] + ci] = true;
+            holds_points[cj * grid.cells[0] + ci] = value;
         }
+    };
+    if gimp {
+        if holds_points.len() != grid.cell_count() {
+            holds_points.clear();
+            holds_points.resize(grid.cell_count(), false);
+        }
+        mark(holds_points, true);
     }
-    let holds_points = &*holds_points;
+    let filled_cells = &*holds_points;
     let bounds = |ci: usize, cj: usize| {
         let h = grid.cell_size;
         let filled = |i: isize, j: isize| {
@@ -86,7 +97,7 @@ pub fn shapes_into(
                 && j >= 0
                 && (i as usize) < grid.cells[0]
                 && (j as usize) < grid.cells[1]
-                && holds_points[j as usize * grid.cells[0] + i as usize]
+                && filled_cells[j as usize * grid.cells[0] + i as usize]
         };
         let (i, j) = (ci as isize, cj as isize);
         let extent = |d: usize, k: isize, low: bool, high: bool| {
@@ -113,6 +124,9 @@ pub fn shapes_into(
                 *shape = grid.shape_in(cell, x, bounds);
             }
         });
+    if gimp {
+        mark(holds_points, false);
+    }
     Ok(())
 }
 
@@ -194,36 +208,47 @@ pub struct ParticleBins {
     /// (empty after one on a GIMP grid): while no point leaves its cell, the
     /// bins stay.
     holding_cells: Vec<u32>,
+    /// The cells (in index order) outside which the arrays hold the values
+    /// of cells without points: `cell_start` 0 before and the point count
+    /// after, no slot, no active node. A rebuild visits these cells and
+    /// those of the new points, not the whole grid (the vertical cut's grid
+    /// is 14 times its body).
+    span: Range<usize>,
+    /// Per cell, whether some GIMP support reaches it (a rebuild's buffer,
+    /// all false between rebuilds).
+    reached: Vec<bool>,
 }
 
 impl ParticleBins {
     /// Bin the particles whose shapes are `shapes`.
     pub fn new(grid: &Grid, shapes: &[ShapeAt]) -> Self {
         let mut bins = Self::default();
-        bins.rebuild(grid, shapes, &mut Vec::new());
+        bins.rebuild(grid, shapes);
         bins
     }
 
     /// Bin the particles whose shapes are `shapes` again, reusing the
-    /// arrays (and `reached`, a buffer of one flag per cell): what
-    /// [`Self::new`] gives, without allocating once the arrays have grown.
-    /// On a bilinear grid the bins are those of the points' holding cells
-    /// and are kept while no point leaves its cell
-    /// ([`Self::rebuild_bilinear`]).
-    pub fn rebuild<S: Support>(&mut self, grid: &Grid, shapes: &[S], reached: &mut Vec<bool>) {
-        let n_cells = grid.cell_count();
+    /// arrays: what [`Self::new`] gives, without allocating once the arrays
+    /// have grown, and with work in proportion to the cells of the points
+    /// (of this rebuild and the last), not to the grid. On a bilinear grid
+    /// the bins are those of the points' holding cells and are kept while
+    /// no point leaves its cell ([`Self::rebuild_bilinear`]).
+    pub fn rebuild<S: Support>(&mut self, grid: &Grid, shapes: &[S]) {
+        let cell_of = |p: usize| shapes[p].holding_cell();
         if grid.patch_side() == 2 {
-            self.keep_or_rebin_bilinear(grid, shapes.len(), |p| shapes[p].holding_cell());
+            self.keep_or_rebin_bilinear(grid, shapes.len(), cell_of);
             return;
         }
         self.holding_cells.clear();
-        self.sort_points(n_cells, shapes.len(), |p| shapes[p].holding_cell());
-        reached.clear();
-        reached.resize(n_cells, false);
-        for s in shapes {
-            mark_cells_reached(grid, s, reached);
+        if self.reached.len() != grid.cell_count() {
+            self.reached.clear();
+            self.reached.resize(grid.cell_count(), false);
         }
-        self.number_cells(grid, reached);
+        let mut span = holding_span(shapes.len(), cell_of);
+        for s in shapes {
+            span = union(span, mark_cells_reached(grid, s, &mut self.reached));
+        }
+        self.bin(grid, shapes.len(), cell_of, span);
     }
 
     /// [`Self::rebuild`] for bilinear shape functions (whose support never
@@ -254,28 +279,68 @@ impl ParticleBins {
         }
         self.holding_cells.clear();
         self.holding_cells.extend((0..n_points).map(&cell_of));
-        self.sort_points(grid.cell_count(), n_points, &cell_of);
-        self.number_cells(grid, &[]);
+        let span = holding_span(n_points, &cell_of);
+        self.bin(grid, n_points, &cell_of, span);
+    }
+
+    /// Sort the points into their cells and number the cells and nodes,
+    /// point `p` in cell `cell_of(p)`, every cell that holds a point or
+    /// that `reached` marks within `span`. Visits `span` and the span of
+    /// the last rebuild (the whole grid at the first, or when the number of
+    /// points changed), then clears the marks.
+    fn bin(
+        &mut self,
+        grid: &Grid,
+        n_points: usize,
+        cell_of: impl Fn(usize) -> u32,
+        span: Range<usize>,
+    ) {
+        let n_cells = grid.cell_count();
+        let kept = self.cell_start.len() == n_cells + 1
+            && self.cell_start[n_cells] as usize == n_points
+            && self.cell_slot.len() == n_cells
+            && self.node_active.len() == grid.node_count();
+        let visit = if kept {
+            union(self.span.clone(), span.clone())
+        } else {
+            self.cell_start.clear();
+            self.cell_start.resize(n_cells + 1, 0);
+            self.cell_slot.clear();
+            self.cell_slot.resize(n_cells, NONE);
+            self.node_active.clear();
+            self.node_active.resize(grid.node_count(), false);
+            0..n_cells
+        };
+        self.sort_points(visit.clone(), n_points, cell_of);
+        self.number_cells(grid, visit);
+        if let Some(marks) = self.reached.get_mut(span.clone()) {
+            marks.fill(false);
+        }
+        self.span = span;
     }
 
     /// `cell_start` and `order`: the points of every cell in index order
-    /// (a stable counting sort), point `p` in cell `cell_of(p)`.
-    fn sort_points(&mut self, n_cells: usize, n_points: usize, cell_of: impl Fn(usize) -> u32) {
+    /// (a stable counting sort), point `p` in cell `cell_of(p)`, every cell
+    /// in `cells`; `cell_start` is 0 before them and `n_points` after.
+    fn sort_points(
+        &mut self,
+        cells: Range<usize>,
+        n_points: usize,
+        cell_of: impl Fn(usize) -> u32,
+    ) {
         let cell_start = &mut self.cell_start;
-        cell_start.clear();
-        cell_start.resize(n_cells + 1, 0);
+        cell_start[cells.start..=cells.end].fill(0);
         for p in 0..n_points {
             cell_start[cell_of(p) as usize + 1] += 1;
         }
-        for c in 0..n_cells {
+        for c in cells.clone() {
             cell_start[c + 1] += cell_start[c];
         }
         self.order.clear();
         self.order.resize(n_points, 0);
         // `next[c]` is kept in `cell_slot` until the slots are numbered
         let next = &mut self.cell_slot;
-        next.clear();
-        next.extend_from_slice(&cell_start[..n_cells]);
+        next[cells.clone()].copy_from_slice(&cell_start[cells]);
         for p in 0..n_points {
             let c = cell_of(p) as usize;
             self.order[next[c] as usize] = p as u32;
@@ -283,19 +348,26 @@ impl ParticleBins {
         }
     }
 
-    /// The active and reached cells (`reached[c]`: some support reaches
-    /// cell `c`; empty when none can), their slots and the active nodes.
-    fn number_cells(&mut self, grid: &Grid, reached: &[bool]) {
-        let n_cells = grid.cell_count();
+    /// The active and reached cells among `cells` (`self.reached[c]`: some
+    /// support reaches cell `c`), their slots and the active nodes; every
+    /// other cell and its nodes are inactive.
+    fn number_cells(&mut self, grid: &Grid, cells: Range<usize>) {
         self.active_cells.clear();
         self.reached_cells.clear();
-        self.cell_slot.clear();
-        self.cell_slot.resize(n_cells, NONE);
-        self.node_active.clear();
-        self.node_active.resize(grid.node_count(), false);
-        for c in 0..n_cells {
+        self.active_nodes.clear();
+        if cells.is_empty() {
+            return;
+        }
+        // the nodes of `cells`: from the first one's lower left to the last
+        // one's upper right
+        let lower_left = |c: usize| grid.cell_nodes(c % grid.cells[0], c / grid.cells[0])[0];
+        let nodes = lower_left(cells.start) as usize
+            ..lower_left(cells.end - 1) as usize + grid.cells[0] + 3;
+        self.node_active[nodes.clone()].fill(false);
+        for c in cells {
             let holds_points = self.cell_start[c + 1] > self.cell_start[c];
-            let is_reached = reached.get(c).copied().unwrap_or(false);
+            let is_reached = self.reached.get(c).copied().unwrap_or(false);
+            self.cell_slot[c] = NONE;
             if holds_points {
                 self.cell_slot[c] = self.active_cells.len() as u32;
                 self.active_cells.push(c as u32);
@@ -309,9 +381,9 @@ impl ParticleBins {
                 }
             }
         }
-        self.active_nodes.clear();
-        self.active_nodes
-            .extend((0..grid.node_count() as u32).filter(|&n| self.node_active[n as usize]));
+        let active = |&n: &u32| self.node_active[n as usize];
+        let nodes = nodes.start as u32..nodes.end as u32;
+        self.active_nodes.extend(nodes.filter(active));
     }
 
     /// Particles in cell `cell`, in index order.
@@ -321,18 +393,44 @@ impl ParticleBins {
 }
 
 /// Mark the cells spanned by the support of `s` (the cells between its lowest
-/// and highest node indices along each direction).
-fn mark_cells_reached<S: Support>(grid: &Grid, s: &S, reached: &mut [bool]) {
+/// and highest node indices along each direction); returns the cells from
+/// the first to the last marked (in index order).
+fn mark_cells_reached<S: Support>(grid: &Grid, s: &S, reached: &mut [bool]) -> Range<usize> {
     let (mut lo, mut hi) = ([usize::MAX; 2], [0usize; 2]);
     for a in 0..s.support_size() {
         let (i, j) = grid.node_ij(s.node(a));
         lo = [lo[0].min(i), lo[1].min(j)];
         hi = [hi[0].max(i), hi[1].max(j)];
     }
+    if lo[0] >= hi[0] || lo[1] >= hi[1] {
+        return 0..0;
+    }
     for cj in lo[1]..hi[1] {
         for ci in lo[0]..hi[0] {
             reached[cj * grid.cells[0] + ci] = true;
         }
+    }
+    lo[1] * grid.cells[0] + lo[0]..(hi[1] - 1) * grid.cells[0] + hi[0]
+}
+
+/// The cells from the lowest to the highest holding cell of `n_points`
+/// points, point `p` in cell `cell_of(p)` (empty without points).
+fn holding_span(n_points: usize, cell_of: impl Fn(usize) -> u32) -> Range<usize> {
+    let (lo, hi) = (0..n_points)
+        .map(|p| cell_of(p) as usize)
+        .fold((usize::MAX, 0), |(lo, hi), c| (lo.min(c), hi.max(c + 1)));
+    match lo < hi {
+        true => lo..hi,
+        false => 0..0,
+    }
+}
+
+/// The smallest range that holds both (an empty range holds nothing).
+fn union(a: Range<usize>, b: Range<usize>) -> Range<usize> {
+    match (a.is_empty(), b.is_empty()) {
+        (true, _) => b,
+        (_, true) => a,
+        _ => a.start.min(b.start)..a.end.max(b.end),
     }
 }
 
@@ -986,7 +1084,7 @@ pub(crate) mod tests {
                 4 => {
                     moved[3][1] += grid.cell_size;
                     let shapes = shapes_at(&grid, &moved).unwrap();
-                    kept.rebuild(&grid, &shapes, &mut Vec::new());
+                    kept.rebuild(&grid, &shapes);
                     let mut fresh = ParticleBins::default();
                     fresh.rebuild_bilinear(&grid, &cells_of(&moved));
                     assert!(same(&kept, &fresh), "full rebuild");
@@ -1004,6 +1102,73 @@ pub(crate) mod tests {
             cells_of(&moved)[7],
             "point 7 changed cells"
         );
+    }
+
+    /// GIMP shapes formed with one scratch for clouds in turn are those of
+    /// a fresh scratch: the cells marked as holding points for one cloud
+    /// clip no domain of the next.
+    #[test]
+    fn gimp_shapes_with_a_kept_scratch_are_the_fresh_ones() {
+        let (grid, pos, _, _) = setup(kinds()[1]);
+        let mut scratch = ShapeScratch::default();
+        let mut shapes = Vec::new();
+        let half: Vec<[f64; 2]> = pos.iter().copied().filter(|x| x[0] < 0.6).collect();
+        for cloud in [&pos, &half, &pos] {
+            shapes_into(&grid, cloud, &mut scratch, &mut shapes).unwrap();
+            assert_eq!(shapes, shapes_at(&grid, cloud).unwrap());
+        }
+        assert!(scratch.holds_points.iter().all(|&filled| !filled));
+    }
+
+    /// Bins rebuilt in place while a small body moves about a large grid
+    /// (within its cells, far across the grid, with a point lost, with a
+    /// point flung to the far corner and back) are the fresh bins of the
+    /// points where they are, field for field, bilinear and GIMP: the
+    /// rebuild's visit of the cells of the body (last and present) misses
+    /// nothing and leaves nothing behind.
+    #[test]
+    fn bins_rebuilt_in_place_are_the_fresh_ones() {
+        let same = |a: &ParticleBins, b: &ParticleBins| {
+            a.cell_start == b.cell_start
+                && a.order == b.order
+                && a.active_cells == b.active_cells
+                && a.reached_cells == b.reached_cells
+                && a.cell_slot == b.cell_slot
+                && a.node_active == b.node_active
+                && a.active_nodes == b.active_nodes
+        };
+        for kind in kinds() {
+            let grid = Grid {
+                shape_functions: kind,
+                ..Grid::bilinear([0.0, 0.0], 0.25, [40, 20])
+            };
+            let block: Vec<[f64; 2]> = (0..64)
+                .map(|k| [1.0 + 0.13 * (k % 8) as f64, 1.0 + 0.11 * (k / 8) as f64])
+                .collect();
+            let mut kept = ParticleBins::default();
+            let mut moved = block.clone();
+            for stage in 0..7 {
+                let shift = |points: &mut Vec<[f64; 2]>, dx: f64, dy: f64| {
+                    points.iter_mut().for_each(|x| *x = [x[0] + dx, x[1] + dy]);
+                };
+                match stage {
+                    1 => shift(&mut moved, 1e-9, 0.0),
+                    2 => shift(&mut moved, 3.1, 0.0),
+                    3 => {
+                        moved.pop();
+                    }
+                    4 => shift(&mut moved, -2.0, 1.5),
+                    5 => moved[10] = [9.9, 4.9],
+                    6 => moved[10] = [2.0, 2.6],
+                    _ => {}
+                }
+                let shapes = shapes_at(&grid, &moved).unwrap();
+                kept.rebuild(&grid, &shapes);
+                let fresh = ParticleBins::new(&grid, &shapes);
+                assert!(same(&kept, &fresh), "{kind:?}, stage {stage}");
+                assert!(!fresh.active_cells.is_empty());
+            }
+        }
     }
 
     /// [`refill_fields`] writes component k of every node's value to field k

@@ -22,8 +22,6 @@ pub struct StepSetup {
     pub driven_shapes: Vec<ShapeAt>,
     /// Buffers of the shape functions and the binning, kept for [`Self::refresh`].
     scratch: ShapeScratch,
-    /// Cells some GIMP domain reaches (binning buffer).
-    reached: Vec<bool>,
     /// The cell of every point (binning buffer, compact shapes).
     cells: Vec<u32>,
 }
@@ -45,7 +43,7 @@ impl StepSetup {
         let positions = &model.particles.position;
         transfer::shapes_into(grid, positions, &mut self.scratch, &mut self.shapes)
             .map_err(point_left_grid)?;
-        self.bins.rebuild(grid, &self.shapes, &mut self.reached);
+        self.bins.rebuild(grid, &self.shapes);
         self.boundary_shapes(model)
     }
 
