@@ -1048,6 +1048,17 @@ pub(crate) mod tests {
         }
     }
 
+    /// Every public field of two bins equal.
+    fn same_bins(a: &ParticleBins, b: &ParticleBins) -> bool {
+        a.cell_start == b.cell_start
+            && a.order == b.order
+            && a.active_cells == b.active_cells
+            && a.reached_cells == b.reached_cells
+            && a.cell_slot == b.cell_slot
+            && a.node_active == b.node_active
+            && a.active_nodes == b.active_nodes
+    }
+
     /// The bins a [`ParticleBins::rebuild_bilinear`] or a [`ParticleBins::rebuild`]
     /// on a bilinear grid keeps or rebuilds are those binned afresh: after
     /// moves within the cells (kept), a move of one point into the next cell,
@@ -1059,15 +1070,6 @@ pub(crate) mod tests {
             let (mut shapes, mut cells) = (Vec::new(), Vec::new());
             bilinear_shapes_into(&grid, x, &mut shapes, &mut cells).unwrap();
             cells
-        };
-        let same = |a: &ParticleBins, b: &ParticleBins| {
-            a.cell_start == b.cell_start
-                && a.order == b.order
-                && a.active_cells == b.active_cells
-                && a.reached_cells == b.reached_cells
-                && a.cell_slot == b.cell_slot
-                && a.node_active == b.node_active
-                && a.active_nodes == b.active_nodes
         };
         let mut kept = ParticleBins::default();
         let mut moved = pos.clone();
@@ -1087,7 +1089,7 @@ pub(crate) mod tests {
                     kept.rebuild(&grid, &shapes);
                     let mut fresh = ParticleBins::default();
                     fresh.rebuild_bilinear(&grid, &cells_of(&moved));
-                    assert!(same(&kept, &fresh), "full rebuild");
+                    assert!(same_bins(&kept, &fresh), "full rebuild");
                 }
                 _ => {}
             }
@@ -1095,7 +1097,7 @@ pub(crate) mod tests {
             kept.rebuild_bilinear(&grid, &cells);
             let mut fresh = ParticleBins::default();
             fresh.rebuild_bilinear(&grid, &cells);
-            assert!(same(&kept, &fresh), "stage {stage}");
+            assert!(same_bins(&kept, &fresh), "stage {stage}");
         }
         assert_ne!(
             cells_of(&pos)[7],
@@ -1128,15 +1130,6 @@ pub(crate) mod tests {
     /// nothing and leaves nothing behind.
     #[test]
     fn bins_rebuilt_in_place_are_the_fresh_ones() {
-        let same = |a: &ParticleBins, b: &ParticleBins| {
-            a.cell_start == b.cell_start
-                && a.order == b.order
-                && a.active_cells == b.active_cells
-                && a.reached_cells == b.reached_cells
-                && a.cell_slot == b.cell_slot
-                && a.node_active == b.node_active
-                && a.active_nodes == b.active_nodes
-        };
         for kind in kinds() {
             let grid = Grid {
                 shape_functions: kind,
@@ -1165,7 +1158,7 @@ pub(crate) mod tests {
                 let shapes = shapes_at(&grid, &moved).unwrap();
                 kept.rebuild(&grid, &shapes);
                 let fresh = ParticleBins::new(&grid, &shapes);
-                assert!(same(&kept, &fresh), "{kind:?}, stage {stage}");
+                assert!(same_bins(&kept, &fresh), "{kind:?}, stage {stage}");
                 assert!(!fresh.active_cells.is_empty());
             }
         }
