@@ -211,8 +211,8 @@ pub struct ParticleBins {
     /// The cells (in index order) outside which the arrays hold the values
     /// of cells without points: `cell_start` 0 before and the point count
     /// after, no slot, no active node. A rebuild visits these cells and
-    /// those of the new points, not the whole grid (the vertical cut's grid
-    /// is 14 times its body).
+    /// those of the new points, not the whole grid (on the vertical cut's
+    /// 40 m grid, the rows of the body: a third of the cells at the start).
     span: Range<usize>,
     /// Per cell, whether some GIMP support reaches it (a rebuild's buffer,
     /// all false between rebuilds).
@@ -229,8 +229,9 @@ impl ParticleBins {
 
     /// Bin the particles whose shapes are `shapes` again, reusing the
     /// arrays: what [`Self::new`] gives, without allocating once the arrays
-    /// have grown, and with work in proportion to the cells of the points
-    /// (of this rebuild and the last), not to the grid. On a bilinear grid
+    /// have grown, and with work in proportion to the cells from the lowest
+    /// to the highest the points hold or reach (at this rebuild and the
+    /// last), not to the grid. On a bilinear grid
     /// the bins are those of the points' holding cells and are kept while
     /// no point leaves its cell ([`Self::rebuild_bilinear`]).
     pub fn rebuild<S: Support>(&mut self, grid: &Grid, shapes: &[S]) {
