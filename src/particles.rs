@@ -26,6 +26,10 @@ pub struct Particles {
     pub velocity: Vec<[f64; 2]>,
     /// Acceleration a_p, m/s² (implicit dynamic runs).
     pub acceleration: Vec<[f64; 2]>,
+    /// Force per mass q_p = Σ_i N_ip [M⁻¹(f_ext − f_int)]_i of the last
+    /// step's end, m/s² (generalised-α runs; zero at the start, i.e. the
+    /// body starts in balance, as a_p = 0 assumes).
+    pub force_per_mass: Vec<[f64; 2]>,
     /// Constitutive state variables.
     pub state: Vec<PointState>,
     /// Index of the material in the run's material table.
@@ -64,6 +68,7 @@ impl Particles {
         self.strain.push([0.0; 4]);
         self.velocity.push([0.0; 2]);
         self.acceleration.push([0.0; 2]);
+        self.force_per_mass.push([0.0; 2]);
         self.state.push(PointState::default());
         self.material.push(material);
         self.body.push(body);
@@ -84,6 +89,7 @@ impl Particles {
         filter(&mut self.strain, keep);
         filter(&mut self.velocity, keep);
         filter(&mut self.acceleration, keep);
+        filter(&mut self.force_per_mass, keep);
         filter(&mut self.state, keep);
         filter(&mut self.material, keep);
         filter(&mut self.body, keep);

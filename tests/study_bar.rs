@@ -58,7 +58,7 @@ fn time_integrators_converge_at_their_orders() {
     };
     let spec = common::validation("studies/elastic_bar_order.toml");
     let rows = run_study(&spec, out.path(), &options).expect("study runs");
-    assert_eq!(rows.len(), 12, "3 series x 4 refinements");
+    assert_eq!(rows.len(), 20, "5 series x 4 refinements");
     for file in ["study.csv", "report.md", "work_precision.png"] {
         assert!(out.path().join(file).exists(), "{file} written");
     }
@@ -78,6 +78,12 @@ fn time_integrators_converge_at_their_orders() {
     // γ > 1/2 damps at the price of first order (measured 0.99)
     let damped = slope("Newmark γ = 0.6 (damped)");
     assert!((damped - 1.0).abs() <= 0.3, "γ = 0.6 order {damped}");
+    // generalised-α damps without losing the second order (issue 39, check 1:
+    // within ±0.2 of 2)
+    for rho in ["0.8", "0.5"] {
+        let order = slope(&format!("generalised-α ρ∞ = {rho}"));
+        assert!((order - 2.0).abs() <= 0.2, "ρ∞ = {rho} order {order}");
+    }
     // explicit MUSL: second order at the usual CFL numbers, tending to first
     // order as Δt → 0 (the re-mapped velocity of the strain increment differs
     // from the one that moved the points by O(Δt h²) per step); measured local

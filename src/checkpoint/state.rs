@@ -115,6 +115,7 @@ impl SavedState {
             ("strain", p.strain.len()),
             ("velocity", p.velocity.len()),
             ("acceleration", p.acceleration.len()),
+            ("force_per_mass", p.force_per_mass.len()),
             ("state", p.state.len()),
             ("material", p.material.len()),
             ("body", p.body.len()),
@@ -305,7 +306,7 @@ impl Codec for PointState {
 }
 
 impl Codec for Particles {
-    const MIN_SIZE: usize = 12 * 8;
+    const MIN_SIZE: usize = 13 * 8;
     fn encode(&self, w: &mut Writer) {
         w.put(&self.position);
         w.put(&self.position0);
@@ -316,6 +317,7 @@ impl Codec for Particles {
         w.put(&self.strain);
         w.put(&self.velocity);
         w.put(&self.acceleration);
+        w.put(&self.force_per_mass);
         w.put(&self.state);
         w.put(&self.material);
         w.put(&self.body);
@@ -331,6 +333,7 @@ impl Codec for Particles {
             strain: r.get()?,
             velocity: r.get()?,
             acceleration: r.get()?,
+            force_per_mass: r.get()?,
             state: r.get()?,
             material: r.get()?,
             body: r.get()?,

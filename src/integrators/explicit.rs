@@ -513,6 +513,7 @@ impl UpdatedGrid {
             displacement: &self.velocity,
             scale: dt,
             acceleration: Some((&self.acceleration, VelocityUpdate::Forward)),
+            force_per_mass: None,
         }
     }
 

@@ -34,12 +34,24 @@ pub struct GridMotion<'a> {
     /// New nodal accelerations a_i(n+1) and how velocities follow them;
     /// `None` in quasi-static runs (no velocities or accelerations).
     pub acceleration: Option<(&'a [[f64; 2]], VelocityUpdate)>,
+    /// The nodal force per mass M⁻¹(f_ext − f_int) at the step's end, which
+    /// the points carry to the next step (generalised-α only).
+    pub force_per_mass: Option<&'a [[f64; 2]]>,
 }
 
 /// x_p += scale Σ_i N_ip u_i; with accelerations, a_p = Σ_i N_ip a_i and v_p
-/// by the velocity rule (in parallel over the points: each point's update
-/// reads only its own state and the nodal fields).
+/// by the velocity rule; with a force per mass, q_p = Σ_i N_ip q_i (in
+/// parallel over the points: each point's update reads only its own state
+/// and the nodal fields).
 pub fn g2p<S: Support>(particles: &mut Particles, shapes: &[S], motion: &GridMotion) {
+    if let Some(nodal) = motion.force_per_mass {
+        particles
+            .force_per_mass
+            .par_iter_mut()
+            .zip(shapes.par_iter())
+            .with_min_len(POINTS_PER_TASK)
+            .for_each(|(q, shape)| *q = interpolate(shape, nodal));
+    }
     let Particles {
         position,
         velocity,

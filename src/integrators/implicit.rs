@@ -52,7 +52,7 @@ impl ImplicitIntegrator {
         let dynamic = model.analysis() == AnalysisKind::ImplicitDynamic;
         Ok(Self {
             dt: model.scene.scene.dt.unwrap_or(1.0),
-            newmark: dynamic.then(|| Newmark::with_gamma(model.scene.solver.newmark_gamma)),
+            newmark: dynamic.then(|| Newmark::from_solver(&model.scene.solver)),
             tangent: Tangent::new(model)?,
             background_block: background_block(&model.scene, &model.grid),
             setup: StepSetup::default(),
@@ -232,20 +232,25 @@ impl ImplicitIntegrator {
         t1: f64,
         profile: &Profile,
     ) -> NodalKinematics {
-        if self.newmark.is_none() {
+        let Some(newmark) = self.newmark else {
             return NodalKinematics {
                 mass: Vec::new(),
                 velocity: Vec::new(),
                 acceleration: Vec::new(),
+                force_per_mass: Vec::new(),
                 external: external_force(model, setup, t1),
             };
-        }
-        let mut nodal = nodal_kinematics(model, setup, t1, &mut self.p2g);
+        };
+        let carry_force = newmark.is_generalised_alpha();
+        let mut nodal = nodal_kinematics(model, setup, t1, carry_force, &mut self.p2g);
         profile.count(Work::MassMatrix, 1);
         for (d, c) in model.constraints.dof.iter().enumerate() {
             if *c == DofConstraint::Fixed {
                 nodal.velocity[d / 2][d % 2] = 0.0;
                 nodal.acceleration[d / 2][d % 2] = 0.0;
+                if carry_force {
+                    nodal.force_per_mass[d / 2][d % 2] = 0.0;
+                }
             }
         }
         nodal
@@ -296,6 +301,8 @@ struct ConvergedGrid {
     du: Vec<[f64; 2]>,
     /// a_{n+1} per grid node (dynamic runs).
     acceleration: Option<Vec<[f64; 2]>>,
+    /// M⁻¹(f_ext − f_int) at t_{n+1} per grid node (generalised-α runs).
+    force_per_mass: Option<Vec<[f64; 2]>>,
     /// Support reactions −R per grid node.
     reaction: Vec<[f64; 2]>,
     /// Stresses, states and tangents at Δu.
@@ -321,6 +328,10 @@ impl ConvergedGrid {
             acceleration: system
                 .newmark
                 .map(|newmark| system.nodal_acceleration(&newmark, &du)),
+            force_per_mass: system
+                .newmark
+                .filter(Newmark::is_generalised_alpha)
+                .map(|newmark| system.nodal_inertial_acceleration(&newmark, &du)),
             reaction: residual.residual.iter().map(|r| [-r[0], -r[1]]).collect(),
             reference: residual.reference,
             du,
@@ -338,6 +349,7 @@ impl ConvergedGrid {
             displacement: &self.du,
             scale: 1.0,
             acceleration: self.acceleration.as_deref().zip(rule),
+            force_per_mass: self.force_per_mass.as_deref(),
         }
     }
 }

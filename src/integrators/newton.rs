@@ -20,13 +20,22 @@ use crate::profile::{Profile, Stage};
 use crate::scene::{PredictorChoice, SolverSpec};
 use crate::transfer::{self, NodalField, NONE};
 
-/// Newmark parameters (paper eq. 2 uses γ = ½, β = ¼).
+/// Parameters of the Newmark family (paper eq. 2 uses γ = ½, β = ¼), including
+/// the generalised-α scheme (theory "Generalised-α"): the step's balance
+/// M ā + f_int(n+1) = f_ext(n+1) with the inertial acceleration
+/// ā = [(1 − α_m) a(n+1) + α_m a(n) − α_f q(n)] / (1 − α_f), where
+/// q(n) = M⁻¹(f_ext − f_int) at t_n is carried by the points
+/// ([`crate::particles::Particles::force_per_mass`]). Newmark is α_m = α_f = 0.
 #[derive(Clone, Copy, Debug)]
 pub struct Newmark {
     /// γ: weight of a_{n+1} in the velocity update.
     pub gamma: f64,
     /// β: weight of a_{n+1} in the displacement update.
     pub beta: f64,
+    /// α_m: weight of a_n in the inertia of the balance (0 for Newmark).
+    pub alpha_m: f64,
+    /// α_f: weight of the forces at t_n in the balance (0 for Newmark).
+    pub alpha_f: f64,
 }
 
 impl Newmark {
@@ -36,7 +45,55 @@ impl Newmark {
         Self {
             gamma,
             beta: 0.25 * (gamma + 0.5) * (gamma + 0.5),
+            alpha_m: 0.0,
+            alpha_f: 0.0,
         }
+    }
+
+    /// Chung and Hulbert's generalised-α with spectral radius `rho_infinity`
+    /// at infinite frequency (theory eq. GA2): α_m = (2ρ∞ − 1)/(ρ∞ + 1),
+    /// α_f = ρ∞/(ρ∞ + 1), γ = ½ − α_m + α_f, β = ¼ (1 − α_m + α_f)².
+    /// Second order for every ρ∞; ρ∞ = 1 is the trapezoidal rule.
+    pub fn generalised_alpha(rho_infinity: f64) -> Self {
+        let alpha_m = (2.0 * rho_infinity - 1.0) / (rho_infinity + 1.0);
+        let alpha_f = rho_infinity / (rho_infinity + 1.0);
+        let gamma = 0.5 - alpha_m + alpha_f;
+        Self {
+            gamma,
+            beta: 0.25 * (gamma + 0.5) * (gamma + 0.5),
+            alpha_m,
+            alpha_f,
+        }
+    }
+
+    /// The scheme of `[solver]`: generalised-α when `rho_infinity` is set,
+    /// else Newmark with `newmark_gamma`.
+    pub fn from_solver(solver: &SolverSpec) -> Self {
+        match solver.rho_infinity {
+            Some(rho) => Self::generalised_alpha(rho),
+            None => Self::with_gamma(solver.gamma()),
+        }
+    }
+
+    /// Whether the balance weights the start of the step (α_m or α_f ≠ 0), so
+    /// that the points must carry q = M⁻¹(f_ext − f_int).
+    pub fn is_generalised_alpha(&self) -> bool {
+        self.alpha_m != 0.0 || self.alpha_f != 0.0
+    }
+
+    /// ∂ā/∂a(n+1) = (1 − α_m)/(1 − α_f): the factor of M/(βΔt²) in the tangent.
+    pub fn inertia_factor(&self) -> f64 {
+        (1.0 - self.alpha_m) / (1.0 - self.alpha_f)
+    }
+
+    /// The inertial acceleration ā of the balance from a(n+1), a(n) and q(n).
+    #[inline]
+    pub fn inertial_acceleration(&self, a_next: f64, a_start: f64, q_start: f64) -> f64 {
+        if !self.is_generalised_alpha() {
+            return a_next;
+        }
+        ((1.0 - self.alpha_m) * a_next + self.alpha_m * a_start - self.alpha_f * q_start)
+            / (1.0 - self.alpha_f)
     }
 }
 
@@ -48,6 +105,9 @@ pub struct NodalKinematics {
     pub velocity: Vec<[f64; 2]>,
     /// Nodal acceleration a_n (dynamic only).
     pub acceleration: Vec<[f64; 2]>,
+    /// Nodal q_n = M⁻¹(f_ext − f_int) at t_n, mapped from the points
+    /// (generalised-α only, else empty).
+    pub force_per_mass: Vec<[f64; 2]>,
     /// External force at t_{n+1} (body force + traction), per grid node.
     pub external: Vec<[f64; 2]>,
 }
@@ -285,6 +345,42 @@ impl StepSystem<'_> {
             / (beta * dt * dt)
     }
 
+    /// The balance's inertial acceleration ā at grid dof (`node`, `c`)
+    /// ([`Newmark::inertial_acceleration`]; a_{n+1} for Newmark).
+    pub fn inertial_acceleration(
+        &self,
+        newmark: &Newmark,
+        du: &[[f64; 2]],
+        node: usize,
+        c: usize,
+    ) -> f64 {
+        let a_next = self.acceleration(newmark, du, node, c);
+        if !newmark.is_generalised_alpha() {
+            return a_next;
+        }
+        let nodal = &self.nodal;
+        newmark.inertial_acceleration(
+            a_next,
+            nodal.acceleration[node][c],
+            nodal.force_per_mass[node][c],
+        )
+    }
+
+    /// ā at every active node (zero elsewhere): at convergence the nodal
+    /// M⁻¹(f_ext − f_int) of t_{n+1}, which G2P carries to the points
+    /// (generalised-α).
+    pub fn nodal_inertial_acceleration(&self, newmark: &Newmark, du: &[[f64; 2]]) -> Vec<[f64; 2]> {
+        let mut a = vec![[0.0; 2]; self.model.grid.node_count()];
+        for (node, a_node) in a.iter_mut().enumerate() {
+            if self.setup.bins.node_active[node] {
+                for c in 0..2 {
+                    a_node[c] = self.inertial_acceleration(newmark, du, node, c);
+                }
+            }
+        }
+        a
+    }
+
     /// a_{n+1} at every active node (zero elsewhere), for the G2P stage.
     pub fn nodal_acceleration(&self, newmark: &Newmark, du: &[[f64; 2]]) -> Vec<[f64; 2]> {
         let mut a = vec![[0.0; 2]; self.model.grid.node_count()];
@@ -352,7 +448,7 @@ impl StepSystem<'_> {
             for c in 0..2 {
                 let inertia = match &self.newmark {
                     Some(newmark) => {
-                        self.nodal.mass[node] * self.acceleration(newmark, du, node, c)
+                        self.nodal.mass[node] * self.inertial_acceleration(newmark, du, node, c)
                     }
                     None => 0.0,
                 };

@@ -28,15 +28,17 @@ pub fn external_force(model: &Model, setup: &StepSetup, t: f64) -> Vec<[f64; 2]>
 }
 
 /// Nodal sums of the implicit dynamic step's P2G pass, per node: m_i,
-/// Σ N m v (x, y), Σ N m a (x, y) and the body force's y component
-/// Σ N m (−g) (its x component is zero).
-type KinematicSums = [f64; 6];
+/// Σ N m v (x, y), Σ N m a (x, y), the body force's y component
+/// Σ N m (−g) (its x component is zero) and Σ N m q (x, y) of the points'
+/// force per mass (generalised-α).
+type KinematicSums = [f64; 8];
 
 /// Places of the quantities in [`KinematicSums`].
 const MASS: usize = 0;
 const MOMENTUM: usize = 1;
 const MASS_ACCELERATION: usize = 3;
 const BODY: usize = 5;
+const FORCE_PER_MASS: usize = 6;
 
 /// The buffers of [`nodal_kinematics`], kept from step to step.
 #[derive(Default)]
@@ -51,18 +53,26 @@ pub struct KinematicsBuffers {
 /// an implicit dynamic step, per grid node (zero at the nodes no point
 /// reaches), the point sums in one pass: the same values, bit for bit, as
 /// [`transfer::nodal_mass`], [`transfer::nodal_mass_weighted`] of v and a
-/// divided by the mass, and [`external_force`].
+/// divided by the mass, and [`external_force`]; with `carry_force` also the
+/// points' force per mass q, mass-weighted (generalised-α).
 pub fn nodal_kinematics(
     model: &Model,
     setup: &StepSetup,
     t: f64,
+    carry_force: bool,
     buffers: &mut KinematicsBuffers,
 ) -> NodalKinematics {
     let p = &model.particles;
     let g = model.scene.loads.gravity_at(t);
     let (mass, velocity, acceleration) = (&p.mass, &p.velocity, &p.acceleration);
+    let force_per_mass = &p.force_per_mass;
     let add = |p: usize, s: &ShapeAt, patch: &mut [KinematicSums]| {
         let (m, v, a) = (mass[p], velocity[p], acceleration[p]);
+        let q = if carry_force {
+            force_per_mass[p]
+        } else {
+            [0.0; 2]
+        };
         for node in s.support() {
             let nm = s.n[node] * m;
             let sum = &mut patch[s.local[node] as usize];
@@ -72,6 +82,8 @@ pub fn nodal_kinematics(
             sum[MASS_ACCELERATION] += nm * a[0];
             sum[MASS_ACCELERATION + 1] += nm * a[1];
             sum[BODY] += nm * -g;
+            sum[FORCE_PER_MASS] += nm * q[0];
+            sum[FORCE_PER_MASS + 1] += nm * q[1];
         }
     };
     let KinematicsBuffers { cells, sums } = buffers;
@@ -98,6 +110,11 @@ pub fn nodal_kinematics(
             .collect(),
         velocity: per_node(|s| per_mass(s, MOMENTUM)),
         acceleration: per_node(|s| per_mass(s, MASS_ACCELERATION)),
+        force_per_mass: if carry_force {
+            per_node(|s| per_mass(s, FORCE_PER_MASS))
+        } else {
+            Vec::new()
+        },
         external,
     }
 }
@@ -172,7 +189,7 @@ mod tests {
             for t in [0.001, 0.002] {
                 let external = external_force(&model, &setup, t);
                 assert!(external.iter().any(|f| f[0] != 0.0), "pressures act");
-                let one_pass = nodal_kinematics(&model, &setup, t, &mut buffers);
+                let one_pass = nodal_kinematics(&model, &setup, t, false, &mut buffers);
                 assert_eq!(one_pass.mass, mass);
                 assert_eq!(one_pass.velocity, velocity);
                 assert_eq!(one_pass.acceleration, acceleration);

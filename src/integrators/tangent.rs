@@ -336,13 +336,14 @@ fn fill_cell_blocks(system: &StepSystem, trial: &TrialStresses, blocks: &mut Vec
 }
 
 impl StepSystem<'_> {
-    /// M/(βΔt²) at the free dofs (dynamic runs; `None` when quasi-static).
+    /// (1 − α_m)/(1 − α_f) M/(βΔt²) at the free dofs (dynamic runs; `None` when quasi-static).
     fn mass_diagonal(&self) -> Option<Vec<f64>> {
         let newmark = self.newmark.as_ref()?;
+        let (factor, beta_dt2) = (newmark.inertia_factor(), newmark.beta * self.dt * self.dt);
         let mut diag = vec![0.0; self.dofs.n_free];
         for (d, &index) in self.dofs.index.iter().enumerate() {
             if index != NONE {
-                diag[index as usize] = self.nodal.mass[d / 2] / (newmark.beta * self.dt * self.dt);
+                diag[index as usize] = self.nodal.mass[d / 2] * factor / beta_dt2;
             }
         }
         Some(diag)

@@ -410,10 +410,33 @@ pub struct SolverSpec {
     pub cfl: f64,
     /// Explicit: local (Cundall) damping α_d of DESIGN D21, in [0, 1).
     pub damping: f64,
-    /// Implicit dynamic: Newmark γ in [0.5, 1], with β = (γ + ½)²/4. The
-    /// default ½ is the trapezoidal rule of paper eq. 2 (D15, no numerical
-    /// damping); γ > ½ damps the highest frequencies.
-    pub newmark_gamma: f64,
+    /// Implicit dynamic: Newmark γ in [0.5, 1], with β = (γ + ½)²/4. Unset
+    /// (and no `rho_infinity`): ½, the trapezoidal rule of paper eq. 2 (D15,
+    /// no numerical damping); γ > ½ damps the highest frequencies at the price
+    /// of first-order accuracy.
+    pub newmark_gamma: Option<f64>,
+    /// Implicit dynamic: the generalised-α scheme of Chung and Hulbert with
+    /// this spectral radius at infinite frequency, in [0, 1] (theory
+    /// "Generalised-α"): second order for every value, the highest
+    /// frequencies damped to ρ∞ per step; 1 is the trapezoidal rule.
+    /// Refused together with `newmark_gamma`.
+    pub rho_infinity: Option<f64>,
+}
+
+impl SolverSpec {
+    /// Newmark γ of the scene (½ when unset).
+    pub fn gamma(&self) -> f64 {
+        self.newmark_gamma.unwrap_or(0.5)
+    }
+
+    /// The implicit dynamic time scheme, for reports: "generalised-α ρ∞ = …"
+    /// or "Newmark γ = …".
+    pub fn time_scheme(&self) -> String {
+        match self.rho_infinity {
+            Some(rho) => format!("generalised-α ρ∞ = {rho}"),
+            None => format!("Newmark γ = {}", self.gamma()),
+        }
+    }
 }
 
 impl Default for SolverSpec {
@@ -434,7 +457,8 @@ impl Default for SolverSpec {
             penalty_factor: None,
             cfl: 0.5,
             damping: 0.0,
-            newmark_gamma: 0.5,
+            newmark_gamma: None,
+            rho_infinity: None,
         }
     }
 }

@@ -248,8 +248,11 @@ impl Scene {
                 if self.scene.steps.is_some() {
                     unused.push("scene.steps");
                 }
-                if s.newmark_gamma != defaults.newmark_gamma {
+                if s.newmark_gamma.is_some() {
                     unused.push("solver.newmark_gamma");
+                }
+                if s.rho_infinity.is_some() {
+                    unused.push("solver.rho_infinity");
                 }
                 if s.max_iterations.is_some() {
                     unused.push("solver.max_iterations");
@@ -271,10 +274,11 @@ impl Scene {
                 if s.damping != defaults.damping {
                     unused.push("solver.damping");
                 }
-                if self.scene.analysis == AnalysisKind::QuasiStatic
-                    && s.newmark_gamma != defaults.newmark_gamma
-                {
+                if self.scene.analysis == AnalysisKind::QuasiStatic && s.newmark_gamma.is_some() {
                     unused.push("solver.newmark_gamma");
+                }
+                if self.scene.analysis == AnalysisKind::QuasiStatic && s.rho_infinity.is_some() {
+                    unused.push("solver.rho_infinity");
                 }
                 if self.scene.analysis == AnalysisKind::QuasiStatic
                     && s.predictor != defaults.predictor
@@ -488,12 +492,29 @@ impl Scene {
             s.damping >= 0.0 && s.damping < 1.0,
             format!("must lie in [0, 1) (got {})", s.damping),
         );
-        check(
-            e,
-            "solver.newmark_gamma",
-            (0.5..=1.0).contains(&s.newmark_gamma),
-            format!("must lie in [0.5, 1] (got {})", s.newmark_gamma),
-        );
+        if let Some(gamma) = s.newmark_gamma {
+            check(
+                e,
+                "solver.newmark_gamma",
+                (0.5..=1.0).contains(&gamma),
+                format!("must lie in [0.5, 1] (got {gamma})"),
+            );
+        }
+        if let Some(rho) = s.rho_infinity {
+            check(
+                e,
+                "solver.rho_infinity",
+                (0.0..=1.0).contains(&rho),
+                format!("must lie in [0, 1] (got {rho})"),
+            );
+            check(
+                e,
+                "solver.rho_infinity",
+                s.newmark_gamma.is_none(),
+                "selects the generalised-α scheme, which sets its own γ: remove solver.newmark_gamma"
+                    .to_string(),
+            );
+        }
         if self.scene.analysis == AnalysisKind::Explicit {
             if let Some(dt) = self.scene.dt {
                 if let Some(limit) = self.critical_time_step() {

@@ -464,7 +464,7 @@ fn integrator_text(p: &PlannedRun) -> String {
             }
             t
         }
-        (_, AnalysisKind::ImplicitDynamic) => format!("implicit Newmark γ = {}", s.newmark_gamma),
+        (_, AnalysisKind::ImplicitDynamic) => format!("implicit {}", s.time_scheme()),
         (_, AnalysisKind::QuasiStatic) => "implicit quasi-static Newton".to_string(),
     };
     for (name, value) in &p.axes {
