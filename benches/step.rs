@@ -51,6 +51,7 @@ fn simulation(model: &Model, scene: &Scene) -> Simulation {
         integrator,
         monitors: Vec::new(),
         profile: Profile::default(),
+        last_step: None,
     }
 }
 

@@ -244,6 +244,9 @@ impl Model {
             AnalysisKind::Explicit => {
                 self.time >= self.scene.scene.end_time.unwrap_or(0.0) * (1.0 - 1e-12)
             }
+            AnalysisKind::ImplicitDynamic if self.scene.solver.adaptive() => {
+                self.time >= self.scene.scene.end_time_or_steps() * (1.0 - 1e-12)
+            }
             _ => self.step >= self.scene.scene.steps.unwrap_or(0),
         }
     }

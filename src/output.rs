@@ -43,7 +43,8 @@ impl OutputError {
     }
 }
 
-/// `curve.csv`: columns `step, time` and one per monitor. Each row is
+/// `curve.csv`: columns `step, time`, the step's own columns
+/// ([`crate::simulation::Simulation::step_column_names`]) and one per monitor. Each row is
 /// formatted first and written with one write, then flushed; if that write
 /// fails (a full disk) the file is cut back to its last whole row and the
 /// writer refuses further rows, so the file never ends in a partial row.

@@ -111,7 +111,8 @@ impl OutputObserver {
             }
             .at(sim.model.step, sim.model.time)
         })?;
-        let names: Vec<String> = sim.monitors.iter().map(|m| m.name.clone()).collect();
+        let mut names = sim.step_column_names();
+        names.extend(sim.monitors.iter().map(|m| m.name.clone()));
         let curve = CurveWriter::create(&dir.join("curve.csv"), &names).map_err(at(sim))?;
         let progress = progress_bar(sim, show_progress);
         let mut pending_times = sim.model.scene.output.snapshot_times.clone();
@@ -247,8 +248,10 @@ impl OutputObserver {
 
     fn write_row(&mut self, sim: &Simulation) -> Result<(), RunError> {
         let model = &sim.model;
+        let mut values = sim.step_column_values();
+        values.extend(sim.monitor_values());
         self.curve
-            .row(model.step, model.time, &sim.monitor_values())
+            .row(model.step, model.time, &values)
             .map_err(at(sim))?;
         self.last_row_step = model.step;
         Ok(())
@@ -266,7 +269,17 @@ impl OutputObserver {
     }
 
     fn show_progress(&self, sim: &Simulation, report: &StepReport) {
+        let adaptive = sim.model.scene.solver.adaptive();
         match sim.model.analysis() {
+            AnalysisKind::ImplicitDynamic if adaptive => {
+                let end = sim.model.scene.scene.end_time_or_steps();
+                self.progress
+                    .set_position((1000.0 * sim.model.time / end) as u64);
+                self.progress.set_message(format!(
+                    "step {} t={:.4e} s dt={:.2e} s Newton {} it",
+                    report.step, report.time, report.dt, report.iterations
+                ));
+            }
             AnalysisKind::Explicit => {
                 let end = sim.model.scene.scene.end_time.unwrap_or(1.0);
                 self.progress
@@ -300,6 +313,7 @@ fn progress_bar(sim: &Simulation, show: bool) -> ProgressBar {
     }
     let total = match sim.model.analysis() {
         AnalysisKind::Explicit => 1000,
+        AnalysisKind::ImplicitDynamic if sim.model.scene.solver.adaptive() => 1000,
         _ => sim.model.scene.scene.steps.unwrap_or(0) as u64,
     };
     let bar = ProgressBar::new(total);

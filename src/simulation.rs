@@ -67,6 +67,8 @@ pub struct Simulation {
     pub monitors: Vec<Monitor>,
     /// Stage timings.
     pub profile: Profile,
+    /// What the last step reported (`None` before the first step of this process).
+    pub last_step: Option<StepReport>,
 }
 
 impl Simulation {
@@ -95,6 +97,7 @@ impl Simulation {
             integrator,
             monitors,
             profile,
+            last_step: None,
         })
     }
 
@@ -124,7 +127,43 @@ impl Simulation {
             }
         }
         self.check_monitors()?;
+        self.last_step = Some(StepReport {
+            removed_points: Vec::new(),
+            ..report.clone()
+        });
         Ok(report)
+    }
+
+    /// The columns of `curve.csv` between `time` and the monitors: the step
+    /// `dt` (s), and with adaptive steps the step's relative error estimate
+    /// and the attempts redone for their error and for Newton failures.
+    pub fn step_column_names(&self) -> Vec<String> {
+        let mut names = vec!["dt".to_string()];
+        if self.adaptive() {
+            names.extend(["error_estimate", "rejected_error", "rejected_newton"].map(String::from));
+        }
+        names
+    }
+
+    /// The values of [`Self::step_column_names`] after the last step (zero
+    /// before the first).
+    pub fn step_column_values(&self) -> Vec<f64> {
+        let last = self.last_step.clone().unwrap_or_default();
+        let mut values = vec![last.dt];
+        if self.adaptive() {
+            values.extend([
+                last.error_estimate.unwrap_or(0.0),
+                last.rejected_error as f64,
+                last.rejected_newton as f64,
+            ]);
+        }
+        values
+    }
+
+    /// Whether the run's steps are error-controlled.
+    fn adaptive(&self) -> bool {
+        self.model.analysis() == crate::scene::AnalysisKind::ImplicitDynamic
+            && self.model.scene.solver.adaptive()
     }
 
     /// Run to the end, reporting every step to `observer`. On a failure the

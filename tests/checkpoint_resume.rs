@@ -438,3 +438,18 @@ fn sigterm_then_resume_gives_the_uninterrupted_outputs() {
     );
     assert_eq!(status(&killed).0, "completed");
 }
+
+#[test]
+fn adaptive_generalised_alpha_run_resumes_to_identical_outputs() {
+    // the controller's proposed step, velocity scale and counts, and the
+    // points' force per mass are in the checkpoint: stopped at 37
+    // (checkpoint 30) of the bar's ~100 error-controlled steps
+    let bar = common::validation("elastic/bar_implicit.toml");
+    let adaptive = [
+        "scene.steps=400",
+        "solver.rho_infinity=0.8",
+        "solver.time_step=\"adaptive\"",
+        "solver.error_tolerance=1e-3",
+    ];
+    assert_resume_is_seamless(&bar, &adaptive, 10, 37, None);
+}

@@ -13,6 +13,7 @@
 use crate::bc::{DrivenPoints, TractionPoints};
 use crate::constitutive::PointState;
 use crate::error::TimeStepLimit;
+use crate::integrators::step_control::StepControlRecord;
 use crate::integrators::{Integrator, SolverUsage};
 use crate::model::LostPoint;
 use crate::particles::Particles;
@@ -440,6 +441,7 @@ impl Codec for SolverUsage {
         w.put(&self.stagnated_steps);
         w.put(&self.explicit_time_step);
         w.put(&self.time_step_limited_by);
+        w.put(&self.step_control);
     }
     fn decode(r: &mut Reader) -> Result<Self, DecodeError> {
         Ok(Self {
@@ -453,6 +455,31 @@ impl Codec for SolverUsage {
             stagnated_steps: r.get()?,
             explicit_time_step: r.get()?,
             time_step_limited_by: r.get()?,
+            step_control: r.get()?,
+        })
+    }
+}
+
+impl Codec for StepControlRecord {
+    const MIN_SIZE: usize = 6 * 8 + 1;
+    fn encode(&self, w: &mut Writer) {
+        w.put(&self.next_dt);
+        w.put(&self.accepted);
+        w.put(&self.rejected_error);
+        w.put(&self.rejected_newton);
+        w.put(&self.accepted_at_min);
+        w.put(&self.dt_range);
+        w.put(&self.velocity_scale);
+    }
+    fn decode(r: &mut Reader) -> Result<Self, DecodeError> {
+        Ok(Self {
+            next_dt: r.get()?,
+            accepted: r.get()?,
+            rejected_error: r.get()?,
+            rejected_newton: r.get()?,
+            accepted_at_min: r.get()?,
+            dt_range: r.get()?,
+            velocity_scale: r.get()?,
         })
     }
 }

@@ -176,6 +176,7 @@ impl ExplicitIntegrator {
             iterations: 0,
             substeps: 1,
             removed_points: removed.into_iter().collect(),
+            ..Default::default()
         })
     }
 }

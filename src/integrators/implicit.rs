@@ -12,6 +12,7 @@ use super::newton::{
     self, Newmark, NewtonBuffers, NewtonError, NodalKinematics, Solution, StepSystem,
 };
 use super::p2g::{external_force, nodal_kinematics, KinematicsBuffers};
+use super::step_control::{LocalError, StepControlRecord, StepController};
 use super::stresses::converged_stresses;
 use super::tangent::{background_block, Tangent};
 use super::{NonlocalStep, SolverUsage, StepReport, StepSetup, TrialStresses};
@@ -44,6 +45,29 @@ pub struct ImplicitIntegrator {
     newton_buffers: NewtonBuffers,
     /// The P2G pass's buffers, kept from one (sub-)step to the next.
     p2g: KinematicsBuffers,
+    /// The step-size controller (`[solver] time_step = "adaptive"`).
+    control: Option<StepController>,
+}
+
+/// What an adaptive attempt needs to judge its error.
+#[derive(Clone, Copy)]
+struct ErrorControl {
+    /// The controller.
+    controller: StepController,
+    /// The velocity scale of the relative error so far, m/s.
+    velocity_scale: f64,
+    /// Keep the step whatever its error (the first step, or one at `dt_min`).
+    keep_any: bool,
+}
+
+/// How an attempt at a (sub-)step ended.
+enum Attempt {
+    /// Converged and committed to the model, in this many Newton iterations;
+    /// with adaptive steps, its local error.
+    Committed(usize, Option<LocalError>),
+    /// Converged, but its local error estimate exceeds the tolerance: the
+    /// model is unchanged.
+    Rejected(f64),
 }
 
 impl ImplicitIntegrator {
@@ -60,6 +84,16 @@ impl ImplicitIntegrator {
             last_residuals: (Vec::new(), 0.0),
             newton_buffers: NewtonBuffers::default(),
             p2g: KinematicsBuffers::default(),
+            control: StepController::of(&model.scene),
+        })
+        .map(|mut integrator| {
+            if integrator.control.is_some() {
+                integrator.usage.step_control = Some(StepControlRecord {
+                    next_dt: integrator.dt,
+                    ..Default::default()
+                });
+            }
+            integrator
         })
     }
 
@@ -88,8 +122,12 @@ impl ImplicitIntegrator {
         self.tangent.systems_written()
     }
 
-    /// One implicit step of Δt, halved on Newton failure (DESIGN §3).
+    /// One implicit step: of Δt, halved on Newton failure (DESIGN §3), or with
+    /// adaptive steps of the controller's choice.
     pub fn step(&mut self, model: &mut Model, profile: &Profile) -> Result<StepReport, StepError> {
+        if let Some(control) = self.control {
+            return self.adaptive_step(model, profile, control);
+        }
         let (t0, dt) = (model.time, self.dt);
         let mut report = StepReport {
             step: model.step + 1,
@@ -103,6 +141,86 @@ impl ImplicitIntegrator {
         Ok(report)
     }
 
+    /// One step whose size the error estimate controls (theory
+    /// "Error-controlled steps"): the proposed step, cut to end at the next
+    /// jump of the stepped gravity and at the end time, is tried; an attempt
+    /// whose estimate exceeds the tolerance is redone with the step the
+    /// controller derives from it, one whose Newton iteration fails with half
+    /// the step. The first step of a run (its start acceleration is assumed,
+    /// not computed) and a step at `dt_min` are kept whatever their estimate.
+    fn adaptive_step(
+        &mut self,
+        model: &mut Model,
+        profile: &Profile,
+        control: StepController,
+    ) -> Result<StepReport, StepError> {
+        let t0 = model.time;
+        restart_at_gravity_jump(model, self.newmark);
+        let mut record = self.usage.step_control.take().unwrap_or_default();
+        let mut report = StepReport {
+            step: model.step + 1,
+            ..Default::default()
+        };
+        let mut proposal = record.next_dt;
+        let result = loop {
+            let dt = self.step_within_loads(model, t0, proposal);
+            let judge = ErrorControl {
+                controller: control,
+                velocity_scale: record.velocity_scale,
+                keep_any: model.step == 0 || dt <= control.dt_min * (1.0 + 1e-9),
+            };
+            match self.substep(model, profile, t0, dt, Some(judge), &mut report) {
+                Ok(Attempt::Committed(iterations, local)) => {
+                    report.iterations += iterations;
+                    report.substeps += 1;
+                    report.dt = dt;
+                    self.usage.newton_iterations += iterations;
+                    record.accept(dt, local);
+                    if report.error_estimate.is_some_and(|e| !control.accepts(e)) {
+                        record.accepted_at_min += 1;
+                    }
+                    let estimate = report.error_estimate.unwrap_or(0.0);
+                    // a step cut short by a load jump or the end tells
+                    // nothing against the longer step proposed
+                    record.next_dt = if dt < proposal && control.accepts(estimate) {
+                        proposal
+                    } else {
+                        control.next(dt, estimate)
+                    };
+                    break Ok(());
+                }
+                Ok(Attempt::Rejected(estimate)) => {
+                    report.rejected_error += 1;
+                    record.rejected_error += 1;
+                    proposal = control.next(dt, estimate);
+                }
+                Err(e) if e.retry() && dt > control.dt_min * (1.0 + 1e-9) => {
+                    report.rejected_newton += 1;
+                    record.rejected_newton += 1;
+                    self.usage.halvings += 1;
+                    proposal = (0.5 * dt).max(control.dt_min);
+                }
+                Err(e) => break Err(e.into_step_error(report.rejected_newton)),
+            }
+        };
+        self.usage.step_control = Some(record);
+        result?;
+        model.step += 1;
+        report.time = model.time;
+        Ok(report)
+    }
+
+    /// The step `proposal` cut to end at the next jump of the stepped gravity
+    /// and at the end time.
+    fn step_within_loads(&self, model: &Model, t: f64, proposal: f64) -> f64 {
+        let end = model.scene.scene.end_time_or_steps();
+        let mut dt = proposal.min(end - t);
+        if let Some(jump) = model.scene.loads.next_gravity_jump(t) {
+            dt = dt.min(jump - t);
+        }
+        dt
+    }
+
     /// Advance from `t` by `dt`; on a failure that halving may cure, two
     /// half steps instead (`depth` halvings so far).
     fn advance(
@@ -114,8 +232,9 @@ impl ImplicitIntegrator {
         depth: usize,
         report: &mut StepReport,
     ) -> Result<(), StepError> {
-        match self.substep(model, profile, t, dt, report) {
-            Ok(iterations) => {
+        match self.substep(model, profile, t, dt, None, report) {
+            Ok(Attempt::Rejected(_)) => unreachable_rejection(),
+            Ok(Attempt::Committed(iterations, _)) => {
                 report.iterations += iterations;
                 report.substeps += 1;
                 self.usage.newton_iterations += iterations;
@@ -130,19 +249,22 @@ impl ImplicitIntegrator {
         }
     }
 
-    /// One (sub-)step from `t` to `t + dt`, in the order of paper Fig. 1;
-    /// returns the Newton iterations. The step setup is the integrator's,
-    /// refreshed in place.
+    /// One (sub-)step from `t` to `t + dt`, in the order of paper Fig. 1.
+    /// With `control` (adaptive steps: whether to keep the step whatever its
+    /// error) the converged step's error is estimated, and a step that fails
+    /// the tolerance is rejected before anything is committed. The step
+    /// setup is the integrator's, refreshed in place.
     fn substep(
         &mut self,
         model: &mut Model,
         profile: &Profile,
         t: f64,
         dt: f64,
+        control: Option<ErrorControl>,
         report: &mut StepReport,
-    ) -> Result<usize, NewtonError> {
+    ) -> Result<Attempt, NewtonError> {
         let mut setup = std::mem::take(&mut self.setup);
-        let result = self.substep_with(model, profile, t, dt, report, &mut setup);
+        let result = self.substep_with(model, profile, (t, dt), control, report, &mut setup);
         self.setup = setup;
         result
     }
@@ -152,11 +274,11 @@ impl ImplicitIntegrator {
         &mut self,
         model: &mut Model,
         profile: &Profile,
-        t: f64,
-        dt: f64,
+        (t, dt): (f64, f64),
+        control: Option<ErrorControl>,
         report: &mut StepReport,
         setup: &mut StepSetup,
-    ) -> Result<usize, NewtonError> {
+    ) -> Result<Attempt, NewtonError> {
         let dofs = profile.time(Stage::Setup, || refresh_setup(model, setup))?;
         let setup = &*setup;
         let nodal = profile.time(Stage::P2G, || {
@@ -175,6 +297,19 @@ impl ImplicitIntegrator {
             )
         })?;
         let grid = ConvergedGrid::new(&system, solution);
+        let mut local = None;
+        if let (Some(control), Some(newmark), Some(a)) =
+            (control, self.newmark, grid.acceleration.as_deref())
+        {
+            let error = LocalError::of(&system, &newmark, &grid.du, a);
+            let estimate = error.relative(dt, control.velocity_scale);
+            report.error_estimate = Some(estimate);
+            local = Some(error);
+            if !control.controller.accepts(estimate) && !control.keep_any {
+                self.newton_buffers.recycle(grid.trial);
+                return Ok(Attempt::Rejected(estimate));
+            }
+        }
         self.last_residuals = (grid.history.clone(), grid.reference);
         let motion = grid.motion(dt, self.newmark);
         profile.time(Stage::G2P, || {
@@ -197,7 +332,7 @@ impl ImplicitIntegrator {
         report.removed_points.extend(removed);
         model.time = t + dt;
         self.newton_buffers.recycle(grid.trial);
-        Ok(grid.iterations)
+        Ok(Attempt::Committed(grid.iterations, local))
     }
 
     /// The nonlinear system of a (sub-)step.
@@ -292,6 +427,29 @@ impl ImplicitIntegrator {
     /// Number of unknowns of the next step.
     pub fn unknowns(model: &Model) -> Result<usize, StepError> {
         Ok(step_setup(model)?.1.n_free)
+    }
+}
+
+/// Fixed steps never estimate their error, so they are never rejected.
+fn unreachable_rejection() -> ! {
+    unreachable!("a fixed step is never rejected for its error")
+}
+
+/// At a jump of the stepped gravity just after the start of a step, the
+/// body force per mass jumps by −Δg ŷ while the stresses cannot: every
+/// point's acceleration (and, generalised-α, its force per mass) jumps by the
+/// same amount (theory eq. AS4). Adaptive steps end at each jump, so that the
+/// next step starts from the acceleration after it and its error estimate
+/// sees no load discontinuity.
+fn restart_at_gravity_jump(model: &mut Model, newmark: Option<super::newton::Newmark>) {
+    let jump = model.scene.loads.gravity_jump_at(model.time);
+    if jump == 0.0 || newmark.is_none() {
+        return;
+    }
+    let p = &mut model.particles;
+    p.acceleration.iter_mut().for_each(|a| a[1] -= jump);
+    if newmark.is_some_and(|n| n.is_generalised_alpha()) {
+        p.force_per_mass.iter_mut().for_each(|q| q[1] -= jump);
     }
 }
 

@@ -24,6 +24,7 @@ pub mod newton;
 pub mod p2g;
 mod regularisation;
 pub mod setup;
+pub mod step_control;
 mod stress;
 pub mod stresses;
 pub mod tangent;
@@ -58,6 +59,12 @@ pub struct StepReport {
     pub iterations: usize,
     /// Number of sub-steps the step needed (1 without halving).
     pub substeps: usize,
+    /// Adaptive steps: the relative local error estimate of the step taken.
+    pub error_estimate: Option<f64>,
+    /// Adaptive steps: attempts redone because their error was too large.
+    pub rejected_error: usize,
+    /// Adaptive steps: attempts redone with half the step after Newton failed.
+    pub rejected_newton: usize,
     /// Index remaps of the points removed in the step, in order (each maps
     /// the indices left by the previous one).
     pub removed_points: Vec<PointRemap>,
@@ -88,6 +95,8 @@ pub struct SolverUsage {
     pub explicit_time_step: Option<(f64, f64)>,
     /// Explicit runs: what limited the stable time step at the last step.
     pub time_step_limited_by: Option<TimeStepLimit>,
+    /// Implicit runs with adaptive steps: what the step control did.
+    pub step_control: Option<step_control::StepControlRecord>,
 }
 
 /// The integrator of a run, chosen by `scene.analysis`.

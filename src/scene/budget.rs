@@ -292,6 +292,14 @@ impl Scene {
     /// springs of rigid bodies as in [`crate::integrators::time_step`]).
     fn estimate_steps(&self) -> (f64, String, Vec<String>) {
         let a = &self.scene;
+        if a.analysis == AnalysisKind::ImplicitDynamic && self.solver.adaptive() {
+            let (end, dt) = (a.end_time_or_steps(), a.dt.unwrap_or(1.0));
+            return (
+                end / dt,
+                format!("adaptive steps: scene end {end:.4e} s / first step {dt:.4e} s"),
+                vec!["scene.end_time".into(), "scene.dt".into()],
+            );
+        }
         if a.analysis != AnalysisKind::Explicit {
             let steps = a.steps.unwrap_or(0) as f64;
             return (steps, "scene.steps".into(), vec!["scene.steps".into()]);

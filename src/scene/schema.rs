@@ -192,9 +192,19 @@ pub struct Analysis {
     /// a fixed step that must not exceed the stability limit; omit it to use the CFL rule.
     #[serde(default)]
     pub dt: Option<f64>,
-    /// End time, s (explicit runs; implicit runs end after `steps`).
+    /// End time, s (explicit runs, and implicit runs with adaptive steps,
+    /// which end at `steps` × `dt` when it is not given; other implicit runs
+    /// end after `steps`).
     #[serde(default)]
     pub end_time: Option<f64>,
+}
+
+impl Analysis {
+    /// The end time of a run that ends on time: `end_time`, else `steps` × `dt`.
+    pub fn end_time_or_steps(&self) -> f64 {
+        self.end_time
+            .unwrap_or_else(|| self.steps.unwrap_or(0) as f64 * self.dt.unwrap_or(1.0))
+    }
 }
 
 /// `[grid]`: the background grid.
@@ -365,6 +375,19 @@ pub enum PredictorChoice {
     Zero,
 }
 
+/// `[solver] time_step`: how an implicit dynamic run chooses its steps.
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum TimeStepControl {
+    /// `scene.dt` throughout (halved where Newton fails).
+    #[default]
+    Fixed,
+    /// Steps chosen by the local error estimate against
+    /// `solver.error_tolerance`, from `scene.dt` on, within
+    /// [`dt_min`, `dt_max`] (theory "Error-controlled steps").
+    Adaptive,
+}
+
 /// `[solver] pcg_preconditioner`.
 #[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, Eq)]
 #[serde(rename_all = "snake_case")]
@@ -421,9 +444,31 @@ pub struct SolverSpec {
     /// frequencies damped to ρ∞ per step; 1 is the trapezoidal rule.
     /// Refused together with `newmark_gamma`.
     pub rho_infinity: Option<f64>,
+    /// Implicit dynamic: `fixed` (`scene.dt` throughout) or `adaptive`.
+    pub time_step: TimeStepControl,
+    /// Adaptive steps: the largest local error of a step relative to its
+    /// displacement increment, in (0, 1).
+    pub error_tolerance: f64,
+    /// Adaptive steps: the smallest step, s (default `scene.dt`/1000).
+    pub dt_min: Option<f64>,
+    /// Adaptive steps: the largest step, s (default 100 `scene.dt`).
+    pub dt_max: Option<f64>,
 }
 
 impl SolverSpec {
+    /// Whether an implicit dynamic run chooses its own steps.
+    pub fn adaptive(&self) -> bool {
+        self.time_step == TimeStepControl::Adaptive
+    }
+
+    /// The adaptive steps' bounds [dt_min, dt_max], s, around the first step `dt`.
+    pub fn step_bounds(&self, dt: f64) -> (f64, f64) {
+        (
+            self.dt_min.unwrap_or(1e-3 * dt),
+            self.dt_max.unwrap_or(100.0 * dt),
+        )
+    }
+
     /// Newmark γ of the scene (½ when unset).
     pub fn gamma(&self) -> f64 {
         self.newmark_gamma.unwrap_or(0.5)
@@ -459,6 +504,10 @@ impl Default for SolverSpec {
             damping: 0.0,
             newmark_gamma: None,
             rho_infinity: None,
+            time_step: TimeStepControl::Fixed,
+            error_tolerance: 1e-3,
+            dt_min: None,
+            dt_max: None,
         }
     }
 }
@@ -672,6 +721,22 @@ impl LoadSpec {
         match &self.gravity_ramp {
             Some(r) => (r.increment * (t / r.interval - 1e-9).ceil().max(0.0)).min(r.max),
             None => self.gravity,
+        }
+    }
+
+    /// The first time after `t` at which the stepped gravity jumps, s (`None`
+    /// when it no longer changes): the end of the ramp interval holding `t`.
+    pub fn next_gravity_jump(&self, t: f64) -> Option<f64> {
+        let r = self.gravity_ramp.as_ref()?;
+        let next = ((t / r.interval + 1e-9).floor() + 1.0) * r.interval;
+        (self.gravity_at(t) < r.max).then_some(next)
+    }
+
+    /// The jump of the stepped gravity just after `t`, g(t⁺) − g(t), m/s².
+    pub fn gravity_jump_at(&self, t: f64) -> f64 {
+        match &self.gravity_ramp {
+            Some(r) => self.gravity_at(t + 1e-6 * r.interval) - self.gravity_at(t),
+            None => 0.0,
         }
     }
 }

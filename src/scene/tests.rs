@@ -190,3 +190,72 @@ fn predictor_is_used_by_implicit_dynamic_runs_only() {
     let bad = Scene::from_str_with_overrides(MINIMAL, "t", &["solver.predictor=\"linear\"".into()]);
     assert!(bad.unwrap_err().to_string().contains("predictor"));
 }
+
+/// Generalised-α and adaptive steps: `rho_infinity` outside [0, 1] or beside
+/// `newmark_gamma` is refused naming the field; adaptive steps need an
+/// implicit dynamic run, and end at `steps` × `dt` without an `end_time`.
+#[test]
+fn time_scheme_keys_are_checked() {
+    let dynamic = [
+        "scene.analysis=\"implicit_dynamic\"",
+        "scene.dt=0.01",
+        "scene.steps=5",
+    ];
+    let set = |extra: &[&str]| {
+        let o: Vec<String> = dynamic.iter().chain(extra).map(|s| s.to_string()).collect();
+        Scene::from_str_with_overrides(MINIMAL, "t", &o)
+    };
+    assert!(set(&["solver.rho_infinity=0.8"]).is_ok());
+    for (extra, field) in [
+        (&["solver.rho_infinity=1.2"][..], "solver.rho_infinity"),
+        (
+            &["solver.rho_infinity=0.5", "solver.newmark_gamma=0.6"],
+            "solver.rho_infinity",
+        ),
+        (
+            &["solver.time_step=\"adaptive\"", "solver.error_tolerance=0"],
+            "solver.error_tolerance",
+        ),
+        (
+            &["solver.time_step=\"adaptive\"", "solver.dt_max=0.001"],
+            "solver.dt_max",
+        ),
+        (
+            &[
+                "solver.time_step=\"adaptive\"",
+                "scene.analysis=\"explicit\"",
+                "scene.end_time=1.0",
+            ],
+            "solver.time_step",
+        ),
+    ] {
+        let e = set(extra).unwrap_err().to_string();
+        assert!(e.contains(field), "{extra:?}: {e}");
+    }
+    let adaptive = set(&["solver.time_step=\"adaptive\""]).unwrap();
+    assert_eq!(adaptive.scene.end_time_or_steps(), 0.05);
+    assert_eq!(adaptive.solver.step_bounds(0.01), (1e-5, 1.0));
+}
+
+/// The adaptive steps end at every jump of the stepped gravity: the next jump
+/// after t is the end of t's interval, the jump just after a boundary is one
+/// increment, and nothing jumps once the ramp is done.
+#[test]
+fn gravity_ramp_jumps_at_interval_ends() {
+    let l = LoadSpec {
+        gravity: 0.0,
+        gravity_ramp: Some(GravityRamp {
+            increment: 1.0,
+            interval: 0.001,
+            max: 3.0,
+        }),
+    };
+    assert!((l.next_gravity_jump(0.0).unwrap() - 0.001).abs() < 1e-15);
+    assert!((l.next_gravity_jump(0.0015).unwrap() - 0.002).abs() < 1e-15);
+    assert!((l.next_gravity_jump(0.002 - 1e-16).unwrap() - 0.003).abs() < 1e-15);
+    assert_eq!(l.gravity_jump_at(0.0), 1.0);
+    assert_eq!(l.gravity_jump_at(0.002), 1.0);
+    assert_eq!(l.gravity_jump_at(0.0015), 0.0);
+    assert_eq!(l.next_gravity_jump(0.0035), None);
+    assert_eq!(l.gravity_jump_at(0.003), 0.0);
+}

@@ -265,7 +265,7 @@ impl Scene {
                 }
             }
             AnalysisKind::QuasiStatic | AnalysisKind::ImplicitDynamic => {
-                if self.scene.end_time.is_some() {
+                if self.scene.end_time.is_some() && !s.adaptive() {
                     unused.push("scene.end_time");
                 }
                 if s.cfl != defaults.cfl {
@@ -298,6 +298,48 @@ impl Scene {
             .collect()
     }
 
+    /// `[solver] time_step = "adaptive"` and its tolerance and bounds.
+    fn validate_step_control(&self, e: &mut Vec<FieldError>) {
+        let s = &self.solver;
+        check(
+            e,
+            "solver.error_tolerance",
+            s.error_tolerance > 0.0 && s.error_tolerance < 1.0,
+            format!("must lie in (0, 1) (got {})", s.error_tolerance),
+        );
+        for (field, value) in [("solver.dt_min", s.dt_min), ("solver.dt_max", s.dt_max)] {
+            if let Some(v) = value {
+                check(
+                    e,
+                    field,
+                    v > 0.0 && v.is_finite(),
+                    format!("must be > 0 s (got {v})"),
+                );
+            }
+        }
+        if !s.adaptive() {
+            return;
+        }
+        check(
+            e,
+            "solver.time_step",
+            self.scene.analysis == AnalysisKind::ImplicitDynamic,
+            format!(
+                "\"adaptive\" needs scene.analysis = \"implicit_dynamic\" (got \"{}\"; explicit runs take the CFL step)",
+                self.scene.analysis.key()
+            ),
+        );
+        if let Some(dt) = self.scene.dt.filter(|dt| *dt > 0.0) {
+            let (dt_min, dt_max) = s.step_bounds(dt);
+            check(
+                e,
+                "solver.dt_max",
+                dt_min <= dt && dt <= dt_max,
+                format!("scene.dt = {dt} s must lie in [dt_min, dt_max] = [{dt_min}, {dt_max}] s"),
+            );
+        }
+    }
+
     fn validate_analysis(&self, e: &mut Vec<FieldError>) {
         let a = &self.scene;
         if let Some(dt) = a.dt {
@@ -323,6 +365,20 @@ impl Scene {
                     "scene.end_time",
                     a.end_time.is_some_and(|t| t > 0.0 && t.is_finite()),
                     "explicit runs need end_time > 0 s",
+                );
+            }
+            AnalysisKind::ImplicitDynamic if self.solver.adaptive() => {
+                check(
+                    e,
+                    "scene.end_time",
+                    a.end_time.is_some() || a.steps.is_some_and(|n| n >= 1),
+                    "adaptive steps need end_time (or steps >= 1: end at steps × dt)",
+                );
+                check(
+                    e,
+                    "scene.dt",
+                    a.dt.is_some(),
+                    "adaptive steps need a first time step dt > 0 s",
                 );
             }
             AnalysisKind::ImplicitDynamic => {
@@ -500,6 +556,7 @@ impl Scene {
                 format!("must lie in [0.5, 1] (got {gamma})"),
             );
         }
+        self.validate_step_control(e);
         if let Some(rho) = s.rho_infinity {
             check(
                 e,
