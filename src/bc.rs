@@ -6,6 +6,7 @@
 use crate::grid::{Grid, ShapeAt};
 use crate::particles::Particles;
 use crate::scene::{ContactKind, GridLine, Scene, Side};
+use crate::start_ramp::StartRamp;
 use crate::transfer::{self, ParticleBins, NONE};
 
 /// How one grid degree of freedom (2·node + component) is constrained.
@@ -15,12 +16,16 @@ pub enum DofConstraint {
     Free,
     /// Homogeneous Dirichlet condition (roller / fixity).
     Fixed,
-    /// Prescribed displacement u(t, x) = t · (rate + gradient · x).
+    /// Prescribed displacement u(t, x) = D(t) · (rate + gradient · x), D the
+    /// displacement factor of the start ramp ([`StartRamp::displacement`], D = t
+    /// without ramp).
     Prescribed {
         /// Rate, m per unit time.
         rate: f64,
         /// Gradient of the rate, 1/time.
         gradient: [f64; 2],
+        /// Smooth start of the motion (`ramp_time`).
+        ramp: StartRamp,
     },
 }
 
@@ -52,6 +57,7 @@ impl Constraints {
                     dof[2 * n + p.dof.index()] = DofConstraint::Prescribed {
                         rate: p.rate,
                         gradient: p.gradient,
+                        ramp: StartRamp::new(p.ramp_time),
                     };
                 }
             }
@@ -68,12 +74,17 @@ impl Constraints {
         Self { dof }
     }
 
-    /// Prescribed displacement of grid dof `d` at time `t` (0 for free and fixed dofs).
+    /// Prescribed displacement D(t) · (rate + gradient · x) of grid dof `d` at
+    /// time `t` (0 for free and fixed dofs), D of [`StartRamp::displacement`].
     pub fn prescribed_value(&self, grid: &Grid, d: usize, t: f64) -> f64 {
         match self.dof[d] {
-            DofConstraint::Prescribed { rate, gradient } => {
+            DofConstraint::Prescribed {
+                rate,
+                gradient,
+                ramp,
+            } => {
                 let x = grid.node_position(d / 2);
-                t * (rate + gradient[0] * x[0] + gradient[1] * x[1])
+                ramp.displacement(t) * (rate + gradient[0] * x[0] + gradient[1] * x[1])
             }
             _ => 0.0,
         }
@@ -314,8 +325,12 @@ pub struct DrivenPoints {
     pub rigid: Vec<usize>,
     /// Penalty stiffness k_p = β_pen E, kN/m per m.
     pub stiffness: Vec<f64>,
-    /// Prescribed rigid velocity of each rigid body, m per unit time.
+    /// Prescribed rigid velocity of each rigid body, m per unit time (its
+    /// full value, after the start ramp).
     pub velocity: Vec<[f64; 2]>,
+    /// Smooth start of each rigid body's motion (`ramp_time`): the scene's,
+    /// so not checkpointed.
+    pub ramp: Vec<StartRamp>,
     /// Names of the rigid bodies.
     pub names: Vec<String>,
     /// Whether each point bore on soil in the last committed step
@@ -347,6 +362,7 @@ impl DrivenPoints {
                 return Err(r);
             }
             d.velocity.push(spec.velocity);
+            d.ramp.push(StartRamp::new(spec.ramp_time));
             d.names.push(spec.name.clone());
         }
         d.stiffness = (0..d.len())
@@ -478,11 +494,22 @@ impl DrivenPoints {
         self.particle[k].map_or(self.position[k], |p| particles.position[p])
     }
 
-    /// Anchor X̄(t) = x(0) + ū(t) of point `k` (DESIGN D40).
+    /// Anchor X̄(t) = x(0) + ū(t) of point `k` (DESIGN D40), ū(t) = D(t) v
+    /// with v the body's velocity and D its start ramp's displacement factor
+    /// ([`StartRamp::displacement`]; D = t without ramp).
     pub fn anchor(&self, k: usize, t: f64) -> [f64; 2] {
         let x0 = self.position0[k];
-        let v = self.velocity[self.rigid[k]];
-        [x0[0] + v[0] * t, x0[1] + v[1] * t]
+        let r = self.rigid[k];
+        let (v, d) = (self.velocity[r], self.ramp[r].displacement(t));
+        [x0[0] + v[0] * d, x0[1] + v[1] * d]
+    }
+
+    /// Distance D(t1) − D(t0) rigid body `r` travels over [t0, t1] per unit of
+    /// its velocity: every anchor of the body moves by
+    /// X̄(t1) − X̄(t0) = (D(t1) − D(t0)) v.
+    pub fn travel(&self, r: usize, t0: f64, t1: f64) -> f64 {
+        let ramp = self.ramp[r];
+        ramp.displacement(t1) - ramp.displacement(t0)
     }
 
     /// Whether a point with shape `shape` bears on soil this step: its cell

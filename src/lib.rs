@@ -9,7 +9,8 @@
 //! - the model: [`grid`] and [`shape`] (background grid, bilinear and GIMP
 //!   shape functions), [`particles`] and [`seeding`] (material points),
 //!   [`constitutive`] (stress updates), [`bc`] (Dirichlet lines, traction
-//!   points, driven points), [`model`] (all of it and its state in time);
+//!   points, driven points), [`start_ramp`] (smooth start of their
+//!   prescribed motion), [`model`] (all of it and its state in time);
 //! - the kernels: [`transfer`] (the P2G/G2P kernels both integrators share),
 //!   [`stiffness`] (tangent blocks), [`dofs`] (numbering of the unknowns),
 //!   [`nonlocal`] (averaging of the equivalent plastic strain), [`smoothing`]
@@ -57,6 +58,7 @@ pub mod seeding;
 pub mod shape;
 pub mod simulation;
 pub mod smoothing;
+pub mod start_ramp;
 pub mod stiffness;
 pub mod study;
 pub mod transfer;

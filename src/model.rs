@@ -353,17 +353,19 @@ impl Model {
     }
 
     /// Add the work of the rigid bodies on the soil over the step that began at
-    /// `start`: ½ (R_n + R_n+1)·v Δt per body (R of DESIGN D40).
+    /// `start`: ½ (R_n + R_n+1)·(X̄_n+1 − X̄_n) per body (R and the anchor X̄ of
+    /// DESIGN D40), the anchor's motion being (D(t_n+1) − D(t_n)) v with the
+    /// start ramp's D (v Δt without ramp).
     pub fn account_rigid_work(&mut self, start: f64) {
         let bodies = self.driven.velocity.len();
         self.rigid_force.resize(bodies, [0.0; 2]);
-        let dt = self.time - start;
         for r in 0..bodies {
             let now = self.driven.force_on_soil(r, &self.particles, self.time);
             let before = self.rigid_force[r];
             let v = self.driven.velocity[r];
+            let travel = self.driven.travel(r, start, self.time);
             self.external_work +=
-                0.5 * dt * ((before[0] + now[0]) * v[0] + (before[1] + now[1]) * v[1]);
+                0.5 * travel * ((before[0] + now[0]) * v[0] + (before[1] + now[1]) * v[1]);
             self.rigid_force[r] = now;
         }
     }

@@ -209,7 +209,10 @@ impl SavedState {
         let model = &mut sim.model;
         model.particles = self.particles;
         model.traction = self.traction;
+        // the start ramps are the scene's, not state: kept from the fresh build
+        let ramp = std::mem::take(&mut model.driven.ramp);
         model.driven = self.driven;
+        model.driven.ramp = ramp;
         model.pinned_points = self.pinned_points;
         model.time = self.time;
         model.step = self.step;
@@ -378,6 +381,7 @@ impl Codec for DrivenPoints {
             stiffness: r.get()?,
             velocity: r.get()?,
             names: r.get()?,
+            ramp: Vec::new(),
             bearing: Vec::new(),
         })
     }

@@ -457,6 +457,7 @@ impl UpdatedGrid {
         let largest = active.par_iter().map(|&node| self.mass[node as usize]);
         self.tiny_mass = 1e-12 * largest.reduce(|| 0.0, f64::max);
         let damping = model.scene.solver.damping;
+        let t = model.time;
         let (tiny_mass, mass, momentum, force) =
             (self.tiny_mass, &self.mass, &self.momentum, &self.force);
         refill_fields(
@@ -484,9 +485,16 @@ impl UpdatedGrid {
                             momentum[c] = 0.0;
                             acceleration[c] = -v / dt;
                         }
-                        DofConstraint::Prescribed { rate, gradient } => {
+                        DofConstraint::Prescribed {
+                            rate,
+                            gradient,
+                            ramp,
+                        } => {
+                            // the mean velocity of the step, so that the re-map's
+                            // Δt v moves the node by u(t + Δt) − u(t) (StartRamp)
                             let x = model.grid.node_position(node);
-                            let target = rate + gradient[0] * x[0] + gradient[1] * x[1];
+                            let factor = ramp.mean_velocity_factor(t, t + dt);
+                            let target = factor * (rate + gradient[0] * x[0] + gradient[1] * x[1]);
                             reaction[c] = -f;
                             acceleration[c] = (target - v) / dt;
                             momentum[c] = m * target;

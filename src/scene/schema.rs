@@ -803,7 +803,8 @@ pub struct FixedSpec {
 }
 
 /// `[[bc.prescribed]]`: a prescribed nodal displacement on a grid line
-/// (validation scenes): u(t, x) = t · (rate + gradient · x).
+/// (validation scenes): u(t, x) = D(t) · (rate + gradient · x), D(t) = t
+/// after the start ramp ([`crate::start_ramp::StartRamp`]).
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct PrescribedSpec {
@@ -817,6 +818,17 @@ pub struct PrescribedSpec {
     /// Spatial gradient of the rate, 1/time (for homogeneous strain fields).
     #[serde(default)]
     pub gradient: [f64; 2],
+    /// Time over which the rate rises smoothly from 0 to its value
+    /// ([`crate::start_ramp::StartRamp`]), s or pseudo-time; 0 (default): the
+    /// full rate from t = 0.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub ramp_time: f64,
+}
+
+/// Whether a default-zero key is at its default (left out of the scene
+/// written with the run, which then reads as before the key existed).
+fn is_zero(value: &f64) -> bool {
+    *value == 0.0
 }
 
 /// Side of a rectangular body.
@@ -866,6 +878,11 @@ pub struct RigidSpec {
     pub footprint: [f64; 2],
     /// Prescribed rigid velocity, m per unit time (quasi-static: per step with dt = 1).
     pub velocity: [f64; 2],
+    /// Time over which the velocity rises smoothly from 0 to `velocity`
+    /// ([`crate::start_ramp::StartRamp`]), s or pseudo-time; 0 (default): the
+    /// full velocity from t = 0.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub ramp_time: f64,
     /// Where the body is tied to the soil: `top_points` (the top row of
     /// material points, DESIGN §8.0) or `surface` (points on the soil surface).
     #[serde(default)]

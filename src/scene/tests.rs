@@ -259,3 +259,53 @@ fn gravity_ramp_jumps_at_interval_ends() {
     assert_eq!(l.next_gravity_jump(0.0035), None);
     assert_eq!(l.gravity_jump_at(0.003), 0.0);
 }
+
+/// A negative or non-finite `ramp_time` of a rigid body or a prescribed line
+/// is refused naming its field; two prescribed entries moving one dof with
+/// different ramps contradict each other.
+#[test]
+fn bad_ramp_times_are_refused_naming_the_field() {
+    let driven = format!(
+        "{MINIMAL}\n[bc]\n{}\n{}\n",
+        r#"rigid = [{ name = "platen", footprint = [0.0, 1.0], velocity = [0.0, -0.01], ramp_time = -0.1 }]"#,
+        r#"prescribed = [{ line = "x=1", dof = "x", rate = 0.01, ramp_time = nan }]"#
+    );
+    // nan is refused with every non-finite number, before the other checks
+    let e = Scene::from_str_with_overrides(&driven, "t", &[])
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("bc.prescribed[0].ramp_time"), "{e}");
+    let negative = ["bc.prescribed.0.ramp_time=-1.0".into()];
+    let e = Scene::from_str_with_overrides(&driven, "t", &negative)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("bc.rigid[0].ramp_time") && e.contains("got -0.1"),
+        "{e}"
+    );
+    assert!(
+        e.contains("bc.prescribed[0].ramp_time") && e.contains("got -1"),
+        "{e}"
+    );
+    let fine = Scene::from_str_with_overrides(
+        &driven,
+        "t",
+        &[
+            "bc.rigid.0.ramp_time=0.1".into(),
+            "bc.prescribed.0.ramp_time=0.0".into(),
+        ],
+    )
+    .unwrap();
+    assert_eq!(fine.bc.rigid[0].ramp_time, 0.1);
+    let twice = format!(
+        "{MINIMAL}\n[bc]\n{}\n",
+        r#"prescribed = [{ line = "x=1", dof = "x", rate = 0.01 }, { line = "x=1", dof = "x", rate = 0.01, ramp_time = 1.0 }]"#
+    );
+    let e = Scene::from_str_with_overrides(&twice, "t", &[])
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("bc.prescribed[1]") && e.contains("ramp times 0 and 1"),
+        "{e}"
+    );
+}

@@ -773,6 +773,7 @@ impl Scene {
                 p.rate.is_finite() && p.gradient.iter().all(|g| g.is_finite()),
                 "must be finite",
             );
+            check_ramp_time(e, format!("bc.prescribed[{i}].ramp_time"), p.ramp_time);
         }
         self.validate_dof_conflicts(e);
         for (i, p) in self.bc.pressure.iter().enumerate() {
@@ -818,6 +819,7 @@ impl Scene {
                 r.velocity.iter().all(|v| v.is_finite()),
                 "must be finite",
             );
+            check_ramp_time(e, format!("{f}.ramp_time"), r.ramp_time);
         }
     }
 
@@ -1018,14 +1020,25 @@ fn segments_meet(a: [f64; 2], b: [f64; 2], c: [f64; 2], d: [f64; 2]) -> bool {
         || (o4 == 0.0 && on(c, d, b))
 }
 
-/// One Dirichlet entry on one displacement component: u = t (rate + g · x)
-/// on a grid line (a fixed entry has rate = 0, g = 0).
+/// A start ramp's time must be a finite number ≥ 0 (0: no ramp).
+fn check_ramp_time(e: &mut Vec<FieldError>, field: String, ramp_time: f64) {
+    check(
+        e,
+        field,
+        ramp_time.is_finite() && ramp_time >= 0.0,
+        format!("must be a finite time >= 0 (got {ramp_time})"),
+    );
+}
+
+/// One Dirichlet entry on one displacement component: u = D(t) (rate + g · x)
+/// on a grid line, D of its start ramp (a fixed entry has rate = 0, g = 0).
 struct DofEntry {
     field: String,
     line: GridLine,
     component: Component,
     rate: f64,
     gradient: [f64; 2],
+    ramp_time: f64,
 }
 
 impl DofEntry {
@@ -1095,6 +1108,7 @@ impl Scene {
                     component,
                     rate: 0.0,
                     gradient: [0.0; 2],
+                    ramp_time: 0.0,
                 });
             }
         }
@@ -1108,6 +1122,7 @@ impl Scene {
                 component: p.dof,
                 rate: p.rate,
                 gradient: p.gradient,
+                ramp_time: p.ramp_time,
             });
         }
         let lo = self.grid.origin;
@@ -1140,7 +1155,10 @@ impl Scene {
                 };
                 let conflict = shared.iter().find(|x| {
                     let (va, vb) = (a.value_at(**x), b.value_at(**x));
-                    (va - vb).abs() > 1e-9 * (va.abs() + vb.abs()) || !(va - vb).is_finite()
+                    let moving = va != 0.0 || vb != 0.0;
+                    (va - vb).abs() > 1e-9 * (va.abs() + vb.abs())
+                        || !(va - vb).is_finite()
+                        || (moving && a.ramp_time != b.ramp_time)
                 });
                 if let Some(x) = conflict {
                     if reported.contains(&b.field) {
@@ -1154,12 +1172,14 @@ impl Scene {
                     e.push(FieldError {
                         field: b.field.clone(),
                         message: format!(
-                            "contradicts {} on the {dof} displacement of the node at ({}, {}) m: rates {} and {} per unit time (one dof takes one condition)",
+                            "contradicts {} on the {dof} displacement of the node at ({}, {}) m: rates {} and {} per unit time, ramp times {} and {} (one dof takes one condition)",
                             a.field,
                             x[0],
                             x[1],
                             a.value_at(*x),
-                            b.value_at(*x)
+                            b.value_at(*x),
+                            a.ramp_time,
+                            b.ramp_time
                         ),
                     });
                 }
