@@ -36,6 +36,7 @@ pub mod campaign;
 pub mod checkpoint;
 pub mod constitutive;
 pub mod dofs;
+pub mod energy;
 pub mod error;
 pub mod error_id;
 pub mod grid;

@@ -451,6 +451,10 @@ fn report(
             mass / total
         );
     }
+    let energy = mpm_geo::energy::EnergyBudget::of(sim);
+    if let Some(w) = energy.warning(sim.scene.output.energy_remainder_warning) {
+        eprintln!("warning: {w}");
+    }
     match (outcome.error, outcome.interrupted) {
         (Some(e), _) => fail(
             1,

@@ -597,6 +597,42 @@ pub fn dissipation_density(
     dot4(s1, &dep)
 }
 
+/// One point's work of the stress on its strain increment per unit volume,
+/// integrated the way the backward-Euler return of the stress update
+/// integrates it: the elastic part Δε^e = C(σ(n+1) − σ^R(n)) by the
+/// trapezoidal rule (exact for linear elasticity: the change of ½ σ·Cσ), the
+/// plastic part Δε^p = Δε − Δε^e at σ(n+1) (the dissipation of
+/// [`dissipation_density`]):
+///
+/// w = ½ (σ(n+1) + σ^R(n)) · Δε^e + σ(n+1) · Δε^p
+///   = ½ (σ(n+1) + σ^R(n)) · Δε + ½ (σ(n+1) − σ^R(n)) · Δε^p.
+///
+/// The plain trapezoid ½ (σ(n+1) + σ^R(n)) · Δε assumes the stress linear
+/// in the strain across the step; a point torn from compression to the apex
+/// in one step flows dilatantly at σ(n+1) ≈ 0, and the trapezoid charges that
+/// flow with ½ σ^R(n), a negative work without bound (the vertical cut's
+/// internal work fell below zero). Returns (w, σ(n+1) · Δε^p); same
+/// arguments as [`dissipation_density`].
+pub fn work_and_dissipation_density(
+    c: &Compliance,
+    stress_new: &[f64; 4],
+    stress_rot_old: &[f64; 4],
+    dstrain: &[f64; 4],
+) -> (f64, f64) {
+    let (s1, s0, de) = (stress_new, stress_rot_old, dstrain);
+    let ds = [s1[0] - s0[0], s1[1] - s0[1], s1[2] - s0[2], s1[3] - s0[3]];
+    let de_el = mat_vec(c, &ds);
+    let sum = [s1[0] + s0[0], s1[1] + s0[1], s1[2] + s0[2], s1[3] + s0[3]];
+    let dep = [
+        de[0] - de_el[0],
+        de[1] - de_el[1],
+        de[2] - de_el[2],
+        de[3] - de_el[3],
+    ];
+    let dissipation = dot4(s1, &dep);
+    (0.5 * dot4(&sum, &de_el) + dissipation, dissipation)
+}
+
 /// One step's dissipation increment \[D43, with σ(n+1) for the trapezoid\]:
 ///
 /// ΔD = Σ_p V_p(n) · σ_p(n+1) · Δε^p_p,

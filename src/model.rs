@@ -97,6 +97,12 @@ pub struct Model {
     /// total strain increment), kJ per metre run: elastic energy stored plus
     /// plastic dissipation.
     pub internal_work: f64,
+    /// Kinetic energy removed where the fixed dofs zero the nodal motion so
+    /// far (the no-slip base, rollers), kJ per metre run
+    /// ([`crate::integrators::boundary_work`] B1).
+    pub boundary_work: f64,
+    /// Kinetic energy K0 of the points at t = 0, kJ per metre run.
+    pub initial_kinetic_energy: f64,
     /// Points removed after leaving the grid (`[grid] lost_points = "remove"`).
     pub lost_points: Vec<LostPoint>,
     /// Force of every rigid body on the soil at the end of the last step, kN/m.
@@ -224,12 +230,15 @@ impl Model {
             dissipated_energy: 0.0,
             external_work: 0.0,
             internal_work: 0.0,
+            boundary_work: 0.0,
+            initial_kinetic_energy: 0.0,
             mass_height: 0.0,
             lost_points: Vec::new(),
             rigid_force: Vec::new(),
             scene,
         };
         model.mass_height = model.current_mass_height();
+        model.initial_kinetic_energy = model.kinetic_energy();
         Ok(model)
     }
 

@@ -143,6 +143,8 @@ impl Monitor {
                 .map(|s| s.plastic_strain_eq)
                 .fold(0.0, f64::max),
             (_, MonitorKind::DissipatedEnergy) => model.dissipated_energy,
+            (_, MonitorKind::BoundaryWork) => model.boundary_work,
+            (_, MonitorKind::EnergyRemainder) => crate::energy::remainder(model),
             (_, MonitorKind::Gravity) => model.scene.loads.gravity_at(model.time),
             (_, MonitorKind::RunOut) => p
                 .position

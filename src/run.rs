@@ -619,7 +619,14 @@ pub fn write_run_json(
     let factorisation = sim.integrator.factorisation_stats();
     let implicit = sim.integrator.implicit();
     let solver_warnings = implicit.map_or_else(Vec::new, |i| i.solver_warnings());
-    let all_warnings = [model.scene.warnings(), solver_warnings.clone()].concat();
+    let energy = crate::energy::EnergyBudget::of(model);
+    let energy_warning = energy.warning(model.scene.output.energy_remainder_warning);
+    let all_warnings = [
+        model.scene.warnings(),
+        solver_warnings.clone(),
+        energy_warning.into_iter().collect(),
+    ]
+    .concat();
     let newton_iterations = sim.integrator.usage().newton_iterations;
     let linear_seconds = factorisation.symbolic_seconds
         + factorisation.numeric_seconds
@@ -643,6 +650,7 @@ pub fn write_run_json(
         "particles": model.particles.len(),
         "lost_points": model.lost_points,
         "point_volumes": point_volume_summary(model),
+        "energy": energy,
         "grid_cells": model.grid.cells,
         "wall_seconds": wall_seconds,
         "rayon_threads": rayon::current_num_threads(),

@@ -187,13 +187,18 @@ pub struct EnergyBalance {
     pub internal: f64,
     /// Kinetic energy.
     pub kinetic: f64,
+    /// Kinetic energy removed at the fixed dofs (monitor `boundary_work`,
+    /// [`crate::integrators::boundary_work`]); zero when the scene has no
+    /// such monitor.
+    pub boundary: f64,
 }
 
 impl EnergyBalance {
-    /// (W − W_int − K) / W: the share of the external work lost by the time
-    /// integration (e.g. Newmark γ > ½ damping a dynamic snap).
+    /// (W − W_int − K − B) / W: the share of the external work lost by the
+    /// time integration (e.g. Newmark γ > ½ damping a dynamic snap;
+    /// [`crate::energy`] E1 with K0 = 0).
     pub fn relative_loss(&self) -> f64 {
-        (self.external - self.internal - self.kinetic) / self.external
+        (self.external - self.internal - self.kinetic - self.boundary) / self.external
     }
 }
 

@@ -503,17 +503,18 @@ pub(super) fn write_outputs(
         md.push_str(&footing_section(runs, &m));
     }
     if runs.iter().any(|r| r.energy.is_some()) {
-        md.push_str("\n## Energy balance (M5)\n\nAt the last step, kJ/m: W work of the loads on the soil (pressures, rigid bodies, gravity), W_int work of the stresses on the strain increments (elastic energy stored + dissipation D), K kinetic energy. The loss (W − W_int − K)/W is the energy the time integration removed (Newmark γ > ½ damping a dynamic snap, MUSL's velocity remap; about 2e-5 in an elastic biaxial run and 5e-3 in an elastic explicit cut, tests/energy_balance.rs); a negative loss is energy the run created.\n\n| run | W | W_int | D | K | loss |\n|---|---|---|---|---|---|\n");
+        md.push_str("\n## Energy balance (M5)\n\nAt the last step, kJ/m: W work of the loads on the soil (pressures, rigid bodies, gravity), W_int work of the stresses on the strain increments (elastic energy stored + dissipation D), K kinetic energy, B kinetic energy removed at the fixed dofs (monitor `boundary_work`, explicit runs; 0 without it). The loss (W − W_int − K − B)/W is the energy the time integration removed (Newmark γ > ½ damping a dynamic snap, MUSL's velocity remap; about 2e-5 in an elastic biaxial run and 5e-3 in an elastic explicit cut, tests/energy_balance.rs); a negative loss is energy the run created.\n\n| run | W | W_int | D | K | B | loss |\n|---|---|---|---|---|---|---|\n");
         for r in runs {
             if let Some(e) = r.energy {
                 let _ = writeln!(
                     md,
-                    "| {} | {:.5} | {:.5} | {} | {:.2e} | {:.2} % |",
+                    "| {} | {:.5} | {:.5} | {} | {:.2e} | {:.2e} | {:.2} % |",
                     r.name,
                     e.external,
                     e.internal,
                     fmt_opt(r.dissipation, 1.0, 5),
                     e.kinetic,
+                    e.boundary,
                     100.0 * e.relative_loss()
                 );
             }

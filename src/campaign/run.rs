@@ -397,6 +397,7 @@ fn gather(
             external,
             internal,
             kinetic,
+            boundary: last_value(&curve, "boundary_work").unwrap_or(0.0),
         }),
         _ => None,
     };

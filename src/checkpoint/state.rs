@@ -48,6 +48,10 @@ pub struct SavedState {
     pub external_work: f64,
     /// Internal work, kJ/m.
     pub internal_work: f64,
+    /// Work removed at the fixed dofs, kJ/m.
+    pub boundary_work: f64,
+    /// Kinetic energy at t = 0, kJ/m.
+    pub initial_kinetic_energy: f64,
     /// Points removed so far.
     pub lost_points: Vec<LostPoint>,
     /// Force of every rigid body on the soil after the last step, kN/m.
@@ -88,6 +92,8 @@ impl SavedState {
             dissipated_energy: model.dissipated_energy,
             external_work: model.external_work,
             internal_work: model.internal_work,
+            boundary_work: model.boundary_work,
+            initial_kinetic_energy: model.initial_kinetic_energy,
             lost_points: model.lost_points.clone(),
             rigid_force: model.rigid_force.clone(),
             usage: sim.integrator.usage().clone(),
@@ -222,6 +228,8 @@ impl SavedState {
         model.dissipated_energy = self.dissipated_energy;
         model.external_work = self.external_work;
         model.internal_work = self.internal_work;
+        model.boundary_work = self.boundary_work;
+        model.initial_kinetic_energy = self.initial_kinetic_energy;
         model.lost_points = self.lost_points;
         model.rigid_force = self.rigid_force;
         model.mass_height = model.current_mass_height();
@@ -261,6 +269,8 @@ impl Codec for SavedState {
         w.put(&self.dissipated_energy);
         w.put(&self.external_work);
         w.put(&self.internal_work);
+        w.put(&self.boundary_work);
+        w.put(&self.initial_kinetic_energy);
         w.put(&self.lost_points);
         w.put(&self.rigid_force);
         w.put(&self.usage);
@@ -282,6 +292,8 @@ impl Codec for SavedState {
             dissipated_energy: r.get()?,
             external_work: r.get()?,
             internal_work: r.get()?,
+            boundary_work: r.get()?,
+            initial_kinetic_energy: r.get()?,
             lost_points: r.get()?,
             rigid_force: r.get()?,
             usage: r.get()?,

@@ -32,6 +32,9 @@ pub struct NodalResults<'a> {
     /// The only nodes where `reaction` and `increment` can be other than
     /// zero (increasing), when the integrator knows them; `None`: any node.
     pub nonzero_at: Option<&'a [u32]>,
+    /// Kinetic energy the fixed dofs removed in the step, kJ/m
+    /// ([`super::boundary_work`] B1).
+    pub boundary_work: f64,
 }
 
 /// Commit the step: deformation and stresses at the points, the step's
@@ -84,6 +87,7 @@ pub fn commit_swapping(
     }
 
     model.account_gravity_work(nodal.gravity);
+    model.boundary_work += nodal.boundary_work;
     model.external_work += model
         .traction
         .advect(&setup.traction_shapes, nodal.increment);

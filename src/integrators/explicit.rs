@@ -18,6 +18,7 @@
 
 use rayon::prelude::*;
 
+use super::boundary_work::fixed_dof_kinetic_energy;
 use super::commit::{commit_swapping, NodalResults};
 use super::g2p::{g2p, GridMotion, VelocityUpdate};
 use super::stresses::{converged_stresses_taking, ConvergedStresses};
@@ -214,11 +215,14 @@ impl Buffers {
         profile.time(Stage::P2G, || {
             self.map_to_grid(model, setup, shapes, t, profile)
         });
-        let dt = profile.time(Stage::TimeStep, || {
+        let (dt, boundary_work) = profile.time(Stage::TimeStep, || {
             let dt = time_step(usage, model, setup, &self.grid.mass)?;
             self.grid
                 .update_momentum(model, &setup.bins.active_nodes, dt);
-            Ok::<_, StepError>(dt)
+            let removed = self
+                .grid
+                .fixed_dof_kinetic_energy(model, &setup.bins.active_nodes);
+            Ok::<_, StepError>((dt, removed))
         })?;
         profile.time(Stage::G2P, || {
             g2p(&mut model.particles, shapes, &self.grid.motion(dt))
@@ -247,6 +251,7 @@ impl Buffers {
                 gravity: model.scene.loads.gravity_at(t),
                 end_time: t + dt,
                 nonzero_at: Some(&setup.bins.active_nodes),
+                boundary_work,
             };
             commit_swapping(model, setup, trial, converged, nodal)
         })?;
@@ -512,6 +517,24 @@ impl UpdatedGrid {
                 [acceleration, velocity, reaction]
             },
         );
+    }
+
+    /// The kinetic energy of the P2G momentum that the update zeroed at the
+    /// fixed dofs of the `active` nodes ([`super::boundary_work`] B1), kJ/m.
+    fn fixed_dof_kinetic_energy(&self, model: &Model, active: &[u32]) -> f64 {
+        let (mass, momentum) = (&self.mass, &self.momentum);
+        fixed_dof_kinetic_energy(
+            &model.constraints.dof,
+            active.iter().map(|&node| node as usize),
+            self.tiny_mass,
+            |node| mass[node],
+            |node| {
+                [
+                    momentum[node][0] / mass[node],
+                    momentum[node][1] / mass[node],
+                ]
+            },
+        )
     }
 
     /// G2P of the updated grid (DESIGN §4 step 3): v_p += Δt Σ N a_i,

@@ -326,6 +326,8 @@ impl ImplicitIntegrator {
                 gravity: model.scene.loads.gravity_at(t + dt),
                 end_time: t + dt,
                 nonzero_at: None,
+                // the points keep the velocity P2G zeroes (boundary_work B2)
+                boundary_work: 0.0,
             };
             commit(model, setup, &grid.trial, converged, nodal)
         })?;

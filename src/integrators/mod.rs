@@ -15,6 +15,7 @@
 //! Both use the same transfer kernels ([`crate::transfer`]), the same
 //! constitutive interface and the same boundary-condition devices.
 
+pub mod boundary_work;
 pub mod commit;
 pub mod explicit;
 mod export;

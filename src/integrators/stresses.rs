@@ -9,7 +9,7 @@ use super::{NonlocalStep, StepSetup, TrialStresses};
 use crate::constitutive::{PointState, Voigt};
 use crate::dofs::DofMap;
 use crate::error::StepError;
-use crate::metrics::dissipation_density;
+use crate::metrics::work_and_dissipation_density;
 use crate::model::Model;
 use crate::profile::{Profile, Stage, Work};
 use crate::scene::DoubleMapping;
@@ -166,8 +166,14 @@ fn smooth(
 /// constitutive stresses before double mapping (Voigt dot products,
 /// engineering shear), with one strain increment Δε per point (the one its
 /// stress update was given, B-bar included):
-/// - internal work Σ_p V_p(n) · ½(σ_p(n+1) + σ_p^R(n)) · Δε_p (elastic
-///   energy stored plus dissipation);
+/// - internal work Σ_p V_p(n) · w_p, w_p the work of the stress on Δε_p
+///   integrated as the return mapping integrates it
+///   ([`crate::metrics::work_and_dissipation_density`]: the elastic part
+///   by the trapezoidal rule, the plastic part at σ(n+1)); for a point of
+///   an elastic material, ½(σ_p(n+1) + σ_p^R(n)) · Δε_p. Per step it is
+///   the change of Σ_p V_p(n) ½ σ_p·Cσ_p plus the dissipation, whence
+///   W_int = stored elastic energy + D up to the change of the points'
+///   volumes;
 /// - plastic dissipation (DESIGN D43 with σ(n+1), see
 ///   [`crate::metrics::dissipation_increment`]) Σ_p V_p(n) · σ_p(n+1) · Δε^p_p
 ///   with Δε^p = Δε − C(σ(n+1) − σ^R(n)); elastic materials contribute
@@ -183,29 +189,28 @@ fn step_energies(
     (point_work, point_dissipation): (&mut Vec<f64>, &mut Vec<f64>),
 ) -> (f64, f64) {
     let p = &model.particles;
-    point_work.clear();
-    point_work.par_extend((0..p.len()).into_par_iter().with_min_len(1024).map(|i| {
+    let all_elastic = model.materials.iter().all(|m| m.is_elastic());
+    let point_energies = |i: usize| {
         let strain = trial.strain_increment(i);
         let (now, before) = (&stress[i], &trial.rotated[i]);
-        let work: f64 = (0..4).map(|k| 0.5 * (now[k] + before[k]) * strain[k]).sum();
-        p.volume[i] * work
-    }));
+        let material = p.material[i] as usize;
+        if all_elastic || model.materials[material].is_elastic() {
+            let work: f64 = (0..4).map(|k| 0.5 * (now[k] + before[k]) * strain[k]).sum();
+            return (p.volume[i] * work, 0.0);
+        }
+        let compliance = &model.compliances[material];
+        let (work, dissipation) = work_and_dissipation_density(compliance, now, before, &strain);
+        (p.volume[i] * work, p.volume[i] * dissipation)
+    };
+    (0..p.len())
+        .into_par_iter()
+        .with_min_len(1024)
+        .map(point_energies)
+        .unzip_into_vecs(point_work, point_dissipation);
     let internal_work = point_work.iter().sum();
-    if model.materials.iter().all(|m| m.is_elastic()) {
+    if all_elastic {
         return (internal_work, 0.0);
     }
-    point_dissipation.clear();
-    point_dissipation.par_extend((0..p.len()).into_par_iter().with_min_len(1024).map(|i| {
-        let material = p.material[i] as usize;
-        // elastic points dissipate nothing: give them zero weight
-        let volume = match model.materials[material].is_elastic() {
-            true => 0.0,
-            false => p.volume[i],
-        };
-        let compliance = &model.compliances[material];
-        let strain = trial.strain_increment(i);
-        volume * dissipation_density(compliance, &stress[i], &trial.rotated[i], &strain)
-    }));
     let dissipation = point_dissipation.iter().fold(0.0, |sum, d| sum + d);
     match dissipation.is_finite() {
         true => (internal_work, dissipation),

@@ -353,6 +353,44 @@ fn d43_elastic_increment_dissipates_nothing() {
     );
 }
 
+/// A point torn in one step from compression to the apex (σ(n+1) = 0) by a
+/// large dilatant increment: the work of its stress is the elastic energy it
+/// releases, −½ σ^R(n)·Cσ^R(n), however large the increment, where the plain
+/// trapezoid ½ σ^R(n)·Δε grows without bound below zero; an elastic
+/// increment's work is the change of ½ σ·Cσ, as the trapezoid's.
+#[test]
+fn work_of_a_plastic_step_is_the_released_elastic_energy_plus_dissipation() {
+    let c = isotropic_compliance(10_000.0, 0.35);
+    let s0 = [-300.0, -900.0, -420.0, 60.0];
+    let energy = |s: &[f64; 4]| 0.5 * dot4(s, &mat_vec(&c, s));
+    for stretch in [1e-2, 1.0, 100.0] {
+        let de = [stretch, stretch, 0.0, 0.3 * stretch];
+        let (w, d) = work_and_dissipation_density(&c, &[0.0; 4], &s0, &de);
+        let released = -energy(&s0);
+        assert!(
+            (w - released).abs() < 1e-12 * released.abs(),
+            "Δε = {stretch}: w = {w}"
+        );
+        assert_eq!(d, 0.0, "no stress, no dissipation");
+        let trapezoid = 0.5 * dot4(&s0, &de);
+        if stretch >= 1.0 {
+            assert!(
+                trapezoid < 10.0 * released,
+                "the trapezoid charges the flow at ½σ(n)"
+            );
+        }
+    }
+    let s1 = [-330.0, -870.0, -400.0, 20.0];
+    let ds = [s1[0] - s0[0], s1[1] - s0[1], s1[2] - s0[2], s1[3] - s0[3]];
+    let (w, d) = work_and_dissipation_density(&c, &s1, &s0, &mat_vec(&c, &ds));
+    let change = energy(&s1) - energy(&s0);
+    assert!(
+        (w - change).abs() < 1e-12 * change.abs(),
+        "w = {w}, ΔU = {change}"
+    );
+    assert!(d.abs() < 1e-12 * change.abs(), "d = {d}");
+}
+
 #[test]
 fn external_work_trapezoid_is_exact_for_linear_load() {
     let k = 12.6e3;

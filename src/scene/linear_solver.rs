@@ -107,6 +107,14 @@ impl SolverSpec {
                 format!("must be > 0 (got {})", output.systems_max_mb),
             );
         }
+        if let Some(bound) = output.energy_remainder_warning {
+            if !(bound.is_finite() && bound > 0.0) {
+                refuse(
+                    "output.energy_remainder_warning",
+                    format!("must be a share > 0 (got {bound})"),
+                );
+            }
+        }
         if !output.systems.is_empty() && analysis == AnalysisKind::Explicit {
             refuse(
                 "output.systems",

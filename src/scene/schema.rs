@@ -940,6 +940,11 @@ pub struct OutputSpec {
     pub systems: Vec<usize>,
     /// A system whose files would exceed this many MB is skipped with a warning.
     pub systems_max_mb: f64,
+    /// Warn at the end of a run whose energy remainder |W − W_int − ΔK − B|
+    /// exceeds this share of the energy put in ([`crate::energy`] E1);
+    /// unset (the default): no warning, since a dynamic collapse loses most
+    /// of the work of gravity to the integrator (Newmark γ > ½, MUSL).
+    pub energy_remainder_warning: Option<f64>,
 }
 
 impl Default for OutputSpec {
@@ -951,6 +956,7 @@ impl Default for OutputSpec {
             snapshot_times: Vec::new(),
             systems: Vec::new(),
             systems_max_mb: 500.0,
+            energy_remainder_warning: None,
         }
     }
 }
@@ -986,6 +992,12 @@ pub enum MonitorKind {
     MaxPlasticStrain,
     /// Accumulated plastic dissipation (DESIGN D43, M5), kJ/m.
     DissipatedEnergy,
+    /// Kinetic energy removed at the fixed dofs so far, kJ/m
+    /// (`crate::integrators::boundary_work` B1).
+    BoundaryWork,
+    /// The remainder of the energy budget W − W_int − (K − K0) − B, kJ/m: the
+    /// integrator's numerical dissipation (`crate::energy` E1).
+    EnergyRemainder,
     /// Current gravity, m/s².
     Gravity,
     /// Run-out front x_front = max_p x_p, m: the largest horizontal extent of
