@@ -73,6 +73,7 @@ mod tests {
         let prescribed = DofConstraint::Prescribed {
             rate: 1.0,
             gradient: [0.0; 2],
+            ramp: crate::start_ramp::StartRamp::new(0.0),
         };
         let dof = [
             DofConstraint::Fixed,
