@@ -546,6 +546,7 @@ impl UpdatedGrid {
             scale: dt,
             acceleration: Some((&self.acceleration, VelocityUpdate::Forward)),
             force_per_mass: None,
+            velocity_removed: None,
         }
     }
 

@@ -37,6 +37,10 @@ pub struct GridMotion<'a> {
     /// The nodal force per mass M⁻¹(f_ext − f_int) at the step's end, which
     /// the points carry to the next step (generalised-α only).
     pub force_per_mass: Option<&'a [[f64; 2]]>,
+    /// Implicit: the mapped nodal velocity the fixed dofs zeroed, which the
+    /// points lose (the explicit integrator's a_i = −v_i/Δt there does the
+    /// same through `acceleration`).
+    pub velocity_removed: Option<&'a [[f64; 2]]>,
 }
 
 /// x_p += scale Σ_i N_ip u_i; with accelerations, a_p = Σ_i N_ip a_i and v_p
@@ -87,8 +91,11 @@ fn move_point<S: Support>(
             }
             VelocityUpdate::Newmark { gamma } => {
                 let before = *acceleration;
+                let removed = motion
+                    .velocity_removed
+                    .map_or([0.0; 2], |r| interpolate(shape, r));
                 for c in 0..2 {
-                    v[c] += dt * ((1.0 - gamma) * before[c] + gamma * a[c]);
+                    v[c] += dt * ((1.0 - gamma) * before[c] + gamma * a[c]) - removed[c];
                 }
             }
         }

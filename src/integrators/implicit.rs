@@ -6,6 +6,7 @@
 
 use mpm_solvers::{SolverStats, SparseMatrix};
 
+use super::boundary_work::fixed_dof_kinetic_energy;
 use super::commit::{commit, NodalResults};
 use super::g2p::{g2p, GridMotion, VelocityUpdate};
 use super::newton::{
@@ -285,7 +286,9 @@ impl ImplicitIntegrator {
             self.map_to_grid(model, setup, t + dt, profile)
         });
         let mut nonlocal = NonlocalStep::start(model, false, profile).map_err(StepError::from)?;
-        let system = self.system(model, setup, dofs, nodal, t, dt);
+        let mut system = self.system(model, setup, dofs, nodal, t, dt);
+        let removed_velocity = std::mem::take(&mut system.nodal.removed_velocity);
+        let boundary_work = system.nodal.removed_energy;
         let solution = profile.time(Stage::Newton, || {
             newton::solve(
                 &system,
@@ -311,7 +314,8 @@ impl ImplicitIntegrator {
             }
         }
         self.last_residuals = (grid.history.clone(), grid.reference);
-        let motion = grid.motion(dt, self.newmark);
+        let mut motion = grid.motion(dt, self.newmark);
+        motion.velocity_removed = (!removed_velocity.is_empty()).then_some(&removed_velocity[..]);
         profile.time(Stage::G2P, || {
             g2p(&mut model.particles, &setup.shapes, &motion)
         });
@@ -326,8 +330,7 @@ impl ImplicitIntegrator {
                 gravity: model.scene.loads.gravity_at(t + dt),
                 end_time: t + dt,
                 nonzero_at: None,
-                // the points keep the velocity P2G zeroes (boundary_work B2)
-                boundary_work: 0.0,
+                boundary_work,
             };
             commit(model, setup, &grid.trial, converged, nodal)
         })?;
@@ -376,13 +379,30 @@ impl ImplicitIntegrator {
                 acceleration: Vec::new(),
                 force_per_mass: Vec::new(),
                 external: external_force(model, setup, t1),
+                removed_velocity: Vec::new(),
+                removed_energy: 0.0,
             };
         };
         let carry_force = newmark.is_generalised_alpha();
         let mut nodal = nodal_kinematics(model, setup, t1, carry_force, &mut self.p2g);
         profile.count(Work::MassMatrix, 1);
-        for (d, c) in model.constraints.dof.iter().enumerate() {
+        let dof = &model.constraints.dof;
+        nodal.removed_energy = fixed_dof_kinetic_energy(
+            dof,
+            setup.bins.active_nodes.iter().map(|&n| n as usize),
+            0.0,
+            |i| nodal.mass[i],
+            |i| nodal.velocity[i],
+        );
+        for (d, c) in dof.iter().enumerate() {
             if *c == DofConstraint::Fixed {
+                let v = nodal.velocity[d / 2][d % 2];
+                if v != 0.0 {
+                    if nodal.removed_velocity.is_empty() {
+                        nodal.removed_velocity = vec![[0.0; 2]; nodal.velocity.len()];
+                    }
+                    nodal.removed_velocity[d / 2][d % 2] = v;
+                }
                 nodal.velocity[d / 2][d % 2] = 0.0;
                 nodal.acceleration[d / 2][d % 2] = 0.0;
                 if carry_force {
@@ -510,6 +530,7 @@ impl ConvergedGrid {
             scale: 1.0,
             acceleration: self.acceleration.as_deref().zip(rule),
             force_per_mass: self.force_per_mass.as_deref(),
+            velocity_removed: None,
         }
     }
 }

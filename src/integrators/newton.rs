@@ -110,6 +110,12 @@ pub struct NodalKinematics {
     pub force_per_mass: Vec<[f64; 2]>,
     /// External force at t_{n+1} (body force + traction), per grid node.
     pub external: Vec<[f64; 2]>,
+    /// The mapped velocity that the fixed dofs zeroed, per grid node (zero
+    /// elsewhere; empty when nothing was zeroed): G2P takes it from the
+    /// points, as the explicit integrator does ([`super::boundary_work`] B1).
+    pub removed_velocity: Vec<[f64; 2]>,
+    /// Σ ½ m v² of `removed_velocity`, kJ/m (B1).
+    pub removed_energy: f64,
 }
 
 /// The nonlinear system of one (sub-)step from `t` to `t + dt`.

@@ -116,6 +116,8 @@ pub fn nodal_kinematics(
             Vec::new()
         },
         external,
+        removed_velocity: Vec::new(),
+        removed_energy: 0.0,
     }
 }
 
