@@ -234,7 +234,10 @@ impl ImplicitIntegrator {
         report: &mut StepReport,
     ) -> Result<(), StepError> {
         match self.substep(model, profile, t, dt, None, report) {
-            Ok(Attempt::Rejected(_)) => unreachable_rejection(),
+            // without error control (`None`) no attempt is rejected
+            Ok(Attempt::Rejected(_)) => Err(StepError::NotAvailable(
+                "a fixed step was rejected for its error",
+            )),
             Ok(Attempt::Committed(iterations, _)) => {
                 report.iterations += iterations;
                 report.substeps += 1;
@@ -450,11 +453,6 @@ impl ImplicitIntegrator {
     pub fn unknowns(model: &Model) -> Result<usize, StepError> {
         Ok(step_setup(model)?.1.n_free)
     }
-}
-
-/// Fixed steps never estimate their error, so they are never rejected.
-fn unreachable_rejection() -> ! {
-    unreachable!("a fixed step is never rejected for its error")
 }
 
 /// At a jump of the stepped gravity just after the start of a step, the

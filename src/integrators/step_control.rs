@@ -130,7 +130,8 @@ pub struct StepControlRecord {
     pub rejected_error: usize,
     /// Attempts redone with half the step because Newton failed.
     pub rejected_newton: usize,
-    /// Steps kept at `dt_min` although their estimate exceeded the tolerance.
+    /// Steps kept although their estimate exceeded the tolerance (the
+    /// first step of the run, or a step at `dt_min`).
     pub accepted_at_min: usize,
     /// Smallest and largest step taken, s.
     pub dt_range: Option<(f64, f64)>,
