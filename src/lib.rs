@@ -37,6 +37,7 @@ pub mod constitutive;
 pub mod dofs;
 pub mod error;
 pub mod error_id;
+pub mod friction;
 pub mod grid;
 pub mod integrators;
 pub mod interrupt;

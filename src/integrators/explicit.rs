@@ -448,6 +448,46 @@ impl Buffers {
     }
 }
 
+/// The velocity of a free node of mass `m` after the step's force `force`
+/// with local damping (D21): (p + Δt f_damped)/m per component.
+fn free_velocity(momentum: [f64; 2], force: [f64; 2], m: f64, damping: f64, dt: f64) -> [f64; 2] {
+    let mut v = [0.0; 2];
+    for c in 0..2 {
+        let (v0, mut f) = (momentum[c] / m, force[c]);
+        if v0 != 0.0 {
+            f -= damping * f.abs() * v0.signum();
+        }
+        v[c] = (momentum[c] + dt * f) / m;
+    }
+    v
+}
+
+/// [acceleration, velocity, reaction] of a node on a frictional edge whose
+/// velocity after the step's forces would be `free` (theory eq. FR2): the
+/// approach stopped, the slide limited by Coulomb's law; a tangential dof
+/// also fixed by another condition (a corner) is held. The reaction is the
+/// edge's force m (v − v_free)/Δt.
+fn frictional_node(
+    model: &Model,
+    contact: &crate::friction::FrictionNode,
+    momentum: [f64; 2],
+    free: [f64; 2],
+    m: f64,
+    dt: f64,
+) -> [[f64; 2]; 3] {
+    let mut v = contact.stop_and_slide(free);
+    let t = contact.tangent();
+    if model.constraints.dof[2 * contact.node + t] == DofConstraint::Fixed {
+        v[t] = 0.0;
+    }
+    let (mut acceleration, mut reaction) = ([0.0; 2], [0.0; 2]);
+    for c in 0..2 {
+        acceleration[c] = (v[c] - momentum[c] / m) / dt;
+        reaction[c] = m * (v[c] - free[c]) / dt;
+    }
+    [acceleration, v, reaction]
+}
+
 impl UpdatedGrid {
     /// p_i ← p_i + Δt f_i with local damping (D21) and Dirichlet conditions;
     /// then the accelerations, velocities and reactions of the nodes
@@ -473,6 +513,10 @@ impl UpdatedGrid {
                 let m = mass[node];
                 if m <= tiny_mass {
                     return [[0.0; 2]; 3];
+                }
+                if let Some(contact) = model.friction.at(node) {
+                    let free = free_velocity(momentum[node], force[node], m, damping, dt);
+                    return frictional_node(model, contact, momentum[node], free, m, dt);
                 }
                 let mut momentum = momentum[node];
                 for c in 0..2 {
