@@ -384,7 +384,8 @@ impl Buffers {
     }
 
     /// MUSL re-map (DESIGN §4 step 4): p_i = Σ_p N_ip m_p v_p of the updated
-    /// point velocities, Dirichlet again; Δu_i = Δt p_i / m_i into
+    /// point velocities, Dirichlet again (a frictional edge holds its normal
+    /// dof against the approach only, theory eq. FR3); Δu_i = Δt p_i / m_i into
     /// `self.increment`.
     fn remap<S: Support>(&mut self, model: &Model, setup: &StepSetup, shapes: &[S], dt: f64) {
         let p = &model.particles;
@@ -412,7 +413,18 @@ impl Buffers {
         self.increment.refill(node_count, active, |node| {
             let mut u = [0.0; 2];
             if grid.mass[node] > grid.tiny_mass {
+                let contact = model.friction.at(node);
                 for (c, uc) in u.iter_mut().enumerate() {
+                    if let Some(contact) = contact.filter(|f| f.normal == c) {
+                        // the edge stops the approach only: a node leaving it moves
+                        let v = remapped[node][c] / grid.mass[node];
+                        *uc = if v * contact.inward > 0.0 {
+                            dt * v
+                        } else {
+                            0.0
+                        };
+                        continue;
+                    }
                     *uc = match dof[2 * node + c] {
                         DofConstraint::Fixed => 0.0,
                         DofConstraint::Prescribed { .. } => dt * grid.velocity[node][c],
