@@ -47,6 +47,8 @@ pub struct FrictionNode {
     pub inward: f64,
     /// Friction coefficient μ.
     pub mu: f64,
+    /// The `[[bc.friction]]` line the node belongs to (its place in the list).
+    pub line: usize,
 }
 
 impl FrictionNode {
@@ -99,7 +101,7 @@ impl FrictionEdges {
             at_node: vec![NONE; grid.node_count()],
             stiffness: STICK_STIFFNESS_FACTOR * stiffest,
         };
-        for spec in &scene.bc.friction {
+        for (index, spec) in scene.bc.friction.iter().enumerate() {
             let Ok(line) = GridLine::parse(&spec.line) else {
                 continue;
             };
@@ -113,6 +115,7 @@ impl FrictionEdges {
                         normal: line.axis,
                         inward,
                         mu: spec.mu,
+                        line: index,
                     });
                 }
             }
@@ -121,14 +124,63 @@ impl FrictionEdges {
     }
 
     /// Implicit: the tangential force at frictional node `contact` whose
-    /// step has moved it by `du` along the edge, under the edge's normal
-    /// reaction `reaction` (along the axis, from the last step), theory eq.
-    /// FR1: T = −k_t Δu_t while |k_t Δu_t| ≤ μ N, else −μ N sign(Δu_t),
-    /// N = reaction · inward. Returns (T, dT/dΔu_t).
-    pub fn tangential_force(&self, contact: &FrictionNode, du: f64, reaction: f64) -> (f64, f64) {
-        let normal = reaction * contact.inward;
+    /// step has moved it by `du` along the edge, under the compressive
+    /// normal force `normal` (from the last step, [`Self::patch_normals`]),
+    /// theory eq. FR1: T = −k_t Δu_t while |k_t Δu_t| ≤ μ N, else
+    /// −μ N sign(Δu_t). Returns (T, dT/dΔu_t).
+    pub fn tangential_force(&self, contact: &FrictionNode, du: f64, normal: f64) -> (f64, f64) {
         let (resistance, stick) = coulomb_resistance(self.stiffness * du, contact.mu, normal);
         (-resistance, if stick { self.stiffness } else { 0.0 })
+    }
+
+    /// The normal forces that bound the friction, per node of `nodes`
+    /// (theory eq. FR4): on each contact patch (a run of neighbouring
+    /// `active` nodes of one line), the patch's net compressive force
+    /// N_P = max(Σ N_i, 0) shared among its nodes in proportion to their
+    /// compressive parts, N̂_i = N_P max(N_i, 0) / Σ_j max(N_j, 0), with
+    /// N_i = `normal(node)` (compressive positive). Where every node of a
+    /// patch presses, N̂_i = N_i; a node pulled by the edge (a bilateral
+    /// normal dof, implicit) no longer adds to the capacity μ N_P of its
+    /// neighbours' patch the tension it carries.
+    pub fn patch_normals(
+        &self,
+        active: impl Fn(usize) -> bool,
+        normal: impl Fn(&FrictionNode) -> f64,
+        out: &mut Vec<f64>,
+    ) {
+        out.clear();
+        out.resize(self.nodes.len(), 0.0);
+        let mut start = 0;
+        while start < self.nodes.len() {
+            if !active(self.nodes[start].node) {
+                start += 1;
+                continue;
+            }
+            let line = self.nodes[start].line;
+            let mut end = start + 1;
+            while end < self.nodes.len()
+                && self.nodes[end].line == line
+                && active(self.nodes[end].node)
+            {
+                end += 1;
+            }
+            let (mut net, mut pressing) = (0.0, 0.0);
+            for k in start..end {
+                let n = normal(&self.nodes[k]);
+                out[k] = n;
+                net += n;
+                pressing += n.max(0.0);
+            }
+            let scale = if pressing > 0.0 {
+                net.max(0.0) / pressing
+            } else {
+                0.0
+            };
+            for n in &mut out[start..end] {
+                *n = n.max(0.0) * scale;
+            }
+            start = end;
+        }
     }
 
     /// Whether the run has frictional edges.
@@ -168,6 +220,7 @@ mod tests {
             normal: 1,
             inward: 1.0,
             mu: 0.5,
+            line: 0,
         };
         assert_eq!(base.stop_and_slide([2.0, -1.0]), [1.5, 0.0]);
         assert_eq!(base.stop_and_slide([-2.0, -1.0]), [-1.5, 0.0]);

@@ -489,13 +489,19 @@ impl StepSystem<'_> {
         stiffness.clear();
         stiffness.resize(edges.nodes.len(), 0.0);
         let mut change = 0.0;
+        let model = self.model;
+        let mut normals = Vec::new();
+        edges.patch_normals(
+            |node| self.setup.bins.node_active[node],
+            |c| model.reaction[c.node][c.normal] * c.inward,
+            &mut normals,
+        );
         for (k, contact) in edges.nodes.iter().enumerate() {
             let (node, t) = (contact.node, contact.tangent());
             if !self.setup.bins.node_active[node] || self.dofs.index[2 * node + t] == NONE {
                 continue;
             }
-            let reaction = self.model.reaction[node][contact.normal];
-            let (force, k_t) = edges.tangential_force(contact, du[node][t], reaction);
+            let (force, k_t) = edges.tangential_force(contact, du[node][t], normals[k]);
             let before = residual[node][t];
             residual[node][t] += force;
             change += residual[node][t] * residual[node][t] - before * before;
