@@ -478,7 +478,8 @@ impl StepSystem<'_> {
     /// stiffnesses into `stiffness`; returns the change of ‖R‖² at those dofs.
     /// The normal force is the edge's reaction of the last step (lagged by
     /// one step: the bound μ N is then fixed within the step, and Newton
-    /// meets only the stick–slip switch, as in a return mapping).
+    /// meets only the stick–slip switch, as in a return mapping), each
+    /// contact patch's net force shared by nodal mass (eq. FR4).
     fn add_friction(
         &self,
         du: &[[f64; 2]],
@@ -494,6 +495,7 @@ impl StepSystem<'_> {
         edges.patch_normals(
             |node| self.setup.bins.node_active[node],
             |c| model.reaction[c.node][c.normal] * c.inward,
+            |c| self.nodal.mass.get(c.node).copied().unwrap_or(1.0),
             &mut normals,
         );
         for (k, contact) in edges.nodes.iter().enumerate() {
