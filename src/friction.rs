@@ -4,12 +4,30 @@
 //! reaction N (|T| ≤ μ N: stick below the bound, slip at it), and no
 //! reaction acts where the soil pulls away (N ≤ 0). One law,
 //! [`coulomb_resistance`], serves both integrators:
-//! - explicit (velocity form): a node moving into the edge is stopped, N being
-//!   the force that stops it, and its tangential velocity is reduced by at
-//!   most μ N Δt / m;
-//! - implicit (force form): the normal dof is held (the edge's reaction
-//!   is N), and the tangential dof carries T, a stiff spring k_t on the
-//!   step's tangential increment bounded by μ N.
+//! - FR1 (implicit, force form): the normal dof is held (the edge's reaction
+//!   is N), and the tangential dof carries T = −k_t Δu_t while
+//!   k_t |Δu_t| ≤ μ N̂, else −μ N̂ sign(Δu_t), k_t = 10 E; N̂ of the last step
+//!   (FR4), fixed within the step.
+//! - FR2 (explicit, velocity form): a node whose velocity after the step's
+//!   forces, v*, moves into the edge is stopped (normal impulse per mass
+//!   v*_n) and its tangential velocity reduced by at most μ v*_n.
+//! - FR3 (explicit re-map): the edge holds the normal increment against the
+//!   approach only; a node leaving the edge moves (and strains the soil) as a
+//!   free one. Zeroing it as a fixed dof moved the points without straining
+//!   them: the sliding block rang, lifted off, and slid 0.92 m (exact 0.5) at
+//!   h = 0.125.
+//! - FR4 (implicit normal force): on each contact patch (neighbouring active
+//!   nodes of a line) the bound uses the net normal force
+//!   N_P = max(Σ N_i, 0), shared by nodal mass, N̂_i = N_P m_i / Σ m_j. The
+//!   bilateral edge's nodal reactions swing node by node (tension at some);
+//!   a bound on max(N_i, 0) overestimated the capacity (slide 0.395 m at
+//!   h = 0.0625), and one shared in proportion to max(N_i, 0), lagged,
+//!   fed the swing (0.42 m and a Newton failure at dt = 1e-3).
+//!
+//! Sliding block (`validation/friction/sliding_block.toml`, exact 0.5 m,
+//! stop 0.5 s): implicit 0.5059 m at h = 0.125, 0.0625, 0.03125 (dt = 2e-3,
+//! deceleration fit 4.000 m/s², exact 4), 0.5030 m at dt = 1e-3; explicit
+//! 0.4962 / 0.4975 m at h = 0.125 / 0.0625 (deceleration fit 4.045 / 4.048).
 
 use crate::bc::nodes_on_line;
 use crate::grid::Grid;
