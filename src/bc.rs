@@ -48,9 +48,17 @@ pub struct Constraints {
 }
 
 impl Constraints {
-    /// Build from the scene's `[[bc.fixed]]` and `[[bc.prescribed]]` (fixed wins where both apply).
+    /// Build from the scene's `[[bc.fixed]]`, `[[bc.prescribed]]` and the
+    /// normal dofs of `[[bc.friction]]` (fixed wins where several apply).
     pub fn from_scene(scene: &Scene, grid: &Grid) -> Self {
         let mut dof = vec![DofConstraint::Free; 2 * grid.node_count()];
+        for f in &scene.bc.friction {
+            if let Ok(line) = GridLine::parse(&f.line) {
+                for n in nodes_on_line(grid, line) {
+                    dof[2 * n + line.axis] = DofConstraint::Fixed;
+                }
+            }
+        }
         for p in &scene.bc.prescribed {
             if let Ok(line) = GridLine::parse(&p.line) {
                 for n in nodes_on_line(grid, line) {

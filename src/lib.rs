@@ -39,6 +39,7 @@ pub mod dofs;
 pub mod energy;
 pub mod error;
 pub mod error_id;
+pub mod friction;
 pub mod grid;
 pub mod integrators;
 pub mod interrupt;

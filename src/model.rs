@@ -62,6 +62,9 @@ pub struct Model {
     pub particles: Particles,
     /// Dirichlet conditions of every grid dof.
     pub constraints: Constraints,
+    /// Nodes of the frictional edges (`[[bc.friction]]`); their normal dofs
+    /// are held in `constraints`.
+    pub friction: crate::friction::FrictionEdges,
     /// Follower-pressure points.
     pub traction: TractionPoints,
     /// Penalty-tied points of rigid bodies.
@@ -211,6 +214,7 @@ impl Model {
         let n_nodes = grid.node_count();
         let mut model = Model {
             constraints: Constraints::from_scene(&scene, &grid),
+            friction: crate::friction::FrictionEdges::from_scene(&scene, &grid),
             traction: TractionPoints::from_scene(&scene),
             compliances: materials
                 .iter()

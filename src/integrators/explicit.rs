@@ -389,7 +389,8 @@ impl Buffers {
     }
 
     /// MUSL re-map (DESIGN §4 step 4): p_i = Σ_p N_ip m_p v_p of the updated
-    /// point velocities, Dirichlet again; Δu_i = Δt p_i / m_i into
+    /// point velocities, Dirichlet again (a frictional edge holds its normal
+    /// dof against the approach only, theory eq. FR3); Δu_i = Δt p_i / m_i into
     /// `self.increment`.
     fn remap<S: Support>(&mut self, model: &Model, setup: &StepSetup, shapes: &[S], dt: f64) {
         let p = &model.particles;
@@ -417,7 +418,18 @@ impl Buffers {
         self.increment.refill(node_count, active, |node| {
             let mut u = [0.0; 2];
             if grid.mass[node] > grid.tiny_mass {
+                let contact = model.friction.at(node);
                 for (c, uc) in u.iter_mut().enumerate() {
+                    if let Some(contact) = contact.filter(|f| f.normal == c) {
+                        // the edge stops the approach only: a node leaving it moves
+                        let v = remapped[node][c] / grid.mass[node];
+                        *uc = if v * contact.inward > 0.0 {
+                            dt * v
+                        } else {
+                            0.0
+                        };
+                        continue;
+                    }
                     *uc = match dof[2 * node + c] {
                         DofConstraint::Fixed => 0.0,
                         DofConstraint::Prescribed { .. } => dt * grid.velocity[node][c],
@@ -453,6 +465,46 @@ impl Buffers {
     }
 }
 
+/// The velocity of a free node of mass `m` after the step's force `force`
+/// with local damping (D21): (p + Δt f_damped)/m per component.
+fn free_velocity(momentum: [f64; 2], force: [f64; 2], m: f64, damping: f64, dt: f64) -> [f64; 2] {
+    let mut v = [0.0; 2];
+    for c in 0..2 {
+        let (v0, mut f) = (momentum[c] / m, force[c]);
+        if v0 != 0.0 {
+            f -= damping * f.abs() * v0.signum();
+        }
+        v[c] = (momentum[c] + dt * f) / m;
+    }
+    v
+}
+
+/// [acceleration, velocity, reaction] of a node on a frictional edge whose
+/// velocity after the step's forces would be `free` (theory eq. FR2): the
+/// approach stopped, the slide limited by Coulomb's law; a tangential dof
+/// also fixed by another condition (a corner) is held. The reaction is the
+/// edge's force m (v − v_free)/Δt.
+fn frictional_node(
+    model: &Model,
+    contact: &crate::friction::FrictionNode,
+    momentum: [f64; 2],
+    free: [f64; 2],
+    m: f64,
+    dt: f64,
+) -> [[f64; 2]; 3] {
+    let mut v = contact.stop_and_slide(free);
+    let t = contact.tangent();
+    if model.constraints.dof[2 * contact.node + t] == DofConstraint::Fixed {
+        v[t] = 0.0;
+    }
+    let (mut acceleration, mut reaction) = ([0.0; 2], [0.0; 2]);
+    for c in 0..2 {
+        acceleration[c] = (v[c] - momentum[c] / m) / dt;
+        reaction[c] = m * (v[c] - free[c]) / dt;
+    }
+    [acceleration, v, reaction]
+}
+
 impl UpdatedGrid {
     /// p_i ← p_i + Δt f_i with local damping (D21) and Dirichlet conditions;
     /// then the accelerations, velocities and reactions of the nodes
@@ -479,6 +531,10 @@ impl UpdatedGrid {
                 let m = mass[node];
                 if m <= tiny_mass {
                     return [[0.0; 2]; 3];
+                }
+                if let Some(contact) = model.friction.at(node) {
+                    let free = free_velocity(momentum[node], force[node], m, damping, dt);
+                    return frictional_node(model, contact, momentum[node], free, m, dt);
                 }
                 let mut momentum = momentum[node];
                 for c in 0..2 {

@@ -336,7 +336,9 @@ impl StepSystem<'_> {
                 tally.counted(profile)
             })
             .map_err(|(p, e)| NewtonError::Constitutive(p, e))?;
-        self.residual(trial, du, scratch, res, profile);
+        let mut friction = std::mem::take(&mut trial.friction_stiffness);
+        self.residual(trial, du, scratch, res, &mut friction, profile);
+        trial.friction_stiffness = friction;
         Ok(())
     }
 
@@ -400,14 +402,16 @@ impl StepSystem<'_> {
         a
     }
 
-    /// Residual R = f_ext + f_pen − f_int − M a (DESIGN D16) and its norms
-    /// (D18), into `res`.
+    /// Residual R = f_ext + f_pen − f_int − M a (DESIGN D16), with the
+    /// frictional edges' tangential forces (their stiffnesses into
+    /// `friction`), and its norms (D18), into `res`.
     fn residual(
         &self,
         trial: &TrialStresses,
         du: &[[f64; 2]],
         scratch: &mut ResidualScratch,
         res: &mut Residual,
+        friction: &mut Vec<f64>,
         profile: &Profile,
     ) {
         let model = self.model;
@@ -469,9 +473,49 @@ impl StepSystem<'_> {
                 }
             }
         }
+        norm2 += self.add_friction(du, residual, friction);
         let floor = 1e-6 * model.max_youngs_modulus() * grid.cell_size;
         res.reference = ext2.sqrt().max(int2.sqrt()).max(inertia2.sqrt()).max(floor);
         res.norm = norm2.sqrt();
+    }
+
+    /// The tangential forces of the frictional edges (theory eq. FR1) added
+    /// into `residual` at the free tangential dofs of active nodes, their
+    /// stiffnesses into `stiffness`; returns the change of ‖R‖² at those dofs.
+    /// The normal force is the edge's reaction of the last step (lagged by
+    /// one step: the bound μ N is then fixed within the step, and Newton
+    /// meets only the stick–slip switch, as in a return mapping), each
+    /// contact patch's net force shared by nodal mass (eq. FR4).
+    fn add_friction(
+        &self,
+        du: &[[f64; 2]],
+        residual: &mut [[f64; 2]],
+        stiffness: &mut Vec<f64>,
+    ) -> f64 {
+        let edges = &self.model.friction;
+        stiffness.clear();
+        stiffness.resize(edges.nodes.len(), 0.0);
+        let mut change = 0.0;
+        let model = self.model;
+        let mut normals = Vec::new();
+        edges.patch_normals(
+            |node| self.setup.bins.node_active[node],
+            |c| model.reaction[c.node][c.normal] * c.inward,
+            |c| self.nodal.mass.get(c.node).copied().unwrap_or(1.0),
+            &mut normals,
+        );
+        for (k, contact) in edges.nodes.iter().enumerate() {
+            let (node, t) = (contact.node, contact.tangent());
+            if !self.setup.bins.node_active[node] || self.dofs.index[2 * node + t] == NONE {
+                continue;
+            }
+            let (force, k_t) = edges.tangential_force(contact, du[node][t], normals[k]);
+            let before = residual[node][t];
+            residual[node][t] += force;
+            change += residual[node][t] * residual[node][t] - before * before;
+            stiffness[k] = k_t;
+        }
+        change
     }
 
     /// DESIGN §3 motion limit (dynamic): no point may move more than half a

@@ -35,6 +35,10 @@ pub struct TrialStresses {
     /// B-bar: ⅓ (θ̄_c − θ_p) per point, added to the normal strain components
     /// ([`volumetric`] B2); empty for the standard treatment.
     pub volumetric_correction: Vec<f64>,
+    /// Implicit frictional edges: dT/dΔu_t of each frictional node at this
+    /// iterate (k_t sticking, 0 slipping), in the order of
+    /// [`crate::friction::FrictionEdges::nodes`].
+    pub friction_stiffness: Vec<f64>,
 }
 
 impl TrialStresses {

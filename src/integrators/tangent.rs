@@ -158,7 +158,7 @@ impl Tangent {
                 .chunks(size)
                 .chain(std::iter::repeat_n(background, reached))
                 .collect();
-            let diagonal = system.mass_diagonal();
+            let diagonal = system.diagonal(trial);
             let diagonal = diagonal.as_deref();
             match self.matrix.as_mut() {
                 Some(k) if assembler.built(k) => assembler.reassemble(k, &elements, diagonal)?,
@@ -336,6 +336,21 @@ fn fill_cell_blocks(system: &StepSystem, trial: &TrialStresses, blocks: &mut Vec
 }
 
 impl StepSystem<'_> {
+    /// The tangent's diagonal terms at the free dofs: the inertia's
+    /// [`Self::mass_diagonal`] and the frictional edges' tangential springs
+    /// at `trial` (`None` when there are neither).
+    fn diagonal(&self, trial: &TrialStresses) -> Option<Vec<f64>> {
+        let mut diag = self.mass_diagonal();
+        let edges = &self.model.friction;
+        for (contact, &k_t) in edges.nodes.iter().zip(&trial.friction_stiffness) {
+            let index = self.dofs.index[2 * contact.node + contact.tangent()];
+            if index != NONE && k_t != 0.0 {
+                diag.get_or_insert_with(|| vec![0.0; self.dofs.n_free])[index as usize] += k_t;
+            }
+        }
+        diag
+    }
+
     /// (1 − α_m)/(1 − α_f) M/(βΔt²) at the free dofs (dynamic runs; `None` when quasi-static).
     fn mass_diagonal(&self) -> Option<Vec<f64>> {
         let newmark = self.newmark.as_ref()?;

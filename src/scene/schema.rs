@@ -864,6 +864,19 @@ pub struct PressureSpec {
     pub p: f64,
 }
 
+/// `[[bc.friction]]`: a grid line on the edge of the grid that the soil
+/// cannot cross and along which it slides with Coulomb friction (theory
+/// "Frictional boundary"): the tangential reaction is at most μ times the
+/// normal one, and none acts where the soil pulls away.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct FrictionSpec {
+    /// Grid line `x=<value>` or `y=<value>` on the edge of the grid.
+    pub line: String,
+    /// Friction coefficient μ ≥ 0 (e.g. tan φ of the soil on the base).
+    pub mu: f64,
+}
+
 /// `[[bc.rigid]]`: a rigid, perfectly rough platen or footing driving the top
 /// material points of a body (DESIGN D40–D41).
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
@@ -920,6 +933,9 @@ pub struct BoundarySpec {
     /// Rigid platens / footings.
     #[serde(default)]
     pub rigid: Vec<RigidSpec>,
+    /// Frictional grid edges.
+    #[serde(default)]
+    pub friction: Vec<FrictionSpec>,
 }
 
 /// `[output]`.

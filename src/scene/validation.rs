@@ -755,6 +755,62 @@ impl Scene {
         }
     }
 
+    /// `[[bc.friction]]`: μ ≥ 0, a line on the grid's edge that no fixed or
+    /// prescribed condition also holds.
+    fn validate_friction(&self, e: &mut Vec<FieldError>) {
+        for (i, f) in self.bc.friction.iter().enumerate() {
+            let field = format!("bc.friction[{i}]");
+            check(
+                e,
+                format!("{field}.mu"),
+                f.mu >= 0.0 && f.mu.is_finite(),
+                format!("must be >= 0 (got {})", f.mu),
+            );
+            let Some(line) = self.check_line(e, format!("{field}.line"), &f.line) else {
+                continue;
+            };
+            let cells = self.grid_cells()[line.axis] as f64;
+            let index = ((line.value - self.grid.origin[line.axis]) / self.grid.cell_size).round();
+            check(
+                e,
+                format!("{field}.line"),
+                index == 0.0 || index == cells,
+                format!(
+                    "`{}` must be an edge of the grid (the soil lies on one side of it)",
+                    f.line
+                ),
+            );
+            let same = |text: &str| GridLine::parse(text).is_ok_and(|l| l == line);
+            let others = self
+                .bc
+                .fixed
+                .iter()
+                .enumerate()
+                .filter(|(_, x)| same(&x.line));
+            for (k, _) in others {
+                e.push(FieldError {
+                    field: format!("{field}.line"),
+                    message: format!(
+                        "`{}` is also held by bc.fixed[{k}]: a line is either fixed or frictional",
+                        f.line
+                    ),
+                });
+            }
+            for (k, _) in self
+                .bc
+                .prescribed
+                .iter()
+                .enumerate()
+                .filter(|(_, x)| same(&x.line))
+            {
+                e.push(FieldError {
+                    field: format!("{field}.line"),
+                    message: format!("`{}` is also driven by bc.prescribed[{k}]", f.line),
+                });
+            }
+        }
+    }
+
     fn validate_bc(&self, e: &mut Vec<FieldError>) {
         for (i, f) in self.bc.fixed.iter().enumerate() {
             self.check_line(e, format!("bc.fixed[{i}].line"), &f.line);
@@ -775,6 +831,7 @@ impl Scene {
             );
             check_ramp_time(e, format!("bc.prescribed[{i}].ramp_time"), p.ramp_time);
         }
+        self.validate_friction(e);
         self.validate_dof_conflicts(e);
         for (i, p) in self.bc.pressure.iter().enumerate() {
             let f = format!("bc.pressure[{i}]");
