@@ -378,28 +378,23 @@ impl StepSystem<'_> {
     /// M⁻¹(f_ext − f_int) of t_{n+1}, which G2P carries to the points
     /// (generalised-α).
     pub fn nodal_inertial_acceleration(&self, newmark: &Newmark, du: &[[f64; 2]]) -> Vec<[f64; 2]> {
-        let mut a = vec![[0.0; 2]; self.model.grid.node_count()];
-        for (node, a_node) in a.iter_mut().enumerate() {
-            if self.setup.bins.node_active[node] {
-                for c in 0..2 {
-                    a_node[c] = self.inertial_acceleration(newmark, du, node, c);
-                }
-            }
-        }
-        a
+        self.at_active_nodes(|node, c| self.inertial_acceleration(newmark, du, node, c))
     }
 
     /// a_{n+1} at every active node (zero elsewhere), for the G2P stage.
     pub fn nodal_acceleration(&self, newmark: &Newmark, du: &[[f64; 2]]) -> Vec<[f64; 2]> {
-        let mut a = vec![[0.0; 2]; self.model.grid.node_count()];
-        for (node, a_node) in a.iter_mut().enumerate() {
+        self.at_active_nodes(|node, c| self.acceleration(newmark, du, node, c))
+    }
+
+    /// The nodal field `value(node, component)` at the active nodes, zero elsewhere.
+    fn at_active_nodes(&self, value: impl Fn(usize, usize) -> f64) -> Vec<[f64; 2]> {
+        let mut field = vec![[0.0; 2]; self.model.grid.node_count()];
+        for (node, at_node) in field.iter_mut().enumerate() {
             if self.setup.bins.node_active[node] {
-                for c in 0..2 {
-                    a_node[c] = self.acceleration(newmark, du, node, c);
-                }
+                *at_node = [value(node, 0), value(node, 1)];
             }
         }
-        a
+        field
     }
 
     /// Residual R = f_ext + f_pen − f_int − M a (DESIGN D16), with the
