@@ -18,6 +18,15 @@ kind = "external_work"
 [[monitor]]
 name = "internal_work"
 kind = "internal_work"
+
+# the energy budget W = W_int + (K - K0) + B + R (docs/theory.md E1)
+[[monitor]]
+name = "boundary_work"
+kind = "boundary_work"
+
+[[monitor]]
+name = "energy_remainder"
+kind = "energy_remainder"
 """
 
 FOOTING = """\
@@ -130,25 +139,21 @@ weight_cache_mb = 4096
 
 CUT = """\
 # Vertical cut under increasing gravity (paper §3.3, Figs. 9-12; DESIGN §8.3), {family} model{ls_note}.
-# Soil block 3 m x 3 m (free face x = 3, crest y = 3); rollers on x = 0, rough
-# base (u_x = u_y = 0 along the whole grid width); zero initial stress, at
+# Soil block 3 m x 3 m (free face x = 3, crest y = 3); rollers on x = 0, {base_note}; zero initial stress, at
 # rest; gravity raised by 0.1 g every 1 ms to 60 g at t = 0.6 s, then held,
 # to t = 1.0 s; Table 1 with the Table 3 changes (E = 10,000 kPa, nu = 0.35,
 # c_ini = 100 kPa, b_post = 5), density 2.0 t/m3 (DESIGN decision 18); cell
-# size h = 1/{n} m. The campaign (`mpm-geo campaign validation/vertical_cut`)
+# size h = 1/{n} m. The campaign (`mpm-geo campaign validation/{campaign}`)
 # runs this file as written (implicit Newmark) and again with explicit MUSL.
 # Written by scripts/write_benchmark_scenes.py.
 [scene]
-name = "vertical_cut_{name}"
+name = "{scene_name}"
 analysis = "implicit_dynamic"
 steps = 1000
 dt = 1.0e-3
 
 [solver]
-# Newmark gamma = 0.6 as in the biaxial scenes (DESIGN decision 26). The
-# explicit twin runs undamped (damping = 0) at CFL 0.5.
-newmark_gamma = 0.6
-max_iterations = 60
+{time_scheme}max_iterations = 60
 
 [grid]
 # 40 m wide: x = 40 is a wall that the material does not reach. Measured at
@@ -211,10 +216,9 @@ material = "soil"
 box = [[0.0, 0.0], [3.0, 3.0]]
 
 [bc]
-fixed = [
+{base_friction}fixed = [
   {{ line = "x=0", dofs = ["x"] }},
-  {{ line = "y=0", dofs = ["x", "y"] }},
-  {{ line = "x=40", dofs = ["x"] }},
+{base_fixed}  {{ line = "x=40", dofs = ["x"] }},
 ]
 
 [output]
@@ -278,6 +282,25 @@ over_nonlocal = 1.1
 """
 
 
+# The paper's rough base, and its frictional twin (issue 39): Coulomb friction
+# with mu = tan(phi_res) = tan 15 deg (`--set bc.friction.0.mu=...` for another).
+CUT_NO_SLIP_BASE = dict(
+    time_scheme="# Newmark gamma = 0.6 as in the biaxial scenes (DESIGN decision 26). The\n"
+                "# explicit twin runs undamped (damping = 0) at CFL 0.5.\nnewmark_gamma = 0.6\n",
+    base_note="rough\n# base (u_x = u_y = 0 along the whole grid width)",
+    base_friction="",
+    base_fixed='  {{ line = "y=0", dofs = ["x", "y"] }},\n'.replace("{{", "{").replace("}}", "}"),
+)
+CUT_FRICTION_BASE = dict(
+    time_scheme="# generalised-alpha (docs/theory.md GA1-GA3): damps the two-step mode like\n"
+                "# Newmark gamma = 0.6 but stays second order. The explicit twin runs\n"
+                "# undamped (damping = 0) at CFL 0.5.\nrho_infinity = 0.8\n",
+    base_note="frictional\n# base (Coulomb, mu = tan 15 deg, the residual friction angle; docs/theory.md §5)",
+    base_friction='friction = [{ line = "y=0", mu = 0.2679491924311227 }]\n',
+    base_fixed="",
+)
+
+
 def footing_sides(h):
     """The soil's sides and the grid's origin at cell size h: 14 m wide where
     the footing's edges (6.25 and 7.75 m) fall on grid lines, else one cell
@@ -307,17 +330,19 @@ def main():
             text = FOOTING.format(family=family, ls_note=note, h=h, name=name, nonlocal_table=nonlocal_table,
                                    work_monitors=WORK_MONITORS, **footing_sides(h))
             (footing / f"{name}.toml").write_text(text)
-    cut = ROOT / "validation" / "vertical_cut"
-    cut.mkdir(parents=True, exist_ok=True)
-    for n in [10, 12, 14, 16]:
-        h = repr(1.0 / n) if n != 10 else "0.1"
-        tag = f"h{round(1000 / n)}"
-        for family, nonlocal_table, note in [("local", "", ""),
-                                       ("nonlocal", CUT_NONLOCAL, ", l_s = 0.4 m")]:
-            name = f"{family}_{tag}"
-            text = CUT.format(family=family, ls_note=note, h=h, n=n, name=name, nonlocal_table=nonlocal_table,
-                               work_monitors=WORK_MONITORS)
-            (cut / f"{name}.toml").write_text(text)
+    for campaign, base in [("vertical_cut", CUT_NO_SLIP_BASE), ("vertical_cut_friction", CUT_FRICTION_BASE)]:
+        cut = ROOT / "validation" / campaign
+        cut.mkdir(parents=True, exist_ok=True)
+        for n in [10, 12, 14, 16]:
+            h = repr(1.0 / n) if n != 10 else "0.1"
+            tag = f"h{round(1000 / n)}"
+            for family, nonlocal_table, note in [("local", "", ""),
+                                           ("nonlocal", CUT_NONLOCAL, ", l_s = 0.4 m")]:
+                name = f"{family}_{tag}"
+                text = CUT.format(family=family, ls_note=note, h=h, n=n, name=name, nonlocal_table=nonlocal_table,
+                                   work_monitors=WORK_MONITORS, campaign=campaign,
+                                   scene_name=f"{campaign}_{name}", **base)
+                (cut / f"{name}.toml").write_text(text)
 
 
 if __name__ == "__main__":

@@ -106,3 +106,65 @@ fn coarse_explicit_cut_keeps_its_stable_step_to_the_end() {
     );
     assert!(values[a] > 0.5, "|u_A(1 s)| = {} m", values[a]);
 }
+
+/// The largest difference of two |u_A| histories over t ∈ [0.05, 0.5] s
+/// (every 10 ms), relative to the largest |u_A| of `b` there.
+fn history_gap(a: &[(f64, f64)], b: &[(f64, f64)]) -> f64 {
+    let times = (5..=50).map(|k| 0.01 * k as f64);
+    let (mut gap, mut scale) = (0.0_f64, 0.0_f64);
+    for t in times {
+        let (ua, ub) = (interpolate(a, t).unwrap(), interpolate(b, t).unwrap());
+        gap = gap.max((ua - ub).abs());
+        scale = scale.max(ub.abs());
+    }
+    gap / scale
+}
+
+/// Issue 39, check 3 on u_A (the run-out at 0.5 s and the energy remainder
+/// are not yet met: 12 % apart, 60–90 % of W). The friction-base
+/// twin of the local cut (`validation/vertical_cut_friction/`) at h = 0.25 m
+/// to t = 0.5 s, implicit generalised-α with adaptive steps (tolerance 1e-2
+/// and 5e-3) and explicit MUSL (CFL 0.25 and 0.125): the finest of each agree
+/// on the u_A history within 5 %, and each changes by less than 3 % when its
+/// tolerance or step is halved. Measured: 1.3 % between the integrators;
+/// 1.2 % implicit, 1.7 % explicit on halving.
+#[test]
+fn friction_base_cut_integrators_agree_on_the_crest_displacement() {
+    let file = "vertical_cut_friction/local_h100.toml";
+    let implicit = |tolerance: f64| {
+        let tolerance = format!("solver.error_tolerance={tolerance}");
+        let overrides = [
+            COARSE,
+            "scene.steps=500",
+            "solver.time_step=\"adaptive\"",
+            &tolerance,
+        ];
+        displacement_of_a(common::scene(file, &overrides)).0
+    };
+    let explicit = |cfl: f64| {
+        let cfl = format!("solver.cfl={cfl}");
+        let scene = common::scene(file, &[COARSE, "scene.steps=500", &cfl]);
+        displacement_of_a(scene.explicit_twin().unwrap()).0
+    };
+    let (implicit_coarse, implicit_fine) = (implicit(1e-2), implicit(5e-3));
+    let (explicit_coarse, explicit_fine) = (explicit(0.25), explicit(0.125));
+    let between = history_gap(&explicit_fine, &implicit_fine);
+    let implicit_halving = history_gap(&implicit_coarse, &implicit_fine);
+    let explicit_halving = history_gap(&explicit_coarse, &explicit_fine);
+    println!(
+        "u_A(0.5 s): implicit {:.3} / {:.3} m, explicit {:.3} / {:.3} m; gaps: integrators {between:.4}, implicit halving {implicit_halving:.4}, explicit halving {explicit_halving:.4}",
+        interpolate(&implicit_coarse, 0.5).unwrap(),
+        interpolate(&implicit_fine, 0.5).unwrap(),
+        interpolate(&explicit_coarse, 0.5).unwrap(),
+        interpolate(&explicit_fine, 0.5).unwrap(),
+    );
+    assert!(between <= 0.05, "integrators differ by {between}");
+    assert!(
+        implicit_halving <= 0.03,
+        "implicit halving {implicit_halving}"
+    );
+    assert!(
+        explicit_halving <= 0.03,
+        "explicit halving {explicit_halving}"
+    );
+}

@@ -47,11 +47,16 @@ impl Scene {
             }
             AnalysisKind::ImplicitDynamic => {}
         }
-        let (Some(steps), Some(dt)) = (analysis.steps, analysis.dt) else {
+        if analysis.dt.is_none() || (analysis.steps.is_none() && analysis.end_time.is_none()) {
             return Err(refuse("an implicit dynamic scene needs steps and dt"));
-        };
+        }
         analysis.analysis = AnalysisKind::Explicit;
-        analysis.end_time = Some(steps as f64 * dt);
+        // adaptive steps end at `end_time` when given, fixed ones after `steps`
+        if !twin.solver.adaptive() {
+            analysis.end_time = None;
+        }
+        analysis.end_time = Some(analysis.end_time_or_steps());
+        twin.solver.time_step = super::TimeStepControl::Fixed;
         analysis.steps = None;
         analysis.dt = None;
         twin.output.snapshots.clear();
