@@ -221,7 +221,7 @@ impl Buffers {
                 .update_momentum(model, &setup.bins.active_nodes, dt);
             let removed = self
                 .grid
-                .fixed_dof_kinetic_energy(model, &setup.bins.active_nodes);
+                .fixed_dof_kinetic_energy(model, &setup.bins.active_nodes, dt);
             Ok::<_, StepError>((dt, removed))
         })?;
         profile.time(Stage::G2P, || {
@@ -576,21 +576,42 @@ impl UpdatedGrid {
     }
 
     /// The kinetic energy of the P2G momentum that the update zeroed at the
-    /// fixed dofs of the `active` nodes ([`super::boundary_work`] B1), kJ/m.
-    fn fixed_dof_kinetic_energy(&self, model: &Model, active: &[u32]) -> f64 {
+    /// fixed dofs of the `active` nodes ([`super::boundary_work`] B1), and
+    /// what the frictional edges took in the step `dt` of length: at such a
+    /// node ½ m (|v_free|² − |v|²), v_free = v − Δt R/m the velocity the
+    /// step's forces alone would give, kJ/m.
+    fn fixed_dof_kinetic_energy(&self, model: &Model, active: &[u32], dt: f64) -> f64 {
         let (mass, momentum) = (&self.mass, &self.momentum);
-        fixed_dof_kinetic_energy(
-            &model.constraints.dof,
-            active.iter().map(|&node| node as usize),
-            self.tiny_mass,
-            |node| mass[node],
-            |node| {
-                [
-                    momentum[node][0] / mass[node],
-                    momentum[node][1] / mass[node],
-                ]
-            },
-        )
+        let frictional = |node: usize| model.friction.at(node).is_some();
+        let friction: f64 = active
+            .iter()
+            .map(|&node| node as usize)
+            .filter(|&node| frictional(node) && mass[node] > self.tiny_mass)
+            .map(|node| {
+                let (m, v, r) = (mass[node], self.velocity[node], self.reaction[node]);
+                let t = model.friction.at(node).map_or(0, |c| c.tangent());
+                let free = v[t] - dt * r[t] / m;
+                let n = 1 - t;
+                let mapped = momentum[node][n] / m;
+                0.5 * m * (free * free - v[t] * v[t] + mapped * mapped)
+            })
+            .sum();
+        friction
+            + fixed_dof_kinetic_energy(
+                &model.constraints.dof,
+                active
+                    .iter()
+                    .map(|&node| node as usize)
+                    .filter(|&node| !frictional(node)),
+                self.tiny_mass,
+                |node| mass[node],
+                |node| {
+                    [
+                        momentum[node][0] / mass[node],
+                        momentum[node][1] / mass[node],
+                    ]
+                },
+            )
     }
 
     /// G2P of the updated grid (DESIGN §4 step 3): v_p += Δt Σ N a_i,

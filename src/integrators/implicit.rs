@@ -303,6 +303,7 @@ impl ImplicitIntegrator {
             )
         })?;
         let grid = ConvergedGrid::new(&system, solution);
+        let boundary_work = boundary_work + system.friction_work(&grid.du);
         let mut local = None;
         if let (Some(control), Some(newmark), Some(a)) =
             (control, self.newmark, grid.acceleration.as_deref())

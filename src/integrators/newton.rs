@@ -487,10 +487,38 @@ impl StepSystem<'_> {
         residual: &mut [[f64; 2]],
         stiffness: &mut Vec<f64>,
     ) -> f64 {
-        let edges = &self.model.friction;
         stiffness.clear();
-        stiffness.resize(edges.nodes.len(), 0.0);
+        stiffness.resize(self.model.friction.nodes.len(), 0.0);
         let mut change = 0.0;
+        self.for_each_friction_force(du, |k, node, t, force, k_t| {
+            let before = residual[node][t];
+            residual[node][t] += force;
+            change += residual[node][t] * residual[node][t] - before * before;
+            stiffness[k] = k_t;
+        });
+        change
+    }
+
+    /// The work the frictional edges take from the soil over the step `du`,
+    /// −Σ T Δu_t ≥ 0 (kJ/m): a part of the boundary work B of
+    /// [`crate::energy`] (E1).
+    pub fn friction_work(&self, du: &[[f64; 2]]) -> f64 {
+        let mut work = 0.0;
+        self.for_each_friction_force(du, |_, node, t, force, _| work -= force * du[node][t]);
+        work
+    }
+
+    /// `apply(k, node, tangential component, T, dT/dΔu_t)` for every frictional
+    /// node k with a free tangential dof at an active node (FR1, FR4).
+    fn for_each_friction_force(
+        &self,
+        du: &[[f64; 2]],
+        mut apply: impl FnMut(usize, usize, usize, f64, f64),
+    ) {
+        let edges = &self.model.friction;
+        if edges.is_empty() {
+            return;
+        }
         let model = self.model;
         let mut normals = Vec::new();
         edges.patch_normals(
@@ -505,12 +533,8 @@ impl StepSystem<'_> {
                 continue;
             }
             let (force, k_t) = edges.tangential_force(contact, du[node][t], normals[k]);
-            let before = residual[node][t];
-            residual[node][t] += force;
-            change += residual[node][t] * residual[node][t] - before * before;
-            stiffness[k] = k_t;
+            apply(k, node, t, force, k_t);
         }
-        change
     }
 
     /// DESIGN §3 motion limit (dynamic): no point may move more than half a
