@@ -89,22 +89,38 @@ fn block_at_rest_with_friction_stays_put() {
     }
 }
 
-/// The energy budget of the implicit sliding block closes with the friction
-/// work in B (docs/theory.md E1): the block's kinetic energy K0 = 2 kJ/m goes
-/// to the base (measured B = 1.004 K0, |R| = 4e-3 K0). (The explicit budget
-/// does not close yet: its B counts 1.06 K0 and R = −0.12 K0.)
+/// The energy budget of the sliding block closes with the friction work in B
+/// (docs/theory.md E1): the block's kinetic energy K0 = 2 kJ/m goes to the
+/// base. Measured implicit B = 1.004 K0, |R| = 4e-3 K0; explicit (dt = 1e-4)
+/// B = 0.97 K0, R = −0.03 K0.
 #[test]
-fn implicit_friction_work_closes_the_budget() {
-    let mut sim = common::simulation("friction/sliding_block.toml", &["scene.steps=350"]);
+fn friction_work_closes_the_budget() {
+    let implicit = ["scene.steps=350"];
+    let explicit = [
+        "scene.analysis=explicit",
+        "scene.dt=1.0e-4",
+        "scene.end_time=0.7",
+    ];
+    for (overrides, tolerance) in [(&implicit[..], 2e-2), (&explicit[..], 0.1)] {
+        friction_budget_closes(overrides, tolerance);
+    }
+}
+
+fn friction_budget_closes(overrides: &[&str], tolerance: f64) {
+    let mut sim = common::simulation("friction/sliding_block.toml", overrides);
     common::run_history(&mut sim);
     let e = mpm_geo::energy::EnergyBudget::of(&sim.model);
     let k0 = e.initial_kinetic_energy;
     println!("{e:?}");
     assert!((k0 - 2.0).abs() < 1e-9, "K0 = {k0}");
     assert!(
-        (e.boundary_work / k0 - 1.0).abs() < 0.02,
+        (e.boundary_work / k0 - 1.0).abs() < tolerance,
         "B/K0 = {}",
         e.boundary_work / k0
     );
-    assert!(e.remainder.abs() < 2e-2 * k0, "R/K0 = {}", e.remainder / k0);
+    assert!(
+        e.remainder.abs() < tolerance * k0,
+        "R/K0 = {}",
+        e.remainder / k0
+    );
 }

@@ -577,9 +577,11 @@ impl UpdatedGrid {
 
     /// The kinetic energy of the P2G momentum that the update zeroed at the
     /// fixed dofs of the `active` nodes ([`super::boundary_work`] B1), and
-    /// what the frictional edges took in the step `dt` of length: at such a
-    /// node ½ m (|v_free|² − |v|²), v_free = v − Δt R/m the velocity the
-    /// step's forces alone would give, kJ/m.
+    /// the work the frictional edges took in the step `dt`: −T v_t Δt at each
+    /// frictional node (T the edge's tangential force, v_t the node's new
+    /// tangential velocity), as the implicit −T Δu_t, kJ/m. (Kinetic-energy
+    /// forms, ½ m (v*² − v²), counted the stop of tiny nodal masses against
+    /// their own static load: 10× the work of gravity on the cut.)
     fn fixed_dof_kinetic_energy(&self, model: &Model, active: &[u32], dt: f64) -> f64 {
         let (mass, momentum) = (&self.mass, &self.momentum);
         let frictional = |node: usize| model.friction.at(node).is_some();
@@ -588,12 +590,9 @@ impl UpdatedGrid {
             .map(|&node| node as usize)
             .filter(|&node| frictional(node) && mass[node] > self.tiny_mass)
             .map(|node| {
-                let (m, v, r) = (mass[node], self.velocity[node], self.reaction[node]);
+                let (v, r) = (self.velocity[node], self.reaction[node]);
                 let t = model.friction.at(node).map_or(0, |c| c.tangent());
-                let free = v[t] - dt * r[t] / m;
-                let n = 1 - t;
-                let mapped = momentum[node][n] / m;
-                0.5 * m * (free * free - v[t] * v[t] + mapped * mapped)
+                -r[t] * v[t] * dt
             })
             .sum();
         friction

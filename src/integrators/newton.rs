@@ -500,7 +500,7 @@ impl StepSystem<'_> {
     }
 
     /// The work the frictional edges take from the soil over the step `du`,
-    /// −Σ T Δu_t ≥ 0 (kJ/m): a part of the boundary work B of
+    /// −Σ T Δu_t ≥ 0 (kJ/m, theory eq. FR5): a part of the boundary work B of
     /// [`crate::energy`] (E1).
     pub fn friction_work(&self, du: &[[f64; 2]]) -> f64 {
         let mut work = 0.0;
