@@ -68,11 +68,6 @@ pub fn nodal_kinematics(
     let force_per_mass = &p.force_per_mass;
     let add = |p: usize, s: &ShapeAt, patch: &mut [KinematicSums]| {
         let (m, v, a) = (mass[p], velocity[p], acceleration[p]);
-        let q = if carry_force {
-            force_per_mass[p]
-        } else {
-            [0.0; 2]
-        };
         for node in s.support() {
             let nm = s.n[node] * m;
             let sum = &mut patch[s.local[node] as usize];
@@ -82,8 +77,11 @@ pub fn nodal_kinematics(
             sum[MASS_ACCELERATION] += nm * a[0];
             sum[MASS_ACCELERATION + 1] += nm * a[1];
             sum[BODY] += nm * -g;
-            sum[FORCE_PER_MASS] += nm * q[0];
-            sum[FORCE_PER_MASS + 1] += nm * q[1];
+            if carry_force {
+                let q = force_per_mass[p];
+                sum[FORCE_PER_MASS] += nm * q[0];
+                sum[FORCE_PER_MASS + 1] += nm * q[1];
+            }
         }
     };
     let KinematicsBuffers { cells, sums } = buffers;
