@@ -5,9 +5,11 @@
 //! reaction acts where the soil pulls away (N ≤ 0). One law,
 //! [`coulomb_resistance`], serves both integrators:
 //! - FR1 (implicit, force form): the normal dof is held (the edge's reaction
-//!   is N), and the tangential dof carries T = −k_t Δu_t while
-//!   k_t |Δu_t| ≤ μ N̂, else −μ N̂ sign(Δu_t), k_t = 10 E; N̂ of the last step
-//!   (FR4), fixed within the step.
+//!   is N), and the tangential dof carries a stick spring continuing from the
+//!   last step's friction force T_n, T = T_n − k_t Δu_t while |T| ≤ μ N̂,
+//!   else μ N̂ with its sign, k_t = 10 E; N̂ of the last step (FR4), fixed
+//!   within the step. (A spring restarted every step lets a sticking node
+//!   creep at T/(k_t Δt).)
 //! - FR2 (explicit, velocity form): a node whose velocity after the step's
 //!   forces, v*, moves into the edge is stopped (normal impulse per mass
 //!   v*_n) and its tangential velocity reduced by at most μ v*_n.
@@ -18,16 +20,12 @@
 //!   h = 0.125.
 //! - FR4 (implicit normal force): on each contact patch (neighbouring active
 //!   nodes of a line) the bound uses the net normal force
-//!   N_P = max(Σ N_i, 0), shared by nodal mass, N̂_i = N_P m_i / Σ m_j. The
-//!   bilateral edge's nodal reactions swing node by node (tension at some);
-//!   a bound on max(N_i, 0) overestimated the capacity (slide 0.395 m at
-//!   h = 0.0625), and one shared in proportion to max(N_i, 0), lagged,
-//!   fed the swing (0.42 m and a Newton failure at dt = 1e-3).
+//!   N_P = max(Σ N_i, 0), shared in proportion to the reactions filtered
+//!   over three nodes (see [`FrictionEdges::patch_normals`]).
 //!
 //! Sliding block (`validation/friction/sliding_block.toml`, exact 0.5 m,
-//! stop 0.5 s): implicit 0.5059 m at h = 0.125, 0.0625, 0.03125 (dt = 2e-3,
-//! deceleration fit 4.000 m/s², exact 4), 0.5030 m at dt = 1e-3; explicit
-//! 0.4962 / 0.4975 m at h = 0.125 / 0.0625 (deceleration fit 4.045 / 4.048).
+//! stop 0.5 s): implicit 0.5060 / 0.5006 m at h = 0.125 / 0.0625 (dt = 2e-3),
+//! explicit 0.4972 m on both (`tests/friction_base.rs`).
 
 use crate::bc::nodes_on_line;
 use crate::grid::Grid;
@@ -144,10 +142,18 @@ impl FrictionEdges {
     /// Implicit: the tangential force at frictional node `contact` whose
     /// step has moved it by `du` along the edge, under the compressive
     /// normal force `normal` (from the last step, [`Self::patch_normals`]),
-    /// theory eq. FR1: T = −k_t Δu_t while |k_t Δu_t| ≤ μ N, else
-    /// −μ N sign(Δu_t). Returns (T, dT/dΔu_t).
-    pub fn tangential_force(&self, contact: &FrictionNode, du: f64, normal: f64) -> (f64, f64) {
-        let (resistance, stick) = coulomb_resistance(self.stiffness * du, contact.mu, normal);
+    /// with `previous` the tangential force of the last step, theory eq.
+    /// FR1: the stick spring continues from it, T = T_n − k_t Δu_t, while
+    /// |T| ≤ μ N, else μ N with its sign. Returns (T, dT/dΔu_t).
+    pub fn tangential_force(
+        &self,
+        contact: &FrictionNode,
+        du: f64,
+        normal: f64,
+        previous: f64,
+    ) -> (f64, f64) {
+        let demand = self.stiffness * du - previous;
+        let (resistance, stick) = coulomb_resistance(demand, contact.mu, normal);
         (-resistance, if stick { self.stiffness } else { 0.0 })
     }
 
@@ -155,16 +161,20 @@ impl FrictionEdges {
     /// (theory eq. FR4): on each contact patch (a run of neighbouring
     /// `active` nodes of one line), the patch's net compressive force
     /// N_P = max(Σ N_i, 0), N_i = `normal(node)` (compressive positive),
-    /// shared among its nodes in proportion to `weight(node)` (the nodal
-    /// mass): N̂_i = N_P w_i / Σ_j w_j. The nodal reactions of a bilateral
-    /// edge swing node by node (tension at some), and a bound following them
-    /// (max(N_i, 0)) both overestimates the capacity and, lagged, feeds the
-    /// swing: the sliding block then stopped 21 % short at h = 0.0625.
+    /// shared among its nodes in proportion to the reactions filtered over
+    /// three nodes, w_i = max((N_{i−1} + 2 N_i + N_{i+1}) / 4, 0) (at a
+    /// patch's end (2 N_i + N_{i±1}) / 3): N̂_i = N_P w_i / Σ_j w_j. The
+    /// bilateral edge's nodal reactions swing node by node (tension at
+    /// some), and a bound following them (max(N_i, 0)) both overestimates the
+    /// capacity and, lagged, feeds the swing (the sliding block stopped 21 %
+    /// short at h = 0.0625); the filter removes that node-to-node mode and
+    /// keeps the distribution along the edge, which sharing by nodal mass
+    /// lost (the thin front of the cut's debris then carried the pile's
+    /// mean pressure and stopped ~1 m short).
     pub fn patch_normals(
         &self,
         active: impl Fn(usize) -> bool,
         normal: impl Fn(&FrictionNode) -> f64,
-        weight: impl Fn(&FrictionNode) -> f64,
         out: &mut Vec<f64>,
     ) {
         out.clear();
@@ -183,18 +193,15 @@ impl FrictionEdges {
             {
                 end += 1;
             }
-            let (mut net, mut total) = (0.0, 0.0);
-            for k in start..end {
-                net += normal(&self.nodes[k]);
-                out[k] = weight(&self.nodes[k]);
-                total += out[k];
+            let reactions: Vec<f64> = self.nodes[start..end].iter().map(&normal).collect();
+            let net = reactions.iter().sum::<f64>().max(0.0);
+            let weights = &mut out[start..end];
+            for (i, w) in weights.iter_mut().enumerate() {
+                *w = filtered(&reactions, i).max(0.0);
             }
-            let scale = if total > 0.0 {
-                net.max(0.0) / total
-            } else {
-                0.0
-            };
-            for n in &mut out[start..end] {
+            let total: f64 = weights.iter().sum();
+            let scale = if total > 0.0 { net / total } else { 0.0 };
+            for n in weights.iter_mut() {
                 *n *= scale;
             }
             start = end;
@@ -216,6 +223,19 @@ impl FrictionEdges {
     }
 }
 
+/// The reaction at place `i` of a patch's `reactions` filtered over its
+/// neighbours, (N_{i−1} + 2 N_i + N_{i+1}) / 4, one-sided (2 N_i + N_{i±1}) / 3
+/// at an end (eq. FR4).
+fn filtered(reactions: &[f64], i: usize) -> f64 {
+    let before = i.checked_sub(1).map(|j| reactions[j]);
+    let after = reactions.get(i + 1).copied();
+    let (sum, weight) = [before, after]
+        .into_iter()
+        .flatten()
+        .fold((2.0 * reactions[i], 2.0), |(s, w), n| (s + n, w + 1.0));
+    sum / weight
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -228,31 +248,54 @@ mod tests {
         assert_eq!(coulomb_resistance(0.0, 0.0, 1.0), (0.0, true));
     }
 
-    /// A patch's capacity is its net normal force, shared by weight; an
-    /// inactive node splits the edge into two patches.
+    /// A patch's capacity is its net normal force, shared by the filtered
+    /// reactions; an inactive node splits the edge into two patches, and a
+    /// patch in net tension carries nothing.
     #[test]
-    fn patch_normals_share_the_net_force_by_weight() {
-        let node = |node, line| FrictionNode {
-            node,
-            normal: 1,
-            inward: 1.0,
-            mu: 0.5,
-            line,
-        };
-        let edges = FrictionEdges {
-            nodes: (0..6).map(|n| node(n, 0)).collect(),
-            ..Default::default()
-        };
+    fn patch_normals_share_the_net_force_by_the_filtered_reactions() {
+        let edges = edge(6);
         let reaction = [3.0, -1.0, 2.0, 9.0, -4.0, 1.0];
-        let weight = [1.0, 2.0, 1.0, 1.0, 1.0, 1.0];
         let mut out = Vec::new();
-        edges.patch_normals(
-            |n| n != 3,
-            |c| reaction[c.node],
-            |c| weight[c.node],
-            &mut out,
-        );
-        assert_eq!(out, vec![1.0, 2.0, 1.0, 0.0, 0.0, 0.0]);
+        edges.patch_normals(|n| n != 3, |c| reaction[c.node], &mut out);
+        // filtered 5/3, 3/4, 1 (sum 41/12) share the net 4
+        let expected = [80.0 / 41.0, 36.0 / 41.0, 48.0 / 41.0, 0.0, 0.0, 0.0];
+        for (o, e) in out.iter().zip(expected) {
+            assert!((o - e).abs() < 1e-14, "{out:?}");
+        }
+    }
+
+    /// A node-to-node swing of ±3 on a load rising along the edge: the
+    /// interior bounds follow the load (in proportion 2 : 3 : 4 : 5), not
+    /// the swing, and their sum with the ends' is the net force.
+    #[test]
+    fn patch_normals_remove_the_node_to_node_swing() {
+        let edges = edge(6);
+        let reaction: Vec<f64> = (0..6)
+            .map(|i| (i + 1) as f64 + if i % 2 == 0 { 3.0 } else { -3.0 })
+            .collect();
+        let mut out = Vec::new();
+        edges.patch_normals(|_| true, |c| reaction[c.node], &mut out);
+        let unit = out[1] / 2.0;
+        for (i, n) in out.iter().enumerate().take(5).skip(1) {
+            assert!((n - unit * (i + 1) as f64).abs() < 1e-12, "{out:?}");
+        }
+        assert!((out.iter().sum::<f64>() - 21.0).abs() < 1e-12);
+    }
+
+    /// `n` nodes of one frictional base line.
+    fn edge(n: usize) -> FrictionEdges {
+        FrictionEdges {
+            nodes: (0..n)
+                .map(|node| FrictionNode {
+                    node,
+                    normal: 1,
+                    inward: 1.0,
+                    mu: 0.5,
+                    line: 0,
+                })
+                .collect(),
+            ..Default::default()
+        }
     }
 
     /// On a base (normal y, soil above): a node moving down and sideways is

@@ -2,8 +2,7 @@
 //! FR1–FR4) on `validation/friction/sliding_block.toml`: an elastic block
 //! launched at v0 = 2 m/s on a base with μ = 0.4 under g = 10 decelerates by
 //! μ g and slides v0²/(2 μ g) = 0.5 m. Measured (final slide): implicit
-//! 0.5059 m at h = 0.125, 0.0625 and 0.03125 (dt = 2e-3, ρ∞ = 0.5; 0.5030 at
-//! dt = 1e-3); explicit 0.4972 m at h = 0.125 and 0.0625 (dt = 1e-4; 0.4962 / 0.4975
+//! 0.5060 / 0.5006 m at h = 0.125 / 0.0625 (dt = 2e-3, ρ∞ = 0.5); explicit 0.4972 m at h = 0.125 and 0.0625 (dt = 1e-4; 0.4962 / 0.4975
 //! at CFL 0.8). Asserted
 //! within 5 %; frictionless, the block keeps its speed (u(0.4) = 0.8 m within
 //! 1 %); at rest under gravity with μ > 0 it stays put.

@@ -482,7 +482,8 @@ struct ConvergedGrid {
     acceleration: Option<Vec<[f64; 2]>>,
     /// M⁻¹(f_ext − f_int) at t_{n+1} per grid node (generalised-α runs).
     force_per_mass: Option<Vec<[f64; 2]>>,
-    /// Support reactions −R per grid node.
+    /// Support reactions per grid node: −R, and at the frictional edges' free
+    /// tangential dofs the friction force T (FR1).
     reaction: Vec<[f64; 2]>,
     /// Stresses, states and tangents at Δu.
     trial: TrialStresses,
@@ -503,6 +504,9 @@ impl ConvergedGrid {
             iterations,
             history,
         } = solution;
+        let mut reaction: Vec<[f64; 2]> =
+            residual.residual.iter().map(|r| [-r[0], -r[1]]).collect();
+        system.add_friction_reactions(&du, &mut reaction);
         Self {
             acceleration: system
                 .newmark
@@ -511,7 +515,7 @@ impl ConvergedGrid {
                 .newmark
                 .filter(Newmark::is_generalised_alpha)
                 .map(|newmark| system.nodal_inertial_acceleration(&newmark, &du)),
-            reaction: residual.residual.iter().map(|r| [-r[0], -r[1]]).collect(),
+            reaction,
             reference: residual.reference,
             du,
             trial,

@@ -480,7 +480,9 @@ impl StepSystem<'_> {
     /// The normal force is the edge's reaction of the last step (lagged by
     /// one step: the bound μ N is then fixed within the step, and Newton
     /// meets only the stick–slip switch, as in a return mapping), each
-    /// contact patch's net force shared by nodal mass (eq. FR4).
+    /// contact patch's net force shared by the filtered reactions (eq. FR4);
+    /// the stick spring continues from the last step's friction force,
+    /// `model.reaction` at the tangential dof (FR1).
     fn add_friction(
         &self,
         du: &[[f64; 2]],
@@ -497,6 +499,14 @@ impl StepSystem<'_> {
             stiffness[k] = k_t;
         });
         change
+    }
+
+    /// Adds the frictional edges' tangential forces T at `du` (FR1) to the
+    /// support reactions `reaction` (−R, in which Newton balanced them):
+    /// the edge's whole force on the soil, from which the next step's stick
+    /// spring continues.
+    pub fn add_friction_reactions(&self, du: &[[f64; 2]], reaction: &mut [[f64; 2]]) {
+        self.for_each_friction_force(du, |_, node, t, force, _| reaction[node][t] += force);
     }
 
     /// The work the frictional edges take from the soil over the step `du`,
@@ -524,7 +534,6 @@ impl StepSystem<'_> {
         edges.patch_normals(
             |node| self.setup.bins.node_active[node],
             |c| model.reaction[c.node][c.normal] * c.inward,
-            |c| self.nodal.mass.get(c.node).copied().unwrap_or(1.0),
             &mut normals,
         );
         for (k, contact) in edges.nodes.iter().enumerate() {
@@ -532,7 +541,8 @@ impl StepSystem<'_> {
             if !self.setup.bins.node_active[node] || self.dofs.index[2 * node + t] == NONE {
                 continue;
             }
-            let (force, k_t) = edges.tangential_force(contact, du[node][t], normals[k]);
+            let previous = model.reaction[node][t];
+            let (force, k_t) = edges.tangential_force(contact, du[node][t], normals[k], previous);
             apply(k, node, t, force, k_t);
         }
     }
