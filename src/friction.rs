@@ -52,6 +52,19 @@ pub fn coulomb_resistance(demand: f64, mu: f64, normal: f64) -> (f64, bool) {
     }
 }
 
+/// The state of an implicit frictional node in a Newton iterate (FR1).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ContactState {
+    /// The stick spring holds it.
+    Stick,
+    /// It slides; the edge resists with μ N against `direction` (±1, the
+    /// sign of the demand k_t Δu_t − T_n).
+    Slip {
+        /// Sign of the demand.
+        direction: f64,
+    },
+}
+
 /// A grid node on a frictional edge.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FrictionNode {
@@ -144,17 +157,30 @@ impl FrictionEdges {
     /// normal force `normal` (from the last step, [`Self::patch_normals`]),
     /// with `previous` the tangential force of the last step, theory eq.
     /// FR1: the stick spring continues from it, T = T_n − k_t Δu_t, while
-    /// |T| ≤ μ N, else μ N with its sign. Returns (T, dT/dΔu_t).
+    /// |T| ≤ μ N, else μ N with its sign. With `held`, the node keeps that
+    /// stick or slip state whatever `du` (FR6). Returns (T, dT/dΔu_t) and
+    /// the state.
     pub fn tangential_force(
         &self,
         contact: &FrictionNode,
         du: f64,
         normal: f64,
         previous: f64,
-    ) -> (f64, f64) {
+        held: Option<ContactState>,
+    ) -> (f64, f64, ContactState) {
         let demand = self.stiffness * du - previous;
-        let (resistance, stick) = coulomb_resistance(demand, contact.mu, normal);
-        (-resistance, if stick { self.stiffness } else { 0.0 })
+        let state = held.unwrap_or_else(|| match coulomb_resistance(demand, contact.mu, normal) {
+            (_, true) => ContactState::Stick,
+            (resisted, false) => ContactState::Slip {
+                direction: resisted.signum(),
+            },
+        });
+        match state {
+            ContactState::Stick => (-demand, self.stiffness, state),
+            ContactState::Slip { direction } => {
+                (-direction * contact.mu * normal.max(0.0), 0.0, state)
+            }
+        }
     }
 
     /// The normal forces that bound the friction, per node of `nodes`
@@ -280,6 +306,37 @@ mod tests {
             assert!((n - unit * (i + 1) as f64).abs() < 1e-12, "{out:?}");
         }
         assert!((out.iter().sum::<f64>() - 21.0).abs() < 1e-12);
+    }
+
+    /// The stick spring continues from the last step's force; past the
+    /// bound the node slips at μ N; a held state keeps its law whatever the
+    /// increment (FR1, FR6).
+    #[test]
+    fn tangential_force_continues_the_spring_and_holds_a_state() {
+        let edges = FrictionEdges {
+            stiffness: 100.0,
+            ..edge(1)
+        };
+        let node = edges.nodes[0];
+        // T_n = −3 on a bound μ N = 0.5 × 10 = 5: Δu = 0.01 gives −4 (stick)
+        let (t, k, state) = edges.tangential_force(&node, 0.01, 10.0, -3.0, None);
+        assert_eq!((t, k, state), (-4.0, 100.0, ContactState::Stick));
+        // Δu = 0.03 would give −6: slip at −5
+        let (t, k, state) = edges.tangential_force(&node, 0.03, 10.0, -3.0, None);
+        let slip = ContactState::Slip { direction: 1.0 };
+        assert_eq!((t, k, state), (-5.0, 0.0, slip));
+        // held: stick past the bound, slip against a reversed increment
+        let stick = Some(ContactState::Stick);
+        assert_eq!(
+            edges.tangential_force(&node, 0.03, 10.0, -3.0, stick).0,
+            -6.0
+        );
+        assert_eq!(
+            edges
+                .tangential_force(&node, -0.1, 10.0, -3.0, Some(slip))
+                .0,
+            -5.0
+        );
     }
 
     /// `n` nodes of one frictional base line.

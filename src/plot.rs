@@ -188,7 +188,63 @@ pub fn plot_curves_sized(
     y_label: &str,
     series: &[Series],
 ) -> Result<()> {
+    let panel = CurvePanel {
+        title,
+        y_label,
+        series,
+    };
+    plot_curve_panels_sized(path, size, x_label, &[panel])
+}
+
+/// One chart of [`plot_curve_panels`].
+pub struct CurvePanel<'a> {
+    /// Caption of the chart.
+    pub title: &'a str,
+    /// Label of its y axis.
+    pub y_label: &'a str,
+    /// Its curves.
+    pub series: &'a [Series],
+}
+
+/// Charts of curves over one x quantity stacked in one PNG, each
+/// [`CURVE_SIZE`] high.
+pub fn plot_curve_panels(
+    path: impl AsRef<Path>,
+    x_label: &str,
+    panels: &[CurvePanel<'_>],
+) -> Result<()> {
+    let size = (CURVE_SIZE.0, CURVE_SIZE.1 * panels.len().max(1) as u32);
+    plot_curve_panels_sized(path, size, x_label, panels)
+}
+
+fn plot_curve_panels_sized(
+    path: impl AsRef<Path>,
+    size: (u32, u32),
+    x_label: &str,
+    panels: &[CurvePanel<'_>],
+) -> Result<()> {
     let path = path.as_ref();
+    prepare_path(path)?;
+    // drawn under a temporary name, renamed once presented: whole or absent
+    let target = AtomicPath::new(path);
+    let temp = target.temp().to_path_buf();
+    let root = BitMapBackend::new(&temp, size).into_drawing_area();
+    root.fill(&WHITE).map_err(de)?;
+    for (area, panel) in root.split_evenly((panels.len(), 1)).iter().zip(panels) {
+        draw_curves(area, x_label, panel)?;
+    }
+    root.present().map_err(de)?;
+    drop(root);
+    target.commit().map_err(de)
+}
+
+/// The curves of `panel` on `area`, axes fitted to them (y from 0).
+fn draw_curves<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    x_label: &str,
+    panel: &CurvePanel<'_>,
+) -> Result<()> {
+    let series = panel.series;
     let clean: Vec<Vec<(f64, f64)>> = series
         .iter()
         .map(|s| {
@@ -223,15 +279,8 @@ pub fn plot_curves_sized(
     let (y0, y1) = pad(y0, y1);
     let y1 = y1 + 0.05 * (y1 - y0);
     let (xs, ys) = (x1 - x0, y1 - y0);
-
-    prepare_path(path)?;
-    // drawn under a temporary name, renamed once presented: whole or absent
-    let target = AtomicPath::new(path);
-    let temp = target.temp().to_path_buf();
-    let root = BitMapBackend::new(&temp, size).into_drawing_area();
-    root.fill(&WHITE).map_err(de)?;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(title, ("sans-serif", 26))
+    let mut chart = ChartBuilder::on(area)
+        .caption(panel.title, ("sans-serif", 26))
         .margin(16)
         .x_label_area_size(56)
         .y_label_area_size(80)
@@ -240,7 +289,7 @@ pub fn plot_curves_sized(
     chart
         .configure_mesh()
         .x_desc(x_label)
-        .y_desc(y_label)
+        .y_desc(panel.y_label)
         .label_style(("sans-serif", 16))
         .axis_desc_style(("sans-serif", 19))
         .x_label_formatter(&|v| fmt_tick(*v, xs))
@@ -279,9 +328,7 @@ pub fn plot_curves_sized(
         .position(SeriesLabelPosition::UpperRight)
         .draw()
         .map_err(de)?;
-    root.present().map_err(de)?;
-    drop(root);
-    target.commit().map_err(de)
+    Ok(())
 }
 
 /// Tick label of a logarithmic axis: plain decimals from 1e-3 to 1e4, else

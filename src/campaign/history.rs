@@ -40,7 +40,19 @@ pub struct HistoryColumns {
     pub stress: Option<String>,
     /// Run-out front (`run_out`).
     pub run_out: Option<String>,
+    /// The energy budget's W, W_int, K, B and R (theory E1), when the scene
+    /// monitors all five.
+    pub budget: Option<[String; 5]>,
 }
+
+/// The monitors of the energy budget, in the order of [`HistoryColumns::budget`].
+const BUDGET_KINDS: [MonitorKind; 5] = [
+    MonitorKind::ExternalWork,
+    MonitorKind::InternalWork,
+    MonitorKind::KineticEnergy,
+    MonitorKind::BoundaryWork,
+    MonitorKind::EnergyRemainder,
+];
 
 impl HistoryColumns {
     /// The columns of `scene`; `None` without a `point_displacement` norm monitor.
@@ -61,6 +73,11 @@ impl HistoryColumns {
                 m.kind == MonitorKind::PointStress && m.quantity == Some(StressQuantity::Q)
             }),
             run_out: find(&|m| m.kind == MonitorKind::RunOut),
+            budget: BUDGET_KINDS
+                .iter()
+                .map(|&kind| find(&|m| m.kind == kind))
+                .collect::<Option<Vec<_>>>()
+                .and_then(|names| names.try_into().ok()),
         })
     }
 }
@@ -74,6 +91,12 @@ pub struct History {
     pub stress: Vec<(f64, f64)>,
     /// (t, x_front), m (empty without the monitor).
     pub run_out: Vec<(f64, f64)>,
+    /// (t, [W, W_int, K, B, R]), kJ/m (empty without the monitors).
+    pub budget: Vec<(f64, [f64; 5])>,
+    /// (t, R/W): the budget's remainder as a share of the work put in, from
+    /// the first row where W reaches [`SHARE_FROM`] of its largest value (a
+    /// ratio of round-offs before).
+    pub remainder_share: Vec<(f64, f64)>,
 }
 
 impl History {
@@ -99,6 +122,16 @@ impl History {
         let displacement = column(&columns.displacement)?;
         let stress = columns.stress.as_deref().map(column).transpose()?;
         let run_out = columns.run_out.as_deref().map(column).transpose()?;
+        let budget = match &columns.budget {
+            Some(names) => {
+                let mut places = [0; 5];
+                for (place, name) in places.iter_mut().zip(names) {
+                    *place = column(name)?;
+                }
+                Some(places)
+            }
+            None => None,
+        };
         let mut history = History::default();
         for record in reader.records() {
             let record = record.map_err(|e| refuse(CurveProblem::BadRow(e.to_string())))?;
@@ -111,7 +144,15 @@ impl History {
             if let Some(i) = run_out {
                 history.run_out.push((t, value(i)?));
             }
+            if let Some(places) = budget {
+                let mut terms = [0.0; 5];
+                for (term, i) in terms.iter_mut().zip(places) {
+                    *term = value(i)?;
+                }
+                history.budget.push((t, terms));
+            }
         }
+        history.remainder_share = remainder_share(&history.budget);
         Ok(history)
     }
 
@@ -119,6 +160,19 @@ impl History {
     pub fn end_time(&self) -> f64 {
         self.displacement.last().map_or(0.0, |p| p.0)
     }
+}
+
+/// R/W is followed from where W reaches this share of its largest value.
+pub const SHARE_FROM: f64 = 0.01;
+
+/// (t, R/W) of a budget history (see [`History::remainder_share`]).
+pub(crate) fn remainder_share(budget: &[(f64, [f64; 5])]) -> Vec<(f64, f64)> {
+    let largest = budget.iter().map(|(_, b)| b[0].abs()).fold(0.0, f64::max);
+    budget
+        .iter()
+        .skip_while(|(_, b)| b[0].abs() < SHARE_FROM * largest || b[0] == 0.0)
+        .map(|&(t, b)| (t, b[4] / b[0]))
+        .collect()
 }
 
 /// The metrics of one time-history run (DESIGN §9 M1 and M6, issue 12).
@@ -143,6 +197,8 @@ pub struct HistoryMetrics {
     pub stress_reversals: Option<usize>,
     /// M1 \[D42\] of u_A(t) on [0, t_end] against the family reference.
     pub discrepancy: Option<f64>,
+    /// The budget's remainder R/W at the end (theory E1).
+    pub final_remainder_share: Option<f64>,
 }
 
 /// Metrics of every run; the reference of a run is the finest completed
@@ -159,6 +215,7 @@ pub fn compute_history_metrics(runs: &[CampaignRun]) -> Vec<HistoryMetrics> {
                 displacement_at_comparison: metrics::interpolate(u, COMPARISON_TIME).ok(),
                 final_displacement: u.last().map_or(f64::NAN, |p| p.1),
                 final_run_out: h.run_out.last().map(|p| p.1),
+                final_remainder_share: h.remainder_share.last().map(|p| p.1),
                 ..Default::default()
             };
             if let Some(t0) = m.onset {
@@ -209,6 +266,12 @@ impl IntegratorPair<'_> {
         i.displacement_at_comparison
             .zip(e.displacement_at_comparison)
             .map(|(a, b)| (b - a) / a)
+    }
+
+    /// |u_A| at the end, explicit relative to implicit, − 1.
+    fn final_displacement_difference(&self) -> f64 {
+        let (i, e) = (self.implicit.1, self.explicit.1);
+        (e.final_displacement - i.final_displacement) / i.final_displacement
     }
 
     /// M1 \[D42\] of the explicit u_A(t) against the implicit one on [0, t_end].
@@ -270,7 +333,7 @@ pub(super) fn write_history_outputs(
 }
 
 fn histories_csv(runs: &[CampaignRun]) -> String {
-    let mut text = String::from("run,scene,family,integrator,cell_size,time,uA,qB,run_out\n");
+    let mut text = String::from("run,scene,family,integrator,cell_size,time,uA,qB,run_out,external_work,internal_work,kinetic_energy,boundary_work,energy_remainder\n");
     for r in runs {
         let Some(h) = &r.history else { continue };
         for (i, (t, u)) in h.displacement.iter().enumerate() {
@@ -280,9 +343,13 @@ fn histories_csv(runs: &[CampaignRun]) -> String {
                 .get(i)
                 .map(|p| p.1.to_string())
                 .unwrap_or_default();
+            let budget = match h.budget.get(i) {
+                Some((_, terms)) => terms.map(|v| v.to_string()).join(","),
+                None => ",,,,".to_string(),
+            };
             let _ = writeln!(
                 text,
-                "{},{},{},{},{:e},{t:e},{u:e},{q},{x}",
+                "{},{},{},{},{:e},{t:e},{u:e},{q},{x},{budget}",
                 r.name,
                 r.scene,
                 r.regularisation(),
@@ -303,11 +370,11 @@ fn status(r: &CampaignRun) -> &'static str {
 }
 
 fn metrics_csv(runs: &[CampaignRun], m: &[HistoryMetrics]) -> String {
-    let mut csv = String::from("run,scene,family,integrator,cell_size,length_scale,status,wall_seconds,steps,newton_iterations,halvings,lost_points,onset_time,uA_at_0.3,uA_final,run_out_final,qB_peak,qB_peak_time,qB_fall_roughness,qB_reversals,M1_discrepancy\n");
+    let mut csv = String::from("run,scene,family,integrator,cell_size,length_scale,status,wall_seconds,steps,newton_iterations,halvings,lost_points,onset_time,uA_at_0.3,uA_final,run_out_final,qB_peak,qB_peak_time,qB_fall_roughness,qB_reversals,M1_discrepancy,energy_remainder_share\n");
     for (r, mm) in runs.iter().zip(m) {
         let _ = writeln!(
             csv,
-            "{},{},{},{},{:e},{},{},{:.2},{},{},{},{},{},{},{:e},{},{},{},{},{},{}",
+            "{},{},{},{},{:e},{},{},{:.2},{},{},{},{},{},{},{:e},{},{},{},{},{},{},{}",
             r.name,
             r.scene,
             r.regularisation(),
@@ -331,18 +398,19 @@ fn metrics_csv(runs: &[CampaignRun], m: &[HistoryMetrics]) -> String {
                 .map(|n| n.to_string())
                 .unwrap_or_default(),
             fmt_opt(mm.discrepancy, 1.0, 5),
+            fmt_opt(mm.final_remainder_share, 1.0, 4),
         );
     }
     csv
 }
 
 fn integrators_csv(pairs: &[IntegratorPair]) -> String {
-    let mut csv = String::from("scene,family,cell_size,onset_implicit,onset_explicit,onset_difference,uA_0.3_implicit,uA_0.3_explicit,uA_0.3_relative_difference,M1_explicit_vs_implicit,uA_final_implicit,uA_final_explicit,run_out_implicit,run_out_explicit,wall_implicit,wall_explicit,steps_implicit,steps_explicit,newton_iterations,halvings\n");
+    let mut csv = String::from("scene,family,cell_size,onset_implicit,onset_explicit,onset_difference,uA_0.3_implicit,uA_0.3_explicit,uA_0.3_relative_difference,M1_explicit_vs_implicit,uA_final_implicit,uA_final_explicit,uA_final_relative_difference,run_out_implicit,run_out_explicit,remainder_share_implicit,remainder_share_explicit,wall_implicit,wall_explicit,steps_implicit,steps_explicit,newton_iterations,halvings\n");
     for p in pairs {
         let ((ri, mi), (re, me)) = (p.implicit, p.explicit);
         let _ = writeln!(
             csv,
-            "{},{},{:e},{},{},{},{},{},{},{},{:e},{:e},{},{},{:.2},{:.2},{},{},{},{}",
+            "{},{},{:e},{},{},{},{},{},{},{},{:e},{:e},{:.5},{},{},{},{},{:.2},{:.2},{},{},{},{}",
             ri.scene,
             ri.regularisation(),
             ri.cell_size,
@@ -355,8 +423,11 @@ fn integrators_csv(pairs: &[IntegratorPair]) -> String {
             fmt_opt(p.discrepancy(), 1.0, 5),
             mi.final_displacement,
             me.final_displacement,
+            p.final_displacement_difference(),
             fmt_opt(mi.final_run_out, 1.0, 4),
             fmt_opt(me.final_run_out, 1.0, 4),
+            fmt_opt(mi.final_remainder_share, 1.0, 4),
+            fmt_opt(me.final_remainder_share, 1.0, 4),
             ri.wall_seconds,
             re.wall_seconds,
             ri.effort.steps,
@@ -381,14 +452,14 @@ fn spread(values: &[f64]) -> Option<f64> {
 
 fn report_md(runs: &[CampaignRun], m: &[HistoryMetrics], pairs: &[IntegratorPair]) -> String {
     let mut md = format!(
-        "# Vertical-cut campaign report\n\nPer run (DESIGN §9 M1, M6): collapse onset = first time |u_A| > {ONSET_DISPLACEMENT} m; u_A at t = {COMPARISON_TIME} s and at the end; run-out front x_front = max_p x_p at the end; q_B peak of the failure phase (up to {PEAK_WINDOW} s after the onset); fall roughness = total variation of q_B from that peak to {FALL_WINDOW} s after the onset / its net drop over that time (1 = monotone fall; later B rides in the run-out flow); reversals of q_B after the onset with a hysteresis of {:.0} % of its peak (M6 noise index); M1 = relative L2 discrepancy of u_A(t) on [0, t_end] against the finest mesh of the same family (regularisation and integrator).\n\n| run | h (m) | status | wall (s) | steps | Newton | halvings | onset (s) | u_A(0.3) (m) | u_A end (m) | x_front end (m) | q_B peak (kPa) | roughness | reversals | M1 |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "# Vertical-cut campaign report\n\nPer run (DESIGN §9 M1, M6): collapse onset = first time |u_A| > {ONSET_DISPLACEMENT} m; u_A at t = {COMPARISON_TIME} s and at the end; run-out front x_front = max_p x_p at the end; q_B peak of the failure phase (up to {PEAK_WINDOW} s after the onset); fall roughness = total variation of q_B from that peak to {FALL_WINDOW} s after the onset / its net drop over that time (1 = monotone fall; later B rides in the run-out flow); reversals of q_B after the onset with a hysteresis of {:.0} % of its peak (M6 noise index); M1 = relative L2 discrepancy of u_A(t) on [0, t_end] against the finest mesh of the same family (regularisation and integrator); R/W = the energy budget's remainder (docs/theory.md E1) as a share of the work put in, at the end.\n\n| run | h (m) | status | wall (s) | steps | Newton | halvings | onset (s) | u_A(0.3) (m) | u_A end (m) | x_front end (m) | q_B peak (kPa) | roughness | reversals | M1 | R/W end |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
         100.0 * REVERSAL_THRESHOLD
     );
     for (r, mm) in runs.iter().zip(m) {
         let _ =
             writeln!(
             md,
-            "| {} | {:.4} | {} | {:.1} | {} | {} | {} | {} | {} | {:.3} | {} | {} | {} | {} | {} |",
+            "| {} | {:.4} | {} | {:.1} | {} | {} | {} | {} | {} | {:.3} | {} | {} | {} | {} | {} | {} |",
             r.name,
             r.cell_size,
             status(r),
@@ -404,6 +475,7 @@ fn report_md(runs: &[CampaignRun], m: &[HistoryMetrics], pairs: &[IntegratorPair
             fmt_opt(mm.stress_roughness, 1.0, 2),
             mm.stress_reversals.map(|n| n.to_string()).unwrap_or("–".into()),
             fmt_opt(mm.discrepancy, 1.0, 4),
+            fmt_opt(mm.final_remainder_share, 1.0, 3),
         );
     }
     md.push_str("\n## Spread across meshes\n\nPer family: (max − min)/mean over its meshes of the final |u_A| and the final run-out, and S = max M1 over the meshes other than the coarsest (the three finer meshes against the finest).\n\n| family | integrator | meshes | final u_A spread | run-out spread | S (finer meshes) |\n|---|---|---|---|---|---|\n");
@@ -448,12 +520,12 @@ fn report_md(runs: &[CampaignRun], m: &[HistoryMetrics], pairs: &[IntegratorPair
         );
     }
     if !pairs.is_empty() {
-        let _ = write!(md, "\n## Implicit against explicit\n\nThe same scene file run with implicit Newmark (as written) and explicit MUSL (its stable step). Onset difference = explicit − implicit; u_A(0.3) difference relative to the implicit value; M1 = explicit u_A(t) against implicit on [0, t_end].\n\n| scene | onset impl. (s) | onset expl. (s) | Δ onset (s) | u_A(0.3) impl. | u_A(0.3) expl. | rel. diff. | M1 | wall impl. (s) | wall expl. (s) | steps impl. / expl. | halvings |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+        let _ = write!(md, "\n## Implicit against explicit\n\nThe same scene file run with implicit Newmark (as written) and explicit MUSL (its stable step). Onset difference = explicit − implicit; u_A(0.3) difference relative to the implicit value; M1 = explicit u_A(t) against implicit on [0, t_end]; u_A, run-out and the budget's remainder R/W at the end, the u_A difference relative to the implicit value (figure `integrators.png`).\n\n| scene | onset impl. (s) | onset expl. (s) | Δ onset (s) | u_A(0.3) impl. | u_A(0.3) expl. | rel. diff. | M1 | u_A end impl. / expl. (m) | rel. diff. | run-out impl. / expl. (m) | R/W impl. / expl. | wall impl. (s) | wall expl. (s) | steps impl. / expl. | halvings |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
         for p in pairs {
             let ((ri, mi), (re, me)) = (p.implicit, p.explicit);
             let _ = writeln!(
                 md,
-                "| {} | {} | {} | {} | {} | {} | {} | {} | {:.1} | {:.1} | {} / {} | {} |",
+                "| {} | {} | {} | {} | {} | {} | {} | {} | {:.3} / {:.3} | {:.3} | {} / {} | {} / {} | {:.1} | {:.1} | {} / {} | {} |",
                 ri.scene,
                 fmt_opt(mi.onset, 1.0, 4),
                 fmt_opt(me.onset, 1.0, 4),
@@ -462,6 +534,13 @@ fn report_md(runs: &[CampaignRun], m: &[HistoryMetrics], pairs: &[IntegratorPair
                 fmt_opt(me.displacement_at_comparison, 1.0, 3),
                 fmt_opt(p.displacement_difference(), 1.0, 3),
                 fmt_opt(p.discrepancy(), 1.0, 4),
+                mi.final_displacement,
+                me.final_displacement,
+                p.final_displacement_difference(),
+                fmt_opt(mi.final_run_out, 1.0, 2),
+                fmt_opt(me.final_run_out, 1.0, 2),
+                fmt_opt(mi.final_remainder_share, 1.0, 3),
+                fmt_opt(me.final_remainder_share, 1.0, 3),
                 ri.wall_seconds,
                 re.wall_seconds,
                 ri.effort.steps,
@@ -539,7 +618,48 @@ fn plot_histories(out: &Path, runs: &[CampaignRun]) -> plot::Result<()> {
             plot::plot_curves(out.join(file), title, "t (s)", y_label, &s)?;
         }
     }
-    Ok(())
+    let explicit = |r: &CampaignRun| r.integrator() == "explicit";
+    if !runs.iter().any(explicit) {
+        return Ok(());
+    }
+    let every = |_: &CampaignRun| true;
+    plot_integrators(
+        out,
+        [
+            series(&|h| &h.displacement, &every, &explicit),
+            series(&|h| &h.run_out, &every, &explicit),
+            series(&|h| &h.remainder_share, &every, &explicit),
+        ],
+    )
+}
+
+/// `integrators.png`: |u_A|, the run-out and the budget's remainder R/W
+/// over time (`[crest, front, remainder]`), implicit (solid) against
+/// explicit (dashed), every run.
+fn plot_integrators(out: &Path, [crest, front, remainder]: [Vec<Series>; 3]) -> plot::Result<()> {
+    let panels = [
+        (
+            "|u_A|: implicit (solid) against explicit (dashed)",
+            "|u_A| (m)",
+            &crest,
+        ),
+        ("Run-out front x_front", "x_front (m)", &front),
+        (
+            "Energy budget: remainder R/W (theory E1)",
+            "R / W",
+            &remainder,
+        ),
+    ];
+    let panels: Vec<plot::CurvePanel> = panels
+        .iter()
+        .filter(|(_, _, s)| !s.is_empty())
+        .map(|&(title, y_label, series)| plot::CurvePanel {
+            title,
+            y_label,
+            series,
+        })
+        .collect();
+    plot::plot_curve_panels(out.join("integrators.png"), "t (s)", &panels)
 }
 
 /// Paper Fig. 10: normalised εq and point positions at each snapshot time, one

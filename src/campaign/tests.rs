@@ -67,7 +67,18 @@ fn cut_run(
         history.displacement.push((t, u));
         history.stress.push((t, q));
         history.run_out.push((t, 3.0 + 0.5 * u));
+        // a budget whose remainder is 2 % of W implicit, −1 % explicit
+        let (work, share) = (100.0 * t, if explicit { -0.01 } else { 0.02 });
+        let terms = [
+            work,
+            0.5 * work,
+            0.3 * work,
+            (0.2 - share) * work,
+            share * work,
+        ];
+        history.budget.push((t, terms));
     }
+    history.remainder_share = super::history::remainder_share(&history.budget);
     run.history = Some(history);
     run
 }
@@ -236,6 +247,19 @@ fn history_metrics_follow_families_and_pair_the_integrators() {
     let fields: Vec<&str> = rows[0].split(',').collect();
     let difference: f64 = fields[5].parse().unwrap();
     assert!((difference - 0.005).abs() < 1e-4, "{difference}");
+    // u_A(1 s) ∝ (1 − t0)²: explicit (0.935/0.94)² − 1 of the implicit one
+    let final_difference: f64 = fields[12].parse().unwrap();
+    let expected = (0.935f64 / 0.94).powi(2) - 1.0;
+    assert!(
+        (final_difference - expected).abs() < 1e-5,
+        "{final_difference}"
+    );
+    assert_eq!((fields[15], fields[16]), ("0.0200", "-0.0100"), "{pairs}");
+    let histories = std::fs::read_to_string(dir.path().join("histories.csv")).unwrap();
+    let last: Vec<&str> = histories.lines().last().unwrap().split(',').collect();
+    let budget: Vec<f64> = last[9..].iter().map(|v| v.parse().unwrap()).collect();
+    assert_eq!(budget.len(), 5, "{histories}");
+    assert!((budget[4] - 0.02 * budget[0]).abs() < 1e-9, "{budget:?}");
     for file in [
         "histories.csv",
         "metrics.csv",
@@ -243,9 +267,25 @@ fn history_metrics_follow_families_and_pair_the_integrators() {
         "fig12_uA.png",
         "fig11_qB.png",
         "implicit_vs_explicit.png",
+        "integrators.png",
     ] {
         assert!(dir.path().join(file).exists(), "{file} missing");
     }
+}
+
+/// R/W is followed from the first row where W reaches 1 % of its largest
+/// value (a ratio of round-offs before).
+#[test]
+fn remainder_share_starts_where_the_work_is_put_in() {
+    let row = |t: f64, work: f64, remainder: f64| (t, [work, 0.0, 0.0, 0.0, remainder]);
+    let budget = [
+        row(0.0, 0.0, 0.0),
+        row(1.0, 0.005, 0.004),
+        row(2.0, 0.5, 0.01),
+        row(3.0, 1.0, -0.02),
+    ];
+    let share = super::history::remainder_share(&budget);
+    assert_eq!(share, vec![(2.0, 0.02), (3.0, -0.02)]);
 }
 
 /// `campaign.toml` names the benchmark and the integrators; an unknown key or
