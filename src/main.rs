@@ -28,7 +28,7 @@ enum Command {
         /// Output directory (default: out/<scene file stem>).
         #[arg(long)]
         out: Option<PathBuf>,
-        /// Override a scene value, e.g. `--set grid.cell_size=0.002` (repeatable).
+        /// Override a scene value, e.g. `--set grid.cell_size=0.002`; an empty value removes the key (`--set solver.newmark_gamma=`) so its default applies (repeatable).
         #[arg(long = "set", value_name = "KEY=VALUE")]
         overrides: Vec<String>,
         /// No progress bar.
@@ -81,7 +81,7 @@ enum Command {
         /// Scenes run at the same time.
         #[arg(long, default_value_t = 2)]
         jobs: usize,
-        /// Override a value in every scene (repeatable).
+        /// Override a value in every scene; an empty value removes the key (repeatable).
         #[arg(long = "set", value_name = "KEY=VALUE")]
         overrides: Vec<String>,
         /// Also run every scene with K times the steps at Δt / K and report
@@ -139,7 +139,7 @@ enum Command {
     Check {
         /// Scene file (TOML).
         scene: PathBuf,
-        /// Override a scene value (repeatable).
+        /// Override a scene value; an empty value removes the key (repeatable).
         #[arg(long = "set", value_name = "KEY=VALUE")]
         overrides: Vec<String>,
         /// Memory limit for the run's estimate, e.g. `8G`, `512M` (default:

@@ -6,6 +6,8 @@ use super::SceneError;
 /// Apply one `a.b.c=value` override to a TOML table. Path segments that are
 /// numbers index arrays (`body.0.box`). The value is parsed as TOML (numbers,
 /// booleans, arrays, strings in quotes) and taken as a bare string otherwise.
+/// An empty value (`a.b.c=`) removes the key, so that its default applies
+/// (e.g. `solver.newmark_gamma=` before `solver.rho_infinity=0.8`).
 pub fn apply_override(table: &mut toml::Table, assignment: &str) -> Result<(), SceneError> {
     let err = |message: String| SceneError::Override {
         assignment: assignment.to_string(),
@@ -19,6 +21,9 @@ pub fn apply_override(table: &mut toml::Table, assignment: &str) -> Result<(), S
         return Err(err("empty key segment".into()));
     }
     let raw = raw.trim();
+    if raw.is_empty() {
+        return remove_key(table, &keys).map_err(err);
+    }
     let value: toml::Value = format!("v = {raw}")
         .parse::<toml::Table>()
         .ok()
@@ -67,4 +72,39 @@ pub fn apply_override(table: &mut toml::Table, assignment: &str) -> Result<(), S
         };
     }
     Ok(())
+}
+
+/// Remove the key at the path `keys` (tables and array indices on the way);
+/// a key that is not there is already removed.
+fn remove_key(table: &mut toml::Table, keys: &[&str]) -> Result<(), String> {
+    match keys {
+        [last] => {
+            table.remove(*last);
+            Ok(())
+        }
+        [first, rest @ ..] => match table.get_mut(*first) {
+            Some(value) => remove_in(value, rest, first),
+            None => Ok(()),
+        },
+        [] => Err("empty key".into()),
+    }
+}
+
+/// [`remove_key`] below `value`, the value at the path `above`.
+fn remove_in(value: &mut toml::Value, keys: &[&str], above: &str) -> Result<(), String> {
+    match value {
+        toml::Value::Table(table) => remove_key(table, keys),
+        toml::Value::Array(items) if keys.len() > 1 => {
+            let index: usize = keys[0]
+                .parse()
+                .map_err(|_| format!("`{}` must be an array index", keys[0]))?;
+            let len = items.len();
+            let item = items
+                .get_mut(index)
+                .ok_or_else(|| format!("index {index} out of range (length {len})"))?;
+            remove_in(item, &keys[1..], keys[0])
+        }
+        toml::Value::Array(_) => Err("an array element cannot be removed, only a key".into()),
+        _ => Err(format!("`{above}` is not a table or array")),
+    }
 }

@@ -47,6 +47,33 @@ fn overrides_change_values_and_reject_unknown_paths() {
     assert!(e.to_string().contains("cel_size"), "{e}");
 }
 
+/// An empty value removes a key, so that its default applies: the cut
+/// scene's Newmark γ = 0.6 gives way to generalised-α, which the scene
+/// refuses beside γ; a key inside an array's table goes too; an array
+/// element cannot be removed.
+#[test]
+fn empty_override_removes_a_key() {
+    let cut = include_str!("../../validation/vertical_cut/local_h100.toml");
+    let scene = |overrides: &[&str]| {
+        let overrides: Vec<String> = overrides.iter().map(|o| o.to_string()).collect();
+        Scene::from_str_with_overrides(cut, "cut", &overrides)
+    };
+    let both = scene(&["solver.rho_infinity=0.8"]).unwrap_err();
+    assert!(both.to_string().contains("newmark_gamma"), "{both}");
+    let alpha = scene(&["solver.newmark_gamma=", "solver.rho_infinity=0.8"]).unwrap();
+    assert_eq!(alpha.solver.newmark_gamma, None);
+    assert_eq!(alpha.solver.rho_infinity, Some(0.8));
+    let unnamed = scene(&["monitor.0.name="]).unwrap_err();
+    assert!(unnamed.to_string().contains("name"), "{unnamed}");
+    let element = scene(&["bc.fixed.0="]).unwrap_err();
+    assert!(element.to_string().contains("array element"), "{element}");
+    // removing what is not there changes nothing
+    assert_eq!(
+        scene(&["solver.no_such_key="]).unwrap(),
+        scene(&[]).unwrap()
+    );
+}
+
 #[test]
 fn invalid_values_are_all_reported_with_field_names() {
     let bad = MINIMAL
