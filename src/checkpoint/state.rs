@@ -246,6 +246,7 @@ impl SavedState {
             if let Some(p) = point {
                 monitor.set_particle(p);
             }
+            monitor.regroup(&sim.model);
         }
         for (&work, saved) in Work::ALL.iter().zip(self.work) {
             let now = sim.profile.work_count(work);

@@ -987,6 +987,11 @@ pub enum MonitorKind {
     PointVelocity,
     /// Stress quantity (`quantity`) at the material point initially nearest `point`.
     PointStress,
+    /// `quantity` of the points that started within `radius` of `point`
+    /// (default one cell), volume-weighted: stresses of the group's mean
+    /// stress tensor, the mean κ or κ̄, or the group's centre (`x`, `y`).
+    /// Smooths the single-point noise of `point_stress`.
+    NeighbourhoodStress,
     /// Reaction force on the constrained nodes of grid line `line` (kN/m).
     Reaction,
     /// Force exerted by rigid body `rigid` on the soil (kN/m, DESIGN D40).
@@ -1033,7 +1038,7 @@ pub enum VectorComponent {
     Norm,
 }
 
-/// A stress quantity for `point_stress`.
+/// A quantity of `point_stress` and `neighbourhood_stress`.
 #[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq)]
 #[serde(rename_all = "snake_case")]
 pub enum StressQuantity {
@@ -1049,6 +1054,15 @@ pub enum StressQuantity {
     P,
     /// Deviatoric stress q (paper eq. 7, DESIGN D5), kPa.
     Q,
+    /// Equivalent plastic strain κ (local).
+    Kappa,
+    /// Nonlocal equivalent plastic strain κ̄ (κ where there is no
+    /// regularisation).
+    KappaBar,
+    /// Horizontal position of the point (of the group's centre), m.
+    X,
+    /// Vertical position of the point (of the group's centre), m.
+    Y,
 }
 
 /// `[[monitor]]`: one column of `curve.csv`, value = `scale` · raw + `offset`.
@@ -1071,9 +1085,13 @@ pub struct MonitorSpec {
     /// Component for vector monitors (default `y`).
     #[serde(default)]
     pub component: Option<VectorComponent>,
-    /// Quantity for `point_stress`.
+    /// Quantity for `point_stress` and `neighbourhood_stress`.
     #[serde(default)]
     pub quantity: Option<StressQuantity>,
+    /// Radius of the group of `neighbourhood_stress`, m (default: the cell
+    /// size).
+    #[serde(default)]
+    pub radius: Option<f64>,
     /// Scale factor (default 1).
     #[serde(default = "one")]
     pub scale: f64,

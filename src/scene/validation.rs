@@ -958,7 +958,8 @@ impl Scene {
             match m.kind {
                 MonitorKind::PointDisplacement
                 | MonitorKind::PointVelocity
-                | MonitorKind::PointStress => match m.point {
+                | MonitorKind::PointStress
+                | MonitorKind::NeighbourhoodStress => match m.point {
                     None => e.push(FieldError {
                         field: format!("{f}.point"),
                         message: "this monitor kind needs `point = [x, y]`".into(),
@@ -996,12 +997,27 @@ impl Scene {
                 }
                 _ => {}
             }
-            if m.kind == MonitorKind::PointStress {
+            let group = m.kind == MonitorKind::NeighbourhoodStress;
+            if m.kind == MonitorKind::PointStress || group {
                 check(
                     e,
                     format!("{f}.quantity"),
                     m.quantity.is_some(),
-                    "`point_stress` needs `quantity` (sxx, syy, szz, sxy, p or q)",
+                    "this monitor kind needs `quantity` (sxx, syy, szz, sxy, p, q, kappa, kappa_bar, x or y)",
+                );
+            }
+            if let Some(radius) = m.radius {
+                check(
+                    e,
+                    format!("{f}.radius"),
+                    group,
+                    "only `neighbourhood_stress` takes a radius",
+                );
+                check(
+                    e,
+                    format!("{f}.radius"),
+                    radius.is_finite() && radius > 0.0,
+                    "must be a length > 0 (m)",
                 );
             }
         }
