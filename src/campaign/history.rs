@@ -38,6 +38,8 @@ pub struct HistoryColumns {
     pub displacement: String,
     /// q at the monitored point B (`point_stress`, `quantity = "q"`).
     pub stress: Option<String>,
+    /// q of the points around B (`neighbourhood_stress`, `quantity = "q"`).
+    pub neighbourhood_stress: Option<String>,
     /// Run-out front (`run_out`).
     pub run_out: Option<String>,
     /// The energy budget's W, W_int, K, B and R (theory E1), when the scene
@@ -72,6 +74,9 @@ impl HistoryColumns {
             stress: find(&|m| {
                 m.kind == MonitorKind::PointStress && m.quantity == Some(StressQuantity::Q)
             }),
+            neighbourhood_stress: find(&|m| {
+                m.kind == MonitorKind::NeighbourhoodStress && m.quantity == Some(StressQuantity::Q)
+            }),
             run_out: find(&|m| m.kind == MonitorKind::RunOut),
             budget: BUDGET_KINDS
                 .iter()
@@ -89,6 +94,8 @@ pub struct History {
     pub displacement: Vec<(f64, f64)>,
     /// (t, q_B), kPa (empty without the monitor).
     pub stress: Vec<(f64, f64)>,
+    /// (t, q) of the points around B, kPa (empty without the monitor).
+    pub neighbourhood_stress: Vec<(f64, f64)>,
     /// (t, x_front), m (empty without the monitor).
     pub run_out: Vec<(f64, f64)>,
     /// (t, [W, W_int, K, B, R]), kJ/m (empty without the monitors).
@@ -122,6 +129,11 @@ impl History {
         let displacement = column(&columns.displacement)?;
         let stress = columns.stress.as_deref().map(column).transpose()?;
         let run_out = columns.run_out.as_deref().map(column).transpose()?;
+        let group = columns
+            .neighbourhood_stress
+            .as_deref()
+            .map(column)
+            .transpose()?;
         let budget = match &columns.budget {
             Some(names) => {
                 let mut places = [0; 5];
@@ -143,6 +155,9 @@ impl History {
             }
             if let Some(i) = run_out {
                 history.run_out.push((t, value(i)?));
+            }
+            if let Some(i) = group {
+                history.neighbourhood_stress.push((t, value(i)?));
             }
             if let Some(places) = budget {
                 let mut terms = [0.0; 5];
@@ -192,6 +207,10 @@ pub struct HistoryMetrics {
     /// Total variation of q_B from that peak to `FALL_WINDOW` after the
     /// onset over its net drop (1: monotone fall).
     pub stress_roughness: Option<f64>,
+    /// The fall roughness of the neighbourhood reading of q_B
+    /// (`neighbourhood_stress`, the points that started within one cell of
+    /// B), over the same window.
+    pub neighbourhood_roughness: Option<f64>,
     /// Reversals of q_B after the onset, with a hysteresis of
     /// `REVERSAL_THRESHOLD` q_peak (M6 noise index).
     pub stress_reversals: Option<usize>,
@@ -199,6 +218,20 @@ pub struct HistoryMetrics {
     pub discrepancy: Option<f64>,
     /// The budget's remainder R/W at the end (theory E1).
     pub final_remainder_share: Option<f64>,
+}
+
+/// The failure phase of a q_B reading `stress` after the onset `t0`: its
+/// peak (q, t) up to [`PEAK_WINDOW`] after the onset and the fall roughness
+/// from the peak to [`FALL_WINDOW`] after it; `None` without a peak.
+fn failure_fall(stress: &[(f64, f64)], t0: f64) -> Option<((f64, f64), Option<f64>)> {
+    let until =
+        |end: f64| -> Vec<(f64, f64)> { stress.iter().copied().filter(|p| p.0 <= end).collect() };
+    let (t, q) = metrics::peak(&until(t0 + PEAK_WINDOW)).ok()?;
+    let fall: Vec<(f64, f64)> = until(t0 + FALL_WINDOW)
+        .into_iter()
+        .filter(|p| p.0 >= t)
+        .collect();
+    Some(((q, t), metrics::fall_roughness(&fall).ok()))
 }
 
 /// Metrics of every run; the reference of a run is the finest completed
@@ -219,19 +252,14 @@ pub fn compute_history_metrics(runs: &[CampaignRun]) -> Vec<HistoryMetrics> {
                 ..Default::default()
             };
             if let Some(t0) = m.onset {
-                let until = |end: f64| -> Vec<(f64, f64)> {
-                    h.stress.iter().copied().filter(|p| p.0 <= end).collect()
-                };
-                if let Ok((t, q)) = metrics::peak(&until(t0 + PEAK_WINDOW)) {
-                    m.stress_peak = Some((q, t));
-                    let fall: Vec<(f64, f64)> = until(t0 + FALL_WINDOW)
-                        .into_iter()
-                        .filter(|p| p.0 >= t)
-                        .collect();
-                    m.stress_roughness = metrics::fall_roughness(&fall).ok();
-                    m.stress_reversals =
-                        Some(metrics::reversals(&h.stress, t0, REVERSAL_THRESHOLD * q));
+                if let Some((peak, roughness)) = failure_fall(&h.stress, t0) {
+                    m.stress_peak = Some(peak);
+                    m.stress_roughness = roughness;
+                    let threshold = REVERSAL_THRESHOLD * peak.0;
+                    m.stress_reversals = Some(metrics::reversals(&h.stress, t0, threshold));
                 }
+                m.neighbourhood_roughness =
+                    failure_fall(&h.neighbourhood_stress, t0).and_then(|(_, roughness)| roughness);
             }
             let reference = runs
                 .iter()
@@ -333,11 +361,16 @@ pub(super) fn write_history_outputs(
 }
 
 fn histories_csv(runs: &[CampaignRun]) -> String {
-    let mut text = String::from("run,scene,family,integrator,cell_size,time,uA,qB,run_out,external_work,internal_work,kinetic_energy,boundary_work,energy_remainder\n");
+    let mut text = String::from("run,scene,family,integrator,cell_size,time,uA,qB,qB_neighbourhood,run_out,external_work,internal_work,kinetic_energy,boundary_work,energy_remainder\n");
     for r in runs {
         let Some(h) = &r.history else { continue };
         for (i, (t, u)) in h.displacement.iter().enumerate() {
             let q = h.stress.get(i).map(|p| p.1.to_string()).unwrap_or_default();
+            let group = h
+                .neighbourhood_stress
+                .get(i)
+                .map(|p| p.1.to_string())
+                .unwrap_or_default();
             let x = h
                 .run_out
                 .get(i)
@@ -349,7 +382,7 @@ fn histories_csv(runs: &[CampaignRun]) -> String {
             };
             let _ = writeln!(
                 text,
-                "{},{},{},{},{:e},{t:e},{u:e},{q},{x},{budget}",
+                "{},{},{},{},{:e},{t:e},{u:e},{q},{group},{x},{budget}",
                 r.name,
                 r.scene,
                 r.regularisation(),
@@ -370,11 +403,11 @@ fn status(r: &CampaignRun) -> &'static str {
 }
 
 fn metrics_csv(runs: &[CampaignRun], m: &[HistoryMetrics]) -> String {
-    let mut csv = String::from("run,scene,family,integrator,cell_size,length_scale,status,wall_seconds,steps,newton_iterations,halvings,lost_points,onset_time,uA_at_0.3,uA_final,run_out_final,qB_peak,qB_peak_time,qB_fall_roughness,qB_reversals,M1_discrepancy,energy_remainder_share\n");
+    let mut csv = String::from("run,scene,family,integrator,cell_size,length_scale,status,wall_seconds,steps,newton_iterations,halvings,lost_points,onset_time,uA_at_0.3,uA_final,run_out_final,qB_peak,qB_peak_time,qB_fall_roughness,qB_neighbourhood_fall_roughness,qB_reversals,M1_discrepancy,energy_remainder_share\n");
     for (r, mm) in runs.iter().zip(m) {
         let _ = writeln!(
             csv,
-            "{},{},{},{},{:e},{},{},{:.2},{},{},{},{},{},{},{:e},{},{},{},{},{},{},{}",
+            "{},{},{},{},{:e},{},{},{:.2},{},{},{},{},{},{},{:e},{},{},{},{},{},{},{},{}",
             r.name,
             r.scene,
             r.regularisation(),
@@ -394,6 +427,7 @@ fn metrics_csv(runs: &[CampaignRun], m: &[HistoryMetrics]) -> String {
             fmt_opt(mm.stress_peak.map(|p| p.0), 1.0, 3),
             fmt_opt(mm.stress_peak.map(|p| p.1), 1.0, 4),
             fmt_opt(mm.stress_roughness, 1.0, 4),
+            fmt_opt(mm.neighbourhood_roughness, 1.0, 4),
             mm.stress_reversals
                 .map(|n| n.to_string())
                 .unwrap_or_default(),
@@ -452,14 +486,14 @@ fn spread(values: &[f64]) -> Option<f64> {
 
 fn report_md(runs: &[CampaignRun], m: &[HistoryMetrics], pairs: &[IntegratorPair]) -> String {
     let mut md = format!(
-        "# Vertical-cut campaign report\n\nPer run (DESIGN §9 M1, M6): collapse onset = first time |u_A| > {ONSET_DISPLACEMENT} m; u_A at t = {COMPARISON_TIME} s and at the end; run-out front x_front = max_p x_p at the end; q_B peak of the failure phase (up to {PEAK_WINDOW} s after the onset); fall roughness = total variation of q_B from that peak to {FALL_WINDOW} s after the onset / its net drop over that time (1 = monotone fall; later B rides in the run-out flow); reversals of q_B after the onset with a hysteresis of {:.0} % of its peak (M6 noise index); M1 = relative L2 discrepancy of u_A(t) on [0, t_end] against the finest mesh of the same family (regularisation and integrator); R/W = the energy budget's remainder (docs/theory.md E1) as a share of the work put in, at the end.\n\n| run | h (m) | status | wall (s) | steps | Newton | halvings | onset (s) | u_A(0.3) (m) | u_A end (m) | x_front end (m) | q_B peak (kPa) | roughness | reversals | M1 | R/W end |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "# Vertical-cut campaign report\n\nPer run (DESIGN §9 M1, M6): collapse onset = first time |u_A| > {ONSET_DISPLACEMENT} m; u_A at t = {COMPARISON_TIME} s and at the end; run-out front x_front = max_p x_p at the end; q_B peak of the failure phase (up to {PEAK_WINDOW} s after the onset); fall roughness = total variation of q_B from that peak to {FALL_WINDOW} s after the onset / its net drop over that time (1 = monotone fall; later B rides in the run-out flow), of the single point B and of the group of points that started within one cell of B (`neighbourhood_stress`, when the scene monitors it); reversals of q_B after the onset with a hysteresis of {:.0} % of its peak (M6 noise index); M1 = relative L2 discrepancy of u_A(t) on [0, t_end] against the finest mesh of the same family (regularisation and integrator); R/W = the energy budget's remainder (docs/theory.md E1) as a share of the work put in, at the end.\n\n| run | h (m) | status | wall (s) | steps | Newton | halvings | onset (s) | u_A(0.3) (m) | u_A end (m) | x_front end (m) | q_B peak (kPa) | roughness | roughness (group) | reversals | M1 | R/W end |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
         100.0 * REVERSAL_THRESHOLD
     );
     for (r, mm) in runs.iter().zip(m) {
         let _ =
             writeln!(
             md,
-            "| {} | {:.4} | {} | {:.1} | {} | {} | {} | {} | {} | {:.3} | {} | {} | {} | {} | {} | {} |",
+            "| {} | {:.4} | {} | {:.1} | {} | {} | {} | {} | {} | {:.3} | {} | {} | {} | {} | {} | {} | {} |",
             r.name,
             r.cell_size,
             status(r),
@@ -473,6 +507,7 @@ fn report_md(runs: &[CampaignRun], m: &[HistoryMetrics], pairs: &[IntegratorPair
             fmt_opt(mm.final_run_out, 1.0, 2),
             fmt_opt(mm.stress_peak.map(|p| p.0), 1.0, 1),
             fmt_opt(mm.stress_roughness, 1.0, 2),
+            fmt_opt(mm.neighbourhood_roughness, 1.0, 2),
             mm.stress_reversals.map(|n| n.to_string()).unwrap_or("–".into()),
             fmt_opt(mm.discrepancy, 1.0, 4),
             fmt_opt(mm.final_remainder_share, 1.0, 3),
@@ -587,12 +622,18 @@ fn plot_histories(out: &Path, runs: &[CampaignRun]) -> plot::Result<()> {
     };
     let implicit = |r: &CampaignRun| r.integrator() == "implicit";
     let local = |r: &CampaignRun| r.length_scale.is_none();
-    let figures: [(&str, &str, &str, Vec<Series>); 4] = [
+    let figures: [(&str, &str, &str, Vec<Series>); 5] = [
         (
             "fig11_qB.png",
             "Fig. 11: q at B (implicit; dashed: local, solid: nonlocal)",
             "q_B (kPa)",
             series(&|h| &h.stress, &implicit, &local),
+        ),
+        (
+            "fig11_qB_neighbourhood.png",
+            "Fig. 11, q of the points within one cell of B (implicit; dashed: local)",
+            "q_B (kPa)",
+            series(&|h| &h.neighbourhood_stress, &implicit, &local),
         ),
         (
             "fig12_uA.png",

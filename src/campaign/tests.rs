@@ -66,6 +66,9 @@ fn cut_run(
         };
         history.displacement.push((t, u));
         history.stress.push((t, q));
+        // the group's reading: the same fall with a wobble of ±2 kPa
+        let wobble = if i % 2 == 0 { 2.0 } else { -2.0 };
+        history.neighbourhood_stress.push((t, q + wobble));
         history.run_out.push((t, 3.0 + 0.5 * u));
         // a budget whose remainder is 2 % of W implicit, −1 % explicit
         let (work, share) = (100.0 * t, if explicit { -0.01 } else { 0.02 });
@@ -236,6 +239,9 @@ fn history_metrics_follow_families_and_pair_the_integrators() {
     assert_eq!(m[3].discrepancy, Some(0.0));
     assert_eq!(m[1].stress_reversals, Some(0));
     assert!((m[1].stress_roughness.unwrap() - 1.0).abs() < 1e-9);
+    // the wobble adds 4 kPa of variation per ms to the group's fall
+    let group = m[1].neighbourhood_roughness.unwrap();
+    assert!(group > 10.0, "{group}");
 
     let dir = tempfile::tempdir().unwrap();
     write_history_outputs(dir.path(), &runs, Bounds::new(0.0, 16.0, 0.0, 3.5)).unwrap();
@@ -257,7 +263,7 @@ fn history_metrics_follow_families_and_pair_the_integrators() {
     assert_eq!((fields[15], fields[16]), ("0.0200", "-0.0100"), "{pairs}");
     let histories = std::fs::read_to_string(dir.path().join("histories.csv")).unwrap();
     let last: Vec<&str> = histories.lines().last().unwrap().split(',').collect();
-    let budget: Vec<f64> = last[9..].iter().map(|v| v.parse().unwrap()).collect();
+    let budget: Vec<f64> = last[10..].iter().map(|v| v.parse().unwrap()).collect();
     assert_eq!(budget.len(), 5, "{histories}");
     assert!((budget[4] - 0.02 * budget[0]).abs() < 1e-9, "{budget:?}");
     for file in [
@@ -266,6 +272,7 @@ fn history_metrics_follow_families_and_pair_the_integrators() {
         "report.md",
         "fig12_uA.png",
         "fig11_qB.png",
+        "fig11_qB_neighbourhood.png",
         "implicit_vs_explicit.png",
         "integrators.png",
     ] {
