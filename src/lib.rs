@@ -54,6 +54,7 @@ pub mod particles;
 pub mod plot;
 pub mod point_driver;
 pub mod profile;
+pub mod progress_lines;
 pub mod run;
 pub mod scene;
 pub mod seeding;

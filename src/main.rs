@@ -31,9 +31,13 @@ enum Command {
         /// Override a scene value, e.g. `--set grid.cell_size=0.002`; an empty value removes the key (`--set solver.newmark_gamma=`) so its default applies (repeatable).
         #[arg(long = "set", value_name = "KEY=VALUE")]
         overrides: Vec<String>,
-        /// No progress bar.
+        /// No progress bar (and no progress lines).
         #[arg(long)]
         quiet: bool,
+        /// Seconds between the plain progress lines printed when stderr is
+        /// not a terminal (a pipe, a log file; default 10).
+        #[arg(long, value_name = "SECONDS", value_parser = parse_positive_seconds)]
+        progress_every: Option<f64>,
         /// Remove an earlier run's files from the output directory
         /// (run.json, curve.csv, particles_*.vtu, *.pvd, checkpoints) instead
         /// of refusing it; other files there are kept.
@@ -60,9 +64,13 @@ enum Command {
     Resume {
         /// The run's output directory.
         dir: PathBuf,
-        /// No progress bar.
+        /// No progress bar (and no progress lines).
         #[arg(long)]
         quiet: bool,
+        /// Seconds between the plain progress lines printed when stderr is
+        /// not a terminal (default 10).
+        #[arg(long, value_name = "SECONDS", value_parser = parse_positive_seconds)]
+        progress_every: Option<f64>,
         /// Checkpoint interval instead of the run's own.
         #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
         checkpoint_every: Option<u64>,
@@ -349,6 +357,7 @@ fn main() -> ExitCode {
             out,
             overrides,
             quiet,
+            progress_every,
             overwrite,
             max_memory,
             max_steps,
@@ -375,15 +384,17 @@ fn main() -> ExitCode {
             install_interrupt();
             let options = RunOptions {
                 show_progress: !quiet,
+                progress_every,
                 overwrite,
                 checkpoint: checkpoint_every.map(|n| (source, n as usize)),
                 stop_after: stop_after_step,
             };
-            report(run_scene_with(loaded, &out, &options), &out)
+            report(run_scene_with(loaded, &out, &options), &out, quiet)
         }
         Command::Resume {
             dir,
             quiet,
+            progress_every,
             checkpoint_every,
             stop_after_step,
         } => {
@@ -403,8 +414,9 @@ fn main() -> ExitCode {
             let options = ResumeOptions {
                 checkpoint_every: checkpoint_every.map(|n| n as usize),
                 stop_after: stop_after_step,
+                progress_every,
             };
-            report(resumable.run(!quiet, &options), &dir)
+            report(resumable.run(!quiet, &options), &dir, quiet)
         }
     }
 }
@@ -419,15 +431,22 @@ fn install_interrupt() {
 fn report(
     outcome: Result<RunOutcome, Box<dyn std::error::Error + Send + Sync>>,
     out: &Path,
+    quiet: bool,
 ) -> ExitCode {
     let outcome = match outcome {
         Err(e) => return fail_with(2, e.as_ref()),
         Ok(outcome) => outcome,
     };
-    eprintln!("{}", outcome.simulation.profile.table(outcome.wall_seconds));
-    eprintln!("{}", outcome.simulation.profile.work_line());
     let usage = outcome.simulation.integrator.usage();
     let sim = &outcome.simulation.model;
+    let succeeded = outcome.error.is_none() && outcome.interrupted.is_none();
+    if quiet && succeeded && outcome.simulation.finished() {
+        // warnings only
+        print_warnings(sim);
+        return ExitCode::SUCCESS;
+    }
+    eprintln!("{}", outcome.simulation.profile.table(outcome.wall_seconds));
+    eprintln!("{}", outcome.simulation.profile.work_line());
     eprintln!(
         "steps {}  time {:.6e} s  Newton iterations {}  factorisations: Cholesky {} LU {}  halvings {}  stagnated steps {}",
         sim.step,
@@ -441,20 +460,7 @@ fn report(
     if let (Some((lo, hi)), Some(by)) = (usage.explicit_time_step, &usage.time_step_limited_by) {
         eprintln!("explicit time step {lo:.3e} to {hi:.3e} s (limited by {by})");
     }
-    if let Some(first) = sim.lost_points.first() {
-        let mass: f64 = sim.lost_points.iter().map(|l| l.mass).sum();
-        let total: f64 = sim.particles.mass.iter().sum::<f64>() + mass;
-        eprintln!(
-            "warning: {} material point(s) left the grid and were removed (first at step {}, {:.2e} of the mass; listed in run.json)",
-            sim.lost_points.len(),
-            first.step,
-            mass / total
-        );
-    }
-    let energy = mpm_geo::energy::EnergyBudget::of(sim);
-    if let Some(w) = energy.warning(sim.scene.output.energy_remainder_warning) {
-        eprintln!("warning: {w}");
-    }
+    print_warnings(sim);
     match (outcome.error, outcome.interrupted) {
         (Some(e), _) => fail(
             1,
@@ -507,6 +513,33 @@ fn set_limits(scene: &mut Scene, max_memory: Option<f64>, max_steps: Option<u64>
 
 fn parse_memory_arg(text: &str) -> Result<f64, String> {
     mpm_geo::scene::parse_memory(text)
+}
+
+/// The warnings of a finished or stopped run: points removed, an energy
+/// budget that does not close.
+fn print_warnings(sim: &mpm_geo::model::Model) {
+    if let Some(first) = sim.lost_points.first() {
+        let mass: f64 = sim.lost_points.iter().map(|l| l.mass).sum();
+        let total: f64 = sim.particles.mass.iter().sum::<f64>() + mass;
+        eprintln!(
+            "warning: {} material point(s) left the grid and were removed (first at step {}, {:.2e} of the mass; listed in run.json)",
+            sim.lost_points.len(),
+            first.step,
+            mass / total
+        );
+    }
+    let energy = mpm_geo::energy::EnergyBudget::of(sim);
+    if let Some(w) = energy.warning(sim.scene.output.energy_remainder_warning) {
+        eprintln!("warning: {w}");
+    }
+}
+
+/// A number of seconds > 0 (`--progress-every`).
+fn parse_positive_seconds(text: &str) -> Result<f64, String> {
+    match text.trim().parse::<f64>() {
+        Ok(s) if s.is_finite() && s > 0.0 => Ok(s),
+        _ => Err(format!("`{text}` is not a number of seconds > 0")),
+    }
 }
 
 /// Print `error[ID]: message` and return the exit code.

@@ -8,6 +8,8 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use indicatif::{ProgressBar, ProgressStyle};
+
+use crate::progress_lines::ProgressLines;
 use serde_json::json;
 
 use crate::checkpoint::Checkpointer;
@@ -51,6 +53,8 @@ pub struct OutputObserver {
     stop_after: Option<usize>,
     /// Set once the step `stop_after` is done.
     stop: bool,
+    /// Plain progress lines (stderr not a terminal).
+    lines: Option<ProgressLines>,
 }
 
 /// Where a run's outputs stood after a step: what a checkpoint stores so a
@@ -129,6 +133,7 @@ impl OutputObserver {
             resumed: false,
             stop_after: None,
             stop: false,
+            lines: None,
         })
     }
 
@@ -162,7 +167,14 @@ impl OutputObserver {
             resumed: true,
             stop_after: None,
             stop: false,
+            lines: None,
         })
+    }
+
+    /// Print plain progress lines every `every` seconds (`None`: none).
+    pub fn with_progress_lines(mut self, sim: &Simulation, every: Option<f64>) -> Self {
+        self.lines = every.map(|every| ProgressLines::new(sim, every));
+        self
     }
 
     /// Write a checkpoint with `checkpoints` (every N steps and on an
@@ -306,6 +318,15 @@ impl OutputObserver {
     }
 }
 
+/// The interval of plain progress lines: `every` (default
+/// [`crate::progress_lines::DEFAULT_INTERVAL`]) when progress is shown and
+/// stderr is not a terminal (where the bar draws nothing), else none.
+pub fn progress_lines_every(show: bool, every: Option<f64>) -> Option<f64> {
+    use std::io::IsTerminal;
+    (show && !std::io::stderr().is_terminal())
+        .then(|| every.unwrap_or(crate::progress_lines::DEFAULT_INTERVAL))
+}
+
 /// A progress bar over the steps (implicit) or over 1000ths of the end time (explicit).
 fn progress_bar(sim: &Simulation, show: bool) -> ProgressBar {
     if !show {
@@ -382,6 +403,9 @@ impl Observer for OutputObserver {
                 self.write_snapshot(sim)?;
             }
             self.show_progress(sim, report);
+            if let Some(lines) = &mut self.lines {
+                lines.after_step(sim, report);
+            }
             Ok::<_, RunError>(())
         })?;
         self.stop = self.stop_after == Some(sim.model.step);
@@ -432,8 +456,12 @@ pub struct RunOutcome {
 /// How a run writes its output directory.
 #[derive(Clone, Debug, Default)]
 pub struct RunOptions {
-    /// Draw a progress bar on stderr.
+    /// Draw a progress bar on stderr, or, when stderr is not a terminal,
+    /// print plain progress lines ([`ProgressLines`]).
     pub show_progress: bool,
+    /// Seconds between the plain progress lines (default
+    /// [`crate::progress_lines::DEFAULT_INTERVAL`]).
+    pub progress_every: Option<f64>,
     /// Remove an earlier run's files from the directory instead of refusing
     /// it ([`output_dir::prepare`]).
     pub overwrite: bool,
@@ -488,11 +516,14 @@ pub fn run_scene_with(
         None => None,
     };
     let (show, stop_after) = (options.show_progress, options.stop_after);
+    let lines = progress_lines_every(show, options.progress_every);
     drive(sim, out, start, move |sim| {
         let observer = sim
             .profile
             .time(Stage::Output, || OutputObserver::new(out, sim, show))?;
-        Ok(observer.with_checkpoints(checkpoints, stop_after))
+        Ok(observer
+            .with_checkpoints(checkpoints, stop_after)
+            .with_progress_lines(sim, lines))
     })
 }
 

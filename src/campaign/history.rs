@@ -101,7 +101,7 @@ pub struct History {
     /// (t, [W, W_int, K, B, R]), kJ/m (empty without the monitors).
     pub budget: Vec<(f64, [f64; 5])>,
     /// (t, R/W): the budget's remainder as a share of the work put in, from
-    /// the first row where W reaches [`SHARE_FROM`] of its largest value (a
+    /// the first row where W reaches 1 % (`SHARE_FROM`) of its largest value (a
     /// ratio of round-offs before).
     pub remainder_share: Vec<(f64, f64)>,
 }

@@ -460,6 +460,8 @@ pub struct ResumeOptions {
     pub checkpoint_every: Option<usize>,
     /// Test hook: end the run after this step as a kill would.
     pub stop_after: Option<usize>,
+    /// Seconds between plain progress lines (see [`RunOptions`](crate::run::RunOptions)).
+    pub progress_every: Option<f64>,
 }
 
 /// A checkpointed run directory, locked, checked and ready to continue.
@@ -606,9 +608,12 @@ impl Resumable {
             curve,
         };
         let stop_after = options.stop_after;
+        let lines = crate::run::progress_lines_every(show_progress, options.progress_every);
         crate::run::drive(simulation, &dir, start, |sim| {
             let observer = OutputObserver::resume(&dir, sim, cursor, show_progress)?;
-            Ok(observer.with_checkpoints(Some(checkpoints), stop_after))
+            Ok(observer
+                .with_checkpoints(Some(checkpoints), stop_after)
+                .with_progress_lines(sim, lines))
         })
     }
 }
