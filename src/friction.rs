@@ -157,29 +157,26 @@ impl FrictionEdges {
     /// normal force `normal` (from the last step, [`Self::patch_normals`]),
     /// with `previous` the tangential force of the last step, theory eq.
     /// FR1: the stick spring continues from it, T = T_n − k_t Δu_t, while
-    /// |T| ≤ μ N, else μ N with its sign. With `held`, the node keeps that
-    /// stick or slip state whatever `du` (FR6). Returns (T, dT/dΔu_t) and
-    /// the state.
+    /// |T| ≤ μ N, else μ N with its sign. With `held_stick` the node sticks
+    /// whatever `du` (FR6). Returns (T, dT/dΔu_t) and the state.
     pub fn tangential_force(
         &self,
         contact: &FrictionNode,
         du: f64,
         normal: f64,
         previous: f64,
-        held: Option<ContactState>,
+        held_stick: bool,
     ) -> (f64, f64, ContactState) {
         let demand = self.stiffness * du - previous;
-        let state = held.unwrap_or_else(|| match coulomb_resistance(demand, contact.mu, normal) {
-            (_, true) => ContactState::Stick,
-            (resisted, false) => ContactState::Slip {
-                direction: resisted.signum(),
-            },
-        });
-        match state {
-            ContactState::Stick => (-demand, self.stiffness, state),
-            ContactState::Slip { direction } => {
-                (-direction * contact.mu * normal.max(0.0), 0.0, state)
-            }
+        match coulomb_resistance(demand, contact.mu, normal) {
+            (_, stick) if stick || held_stick => (-demand, self.stiffness, ContactState::Stick),
+            (resisted, _) => (
+                -resisted,
+                0.0,
+                ContactState::Slip {
+                    direction: resisted.signum(),
+                },
+            ),
         }
     }
 
@@ -309,34 +306,25 @@ mod tests {
     }
 
     /// The stick spring continues from the last step's force; past the
-    /// bound the node slips at μ N; a held state keeps its law whatever the
-    /// increment (FR1, FR6).
+    /// bound the node slips at μ N; a node held in stick keeps its spring
+    /// past the bound (FR1, FR6).
     #[test]
-    fn tangential_force_continues_the_spring_and_holds_a_state() {
+    fn tangential_force_continues_the_spring_and_holds_a_stick() {
         let edges = FrictionEdges {
             stiffness: 100.0,
             ..edge(1)
         };
         let node = edges.nodes[0];
         // T_n = −3 on a bound μ N = 0.5 × 10 = 5: Δu = 0.01 gives −4 (stick)
-        let (t, k, state) = edges.tangential_force(&node, 0.01, 10.0, -3.0, None);
+        let (t, k, state) = edges.tangential_force(&node, 0.01, 10.0, -3.0, false);
         assert_eq!((t, k, state), (-4.0, 100.0, ContactState::Stick));
         // Δu = 0.03 would give −6: slip at −5
-        let (t, k, state) = edges.tangential_force(&node, 0.03, 10.0, -3.0, None);
+        let (t, k, state) = edges.tangential_force(&node, 0.03, 10.0, -3.0, false);
         let slip = ContactState::Slip { direction: 1.0 };
         assert_eq!((t, k, state), (-5.0, 0.0, slip));
-        // held: stick past the bound, slip against a reversed increment
-        let stick = Some(ContactState::Stick);
-        assert_eq!(
-            edges.tangential_force(&node, 0.03, 10.0, -3.0, stick).0,
-            -6.0
-        );
-        assert_eq!(
-            edges
-                .tangential_force(&node, -0.1, 10.0, -3.0, Some(slip))
-                .0,
-            -5.0
-        );
+        // held in stick: the spring past the bound
+        let (t, k, state) = edges.tangential_force(&node, 0.03, 10.0, -3.0, true);
+        assert_eq!((t, k, state), (-6.0, 100.0, ContactState::Stick));
     }
 
     /// `n` nodes of one frictional base line.

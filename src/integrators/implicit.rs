@@ -363,7 +363,7 @@ impl ImplicitIntegrator {
             dt,
             newmark: self.newmark,
             background_block: self.background_block,
-            held_contacts: Default::default(),
+            held_sticks: Default::default(),
         }
     }
 

@@ -3,7 +3,7 @@
 //! ([`StepSystem`]), the convergence criteria and the line search
 //! ([`Convergence`]), and the loop that joins them ([`solve`]).
 
-use std::sync::OnceLock;
+use std::sync::Mutex;
 
 use mpm_solvers::SolverError;
 use rayon::prelude::*;
@@ -140,17 +140,29 @@ pub struct StepSystem<'a> {
     /// ε_bg · K_cell^el (DESIGN D19): tangent of every active cell, and
     /// residual term of the GIMP-reached cells.
     pub background_block: [f64; 64],
-    /// The frictional nodes' stick or slip states, once held for the rest
-    /// of the solve (FR6); empty until then.
-    pub held_contacts: OnceLock<Vec<ContactState>>,
+    /// Which frictional nodes are held in stick for the rest of the solve
+    /// (FR6).
+    pub held_sticks: Mutex<HeldSticks>,
 }
 
-/// Newton iterations after which the frictional nodes keep their stick or
-/// slip state for the rest of the solve (theory eq. FR6). A node whose trial
-/// force lies at the Coulomb bound can flip between the two from iteration
-/// to iteration (a two-cycle of the residual, ‖R‖ alternating within 1.5 %
-/// far above the tolerance: the full-size friction cut at h = 0.1 m stopped
-/// at t = 0.23 s after six step halvings).
+/// The frictional nodes held in stick (FR6) and the states of the last
+/// iterate.
+#[derive(Default)]
+pub struct HeldSticks {
+    /// Per frictional node: held in stick; empty until the holding starts.
+    held: Vec<bool>,
+    /// The Coulomb states of the last iterate.
+    last: Vec<ContactState>,
+}
+
+/// Newton iterations after which a frictional node found in stick stays in
+/// stick for the rest of the solve (theory eq. FR6). A node whose trial force
+/// lies at the Coulomb bound can flip between stick and slip from iteration
+/// to iteration (a cycle of the residual far above the tolerance: the
+/// full-size friction cut at h = 0.1 m stopped at t = 0.23 s after four to
+/// six step halvings). Holding the states found at one iteration, slips
+/// included, let a held slip drive a node against its motion (a node of
+/// the cut's base moved 40 m in one step, and the edge created 5,000 kJ/m).
 pub const CONTACT_HOLD_ITERATION: usize = 8;
 
 /// Residual-side quantities of one Newton iterate.
@@ -523,14 +535,25 @@ impl StepSystem<'_> {
         self.for_each_friction_force(du, |_, node, t, force, _, _| reaction[node][t] += force);
     }
 
-    /// Hold the frictional nodes' stick or slip states at `du` for the rest
-    /// of the solve (FR6; the first call holds, later ones change nothing).
-    /// Nodes the loop does not reach (no free tangential dof) keep `Stick`,
-    /// which is never read.
-    fn hold_contacts(&self, du: &[[f64; 2]]) {
-        let mut states = vec![ContactState::Stick; self.model.friction.nodes.len()];
-        self.for_each_friction_force(du, |k, _, _, _, _, state| states[k] = state);
-        let _ = self.held_contacts.set(states);
+    /// Hold in stick, for the rest of the solve, every frictional node that
+    /// is in stick at `du` or whose slip changed direction since the last
+    /// iterate (FR6; those held already stay held).
+    fn hold_sticks(&self, du: &[[f64; 2]]) {
+        let mut guard = self.held_sticks.lock().unwrap_or_else(|e| e.into_inner());
+        let n = self.model.friction.nodes.len();
+        let HeldSticks { held, last } = &mut *guard;
+        if held.is_empty() {
+            held.resize(n, false);
+        }
+        let mut now = vec![ContactState::Stick; n];
+        self.friction_forces_with(du, Some(held), |k, _, _, _, _, state| now[k] = state);
+        for (k, state) in now.iter().enumerate() {
+            let reversed = last.get(k).is_some_and(|before| before != state);
+            if *state == ContactState::Stick || reversed {
+                held[k] = true;
+            }
+        }
+        *last = now;
     }
 
     /// The work the frictional edges take from the soil over the step `du`,
@@ -548,6 +571,19 @@ impl StepSystem<'_> {
     fn for_each_friction_force(
         &self,
         du: &[[f64; 2]],
+        apply: impl FnMut(usize, usize, usize, f64, f64, ContactState),
+    ) {
+        let guard = self.held_sticks.lock().unwrap_or_else(|e| e.into_inner());
+        let held = Some(&guard.held[..]).filter(|h| !h.is_empty());
+        self.friction_forces_with(du, held, apply);
+    }
+
+    /// [`Self::for_each_friction_force`] with the nodes `held` in stick
+    /// (none: every node by the Coulomb law at `du`).
+    fn friction_forces_with(
+        &self,
+        du: &[[f64; 2]],
+        held: Option<&[bool]>,
         mut apply: impl FnMut(usize, usize, usize, f64, f64, ContactState),
     ) {
         let edges = &self.model.friction;
@@ -567,9 +603,13 @@ impl StepSystem<'_> {
                 continue;
             }
             let previous = model.reaction[node][t];
-            let held = self.held_contacts.get().map(|states| states[k]);
-            let (force, k_t, state) =
-                edges.tangential_force(contact, du[node][t], normals[k], previous, held);
+            let (force, k_t, state) = edges.tangential_force(
+                contact,
+                du[node][t],
+                normals[k],
+                previous,
+                held.is_some_and(|sticks| sticks[k]),
+            );
             apply(k, node, t, force, k_t, state);
         }
     }
@@ -863,8 +903,8 @@ pub fn solve(
                 history,
             });
         }
-        if iteration == CONTACT_HOLD_ITERATION && !system.model.friction.is_empty() {
-            system.hold_contacts(du);
+        if iteration >= CONTACT_HOLD_ITERATION && !system.model.friction.is_empty() {
+            system.hold_sticks(du);
         }
         let correction = tangent.solve(system, trial, &free_residual, usage, profile)?;
         if correction.iter().any(|v| !v.is_finite()) {
