@@ -35,6 +35,23 @@ impl DofMap {
         Self { index, n_free }
     }
 
+    /// Make the constrained grid dof `d` an unknown, numbered after the
+    /// others (a frictional node's normal dof in a step it may leave the
+    /// edge, theory eq. FR7). A dof that is an unknown already keeps its
+    /// number.
+    pub fn release(&mut self, d: usize) {
+        if self.index[d] == NONE {
+            self.index[d] = self.n_free as u32;
+            self.n_free += 1;
+        }
+    }
+
+    /// Whether grid dof `d` is an unknown of the system.
+    #[inline]
+    pub fn is_free(&self, d: usize) -> bool {
+        self.index[d] != NONE
+    }
+
     /// The system indices of every element's dofs ([`NONE`] where constrained
     /// or outside the grid), in the order of `stiffness::system_blocks`: each
     /// active cell's node patch (row-major), then each GIMP-reached cell's four

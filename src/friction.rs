@@ -22,6 +22,14 @@
 //!   nodes of a line) the bound uses the net normal force
 //!   N_P = max(Σ N_i, 0), shared in proportion to the reactions filtered
 //!   over three nodes (see [`FrictionEdges::patch_normals`]).
+//! - FR7 (implicit separation): a frictional node whose normal dof is
+//!   released in a step is *open*: free to leave the edge, with no reaction
+//!   and no friction. A step starts with open the nodes whose last filtered
+//!   reaction was not compressive and whose soil moves away
+//!   ([`FrictionEdges::open_at_start`]); after the solve a closed patch in
+//!   net tension opens, and an open node that the step moved into the edge
+//!   closes, and the step is solved again with the new set
+//!   ([`FrictionEdges::contact_changes`]).
 //!
 //! Sliding block (`validation/friction/sliding_block.toml`, exact 0.5 m,
 //! stop 0.5 s): implicit 0.5060 / 0.5006 m at h = 0.125 / 0.0625 (dt = 2e-3),
@@ -202,23 +210,10 @@ impl FrictionEdges {
     ) {
         out.clear();
         out.resize(self.nodes.len(), 0.0);
-        let mut start = 0;
-        while start < self.nodes.len() {
-            if !active(self.nodes[start].node) {
-                start += 1;
-                continue;
-            }
-            let line = self.nodes[start].line;
-            let mut end = start + 1;
-            while end < self.nodes.len()
-                && self.nodes[end].line == line
-                && active(self.nodes[end].node)
-            {
-                end += 1;
-            }
-            let reactions: Vec<f64> = self.nodes[start..end].iter().map(&normal).collect();
+        for patch in self.patches(|k| active(self.nodes[k].node)) {
+            let reactions: Vec<f64> = self.nodes[patch.clone()].iter().map(&normal).collect();
             let net = reactions.iter().sum::<f64>().max(0.0);
-            let weights = &mut out[start..end];
+            let weights = &mut out[patch];
             for (i, w) in weights.iter_mut().enumerate() {
                 *w = filtered(&reactions, i).max(0.0);
             }
@@ -227,8 +222,80 @@ impl FrictionEdges {
             for n in weights.iter_mut() {
                 *n *= scale;
             }
+        }
+    }
+
+    /// The contact patches: runs of neighbouring frictional nodes k of one
+    /// line for which `member(k)` holds, as ranges of `nodes`.
+    fn patches(&self, member: impl Fn(usize) -> bool) -> Vec<std::ops::Range<usize>> {
+        let mut patches = Vec::new();
+        let mut start = 0;
+        while start < self.nodes.len() {
+            if !member(start) {
+                start += 1;
+                continue;
+            }
+            let line = self.nodes[start].line;
+            let mut end = start + 1;
+            while end < self.nodes.len() && self.nodes[end].line == line && member(end) {
+                end += 1;
+            }
+            patches.push(start..end);
             start = end;
         }
+        patches
+    }
+
+    /// Implicit separation, start of a step (FR7): per frictional node,
+    /// whether it starts the step open: at an `active` node whose reaction
+    /// in the last step (`last_normal`, compressive positive), filtered over
+    /// three nodes as in FR4, was not compressive, and whose soil moves away
+    /// from the edge (`leaving` > 0).
+    pub fn open_at_start(
+        &self,
+        active: impl Fn(usize) -> bool,
+        last_normal: impl Fn(&FrictionNode) -> f64,
+        leaving: impl Fn(&FrictionNode) -> f64,
+    ) -> Vec<bool> {
+        let mut open = vec![false; self.nodes.len()];
+        for patch in self.patches(|k| active(self.nodes[k].node)) {
+            let reactions: Vec<f64> = self.nodes[patch.clone()].iter().map(&last_normal).collect();
+            for (i, k) in patch.enumerate() {
+                open[k] = filtered(&reactions, i) <= 0.0 && leaving(&self.nodes[k]) > 0.0;
+            }
+        }
+        open
+    }
+
+    /// Implicit separation after a solve (FR7): the frictional nodes k whose
+    /// contact changes, with `open[k]` the set the step was solved with. A
+    /// patch of `active` closed nodes whose net reaction `normal`
+    /// (compressive positive) is tensile opens as a whole: the edge pulls
+    /// the soil there. (Opening single nodes on the filtered reaction let a
+    /// bending wave of the sliding block peel the base open and shut, and
+    /// the nodes reclosed found no normal force of the last step to bound
+    /// their friction: the slide grew by 5 %.) An open node whose normal
+    /// increment `inward_motion` (along the inward normal) is below
+    /// −`tolerance` closes: the step moved it into the edge.
+    pub fn contact_changes(
+        &self,
+        active: impl Fn(usize) -> bool,
+        open: &[bool],
+        normal: impl Fn(&FrictionNode) -> f64,
+        inward_motion: impl Fn(&FrictionNode) -> f64,
+        tolerance: f64,
+    ) -> Vec<usize> {
+        let mut changes: Vec<usize> = (0..self.nodes.len())
+            .filter(|&k| open[k] && inward_motion(&self.nodes[k]) < -tolerance)
+            .collect();
+        let closed = |k: usize| !open[k] && active(self.nodes[k].node);
+        for patch in self.patches(closed) {
+            if self.nodes[patch.clone()].iter().map(&normal).sum::<f64>() < 0.0 {
+                changes.extend(patch);
+            }
+        }
+        changes.sort_unstable();
+        changes
     }
 
     /// Whether the run has frictional edges.
@@ -325,6 +392,37 @@ mod tests {
         // held in stick: the spring past the bound
         let (t, k, state) = edges.tangential_force(&node, 0.03, 10.0, -3.0, true);
         assert_eq!((t, k, state), (-6.0, 100.0, ContactState::Stick));
+    }
+
+    /// A step starts open only where the last step's filtered reaction was
+    /// not compressive and the soil moves away; after the solve, a closed
+    /// patch in net tension opens as a whole (not a compressed one with a
+    /// tensile node), and open nodes moved into the edge close.
+    #[test]
+    fn contacts_open_under_tension_and_close_on_approach() {
+        let edges = edge(7);
+        let last = [0.0, 0.0, 2.0, -3.0, -1.0, 0.0, 0.0];
+        let leaving = [1.0, -1.0, 1.0, 1.0, 1.0, 1.0, 1.0];
+        let open = edges.open_at_start(|n| n != 6, |c| last[c.node], |c| leaving[c.node]);
+        // filtered: 0, 1/2, 1/4, −5/4, −5/4, −1/3
+        assert_eq!(open, [true, false, false, true, true, true, false]);
+        // closed patch 1..=2 in net tension opens; node 0 moved into the
+        // edge closes, nodes 3..=5 moved away or stayed
+        let open = [true, false, false, true, true, true, false];
+        let reaction = [0.0, 1.0, -2.0, 0.0, 0.0, 0.0, 0.0];
+        let motion = [-1e-3, 0.0, 0.0, 1e-3, 0.0, -1e-10, 0.0];
+        let changes = edges.contact_changes(
+            |n| n != 6,
+            &open,
+            |c| reaction[c.node],
+            |c| motion[c.node],
+            1e-9,
+        );
+        assert_eq!(changes, [0, 1, 2]);
+        // a compressed patch with a tensile node stays closed
+        let reaction = [0.0, 3.0, -1.0, 0.0, 0.0, 0.0, 0.0];
+        let none = edges.contact_changes(|n| n != 6, &open, |c| reaction[c.node], |_| 0.0, 1e-9);
+        assert!(none.is_empty(), "{none:?}");
     }
 
     /// `n` nodes of one frictional base line.

@@ -446,7 +446,7 @@ impl Codec for TimeStepLimit {
 }
 
 impl Codec for SolverUsage {
-    const MIN_SIZE: usize = 8 * 8 + 2;
+    const MIN_SIZE: usize = 9 * 8 + 2;
     fn encode(&self, w: &mut Writer) {
         w.put(&self.cholesky);
         w.put(&self.lu);
@@ -455,6 +455,7 @@ impl Codec for SolverUsage {
         w.put(&self.max_unknowns);
         w.put(&self.newton_iterations);
         w.put(&self.halvings);
+        w.put(&self.contact_resolves);
         w.put(&self.stagnated_steps);
         w.put(&self.explicit_time_step);
         w.put(&self.time_step_limited_by);
@@ -469,6 +470,7 @@ impl Codec for SolverUsage {
             max_unknowns: r.get()?,
             newton_iterations: r.get()?,
             halvings: r.get()?,
+            contact_resolves: r.get()?,
             stagnated_steps: r.get()?,
             explicit_time_step: r.get()?,
             time_step_limited_by: r.get()?,

@@ -597,7 +597,7 @@ impl UpdatedGrid {
             .sum();
         friction
             + fixed_dof_kinetic_energy(
-                &model.constraints.dof,
+                |d| model.constraints.dof[d] == DofConstraint::Fixed,
                 active
                     .iter()
                     .map(|&node| node as usize)

@@ -283,25 +283,49 @@ impl ImplicitIntegrator {
         report: &mut StepReport,
         setup: &mut StepSetup,
     ) -> Result<Attempt, NewtonError> {
-        let dofs = profile.time(Stage::Setup, || refresh_setup(model, setup))?;
+        let free_dofs = profile.time(Stage::Setup, || refresh_setup(model, setup))?;
         let setup = &*setup;
-        let nodal = profile.time(Stage::P2G, || {
+        let mapped = profile.time(Stage::P2G, || {
             self.map_to_grid(model, setup, t + dt, profile)
         });
-        let mut nonlocal = NonlocalStep::start(model, false, profile).map_err(StepError::from)?;
-        let mut system = self.system(model, setup, dofs, nodal, t, dt);
+        let mut mapped = mapped;
+        let mut open = open_at_start(model, setup, &mapped, dt);
+        let mut pass = 1;
+        let (mut system, solution, mut nonlocal) = loop {
+            let dofs = released(free_dofs.clone(), model, &open);
+            // without frictional edges there is one pass
+            let mut nodal = if model.friction.is_empty() {
+                std::mem::take(&mut mapped)
+            } else {
+                mapped.clone()
+            };
+            hold_fixed_dofs(&mut nodal, model, setup, &dofs, self.newmark);
+            let mut nonlocal =
+                NonlocalStep::start(model, false, profile).map_err(StepError::from)?;
+            let system = self.system(model, setup, dofs, nodal, t, dt);
+            let solution = profile.time(Stage::Newton, || {
+                newton::solve(
+                    &system,
+                    &mut self.tangent,
+                    nonlocal.as_mut(),
+                    &mut self.usage,
+                    profile,
+                    &mut self.newton_buffers,
+                )
+            })?;
+            let changes = contact_changes(&system, &open, &solution);
+            if changes.is_empty() || pass == MAX_CONTACT_PASSES {
+                break (system, solution, nonlocal);
+            }
+            pass += 1;
+            self.usage.contact_resolves += 1;
+            for k in changes {
+                open[k] = !open[k];
+            }
+            self.newton_buffers.recycle(solution.trial);
+        };
         let removed_velocity = std::mem::take(&mut system.nodal.removed_velocity);
         let boundary_work = system.nodal.removed_energy;
-        let solution = profile.time(Stage::Newton, || {
-            newton::solve(
-                &system,
-                &mut self.tangent,
-                nonlocal.as_mut(),
-                &mut self.usage,
-                profile,
-                &mut self.newton_buffers,
-            )
-        })?;
         let grid = ConvergedGrid::new(&system, solution);
         let boundary_work = boundary_work + system.friction_work(&grid.du);
         let mut local = None;
@@ -367,9 +391,9 @@ impl ImplicitIntegrator {
         }
     }
 
-    /// P2G: nodal mass, v_n and a_n (dynamic only, in one pass; Dirichlet
-    /// dofs neither move nor accelerate; the mass counted in `profile`) and
-    /// the external force at `t1` (DESIGN D10).
+    /// P2G: nodal mass, v_n and a_n (dynamic only, in one pass; the mass
+    /// counted in `profile`) and the external force at `t1` (DESIGN D10).
+    /// The constrained dofs are held by [`hold_fixed_dofs`].
     fn map_to_grid(
         &mut self,
         model: &Model,
@@ -379,42 +403,13 @@ impl ImplicitIntegrator {
     ) -> NodalKinematics {
         let Some(newmark) = self.newmark else {
             return NodalKinematics {
-                mass: Vec::new(),
-                velocity: Vec::new(),
-                acceleration: Vec::new(),
-                force_per_mass: Vec::new(),
                 external: external_force(model, setup, t1),
-                removed_velocity: Vec::new(),
-                removed_energy: 0.0,
+                ..Default::default()
             };
         };
         let carry_force = newmark.is_generalised_alpha();
-        let mut nodal = nodal_kinematics(model, setup, t1, carry_force, &mut self.p2g);
+        let nodal = nodal_kinematics(model, setup, t1, carry_force, &mut self.p2g);
         profile.count(Work::MassMatrix, 1);
-        let dof = &model.constraints.dof;
-        nodal.removed_energy = fixed_dof_kinetic_energy(
-            dof,
-            setup.bins.active_nodes.iter().map(|&n| n as usize),
-            0.0,
-            |i| nodal.mass[i],
-            |i| nodal.velocity[i],
-        );
-        for (d, c) in dof.iter().enumerate() {
-            if *c == DofConstraint::Fixed {
-                let v = nodal.velocity[d / 2][d % 2];
-                if v != 0.0 {
-                    if nodal.removed_velocity.is_empty() {
-                        nodal.removed_velocity = vec![[0.0; 2]; nodal.velocity.len()];
-                    }
-                    nodal.removed_velocity[d / 2][d % 2] = v;
-                }
-                nodal.velocity[d / 2][d % 2] = 0.0;
-                nodal.acceleration[d / 2][d % 2] = 0.0;
-                if carry_force {
-                    nodal.force_per_mass[d / 2][d % 2] = 0.0;
-                }
-            }
-        }
         nodal
     }
 
@@ -537,6 +532,101 @@ impl ConvergedGrid {
             velocity_removed: None,
         }
     }
+}
+
+/// Solves of one step with frictional nodes opened or closed (FR7): the
+/// first with the start's guess, then one per change of the contact set. A
+/// set still changing after the last pass is kept as it is.
+const MAX_CONTACT_PASSES: usize = 4;
+
+/// The least motion v_n Δt away from a frictional edge, as a share of the
+/// cell size, with which a node starts a step open (FR7). The mapped
+/// velocity of soil resting on the edge is not zero but the noise of its
+/// vibration: on the sliding block (h = 0.0625 m, Δt = 2 ms) ~1e-4 h, and
+/// nodes opened on it chattered (the slide grew by 8 %); the tossed block
+/// leaves at 0.06 h per step.
+const LIFT_OFF: f64 = 1e-3;
+
+/// Dirichlet dofs neither move nor accelerate (DESIGN §3): v_n, a_n (and
+/// generalised-α's q_n) are zeroed at the fixed dofs that `dofs` does not
+/// release, and what the zeroing removed is kept for G2P and the budget
+/// ([`super::boundary_work`] B1).
+fn hold_fixed_dofs(
+    nodal: &mut NodalKinematics,
+    model: &Model,
+    setup: &StepSetup,
+    dofs: &DofMap,
+    newmark: Option<Newmark>,
+) {
+    if newmark.is_none() {
+        return;
+    }
+    let dof = &model.constraints.dof;
+    let held = |d: usize| dof[d] == DofConstraint::Fixed && !dofs.is_free(d);
+    nodal.removed_energy = fixed_dof_kinetic_energy(
+        held,
+        setup.bins.active_nodes.iter().map(|&n| n as usize),
+        0.0,
+        |i| nodal.mass[i],
+        |i| nodal.velocity[i],
+    );
+    let carry_force = !nodal.force_per_mass.is_empty();
+    for d in (0..dof.len()).filter(|&d| held(d)) {
+        let (node, c) = (d / 2, d % 2);
+        let v = nodal.velocity[node][c];
+        if v != 0.0 {
+            if nodal.removed_velocity.is_empty() {
+                nodal.removed_velocity = vec![[0.0; 2]; nodal.velocity.len()];
+            }
+            nodal.removed_velocity[node][c] = v;
+        }
+        nodal.velocity[node][c] = 0.0;
+        nodal.acceleration[node][c] = 0.0;
+        if carry_force {
+            nodal.force_per_mass[node][c] = 0.0;
+        }
+    }
+}
+
+/// The frictional nodes that start the step open (FR7): no compressive
+/// reaction in the last step and a mapped velocity leaving the edge (none in
+/// quasi-static steps, which have no velocity).
+fn open_at_start(model: &Model, setup: &StepSetup, mapped: &NodalKinematics, dt: f64) -> Vec<bool> {
+    let edges = &model.friction;
+    if mapped.velocity.is_empty() {
+        return vec![false; edges.nodes.len()];
+    }
+    edges.open_at_start(
+        |node| setup.bins.node_active[node],
+        |c| model.reaction[c.node][c.normal] * c.inward,
+        |c| mapped.velocity[c.node][c.normal] * c.inward * dt - LIFT_OFF * model.grid.cell_size,
+    )
+}
+
+/// `dofs` with the normal dofs of the `open` frictional nodes released.
+fn released(mut dofs: DofMap, model: &Model, open: &[bool]) -> DofMap {
+    for (contact, _) in model.friction.nodes.iter().zip(open).filter(|(_, &o)| o) {
+        dofs.release(2 * contact.node + contact.normal);
+    }
+    dofs
+}
+
+/// The frictional nodes whose contact the converged `solution` changes
+/// (FR7): closed ones pulled by the edge open, open ones moved into the
+/// edge by more than 1e-9 h close.
+fn contact_changes(system: &StepSystem, open: &[bool], solution: &Solution) -> Vec<usize> {
+    let model = system.model;
+    if model.friction.is_empty() || system.newmark.is_none() {
+        return Vec::new();
+    }
+    let (residual, du) = (&solution.residual.residual, &solution.du);
+    model.friction.contact_changes(
+        |node| system.setup.bins.node_active[node],
+        open,
+        |c| -residual[c.node][c.normal] * c.inward,
+        |c| du[c.node][c.normal] * c.inward,
+        1e-9 * model.grid.cell_size,
+    )
 }
 
 /// The shared step setup and the numbering of the unknowns.

@@ -88,6 +88,9 @@ pub struct SolverUsage {
     pub newton_iterations: usize,
     /// Step halvings.
     pub halvings: usize,
+    /// Implicit steps solved again because a frictional node opened or
+    /// closed (theory eq. FR7): one per change of the contact set.
+    pub contact_resolves: usize,
     /// Steps accepted on the force criterion alone because the residual had
     /// stagnated (the energy criterion of D18 cannot be met by iterating).
     pub stagnated_steps: usize,

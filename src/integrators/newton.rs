@@ -101,6 +101,7 @@ impl Newmark {
 }
 
 /// Start-of-step nodal quantities of an implicit (sub-)step (P2G).
+#[derive(Clone, Default)]
 pub struct NodalKinematics {
     /// Lumped nodal mass (dynamic only, else empty).
     pub mass: Vec<f64>,
@@ -531,8 +532,15 @@ impl StepSystem<'_> {
     /// support reactions `reaction` (−R, in which Newton balanced them):
     /// the edge's whole force on the soil, from which the next step's stick
     /// spring continues.
+    /// An open node (FR7) carries none: its normal reaction is set to zero
+    /// (the residual left there is no support force).
     pub fn add_friction_reactions(&self, du: &[[f64; 2]], reaction: &mut [[f64; 2]]) {
         self.for_each_friction_force(du, |_, node, t, force, _, _| reaction[node][t] += force);
+        for contact in &self.model.friction.nodes {
+            if self.dofs.is_free(2 * contact.node + contact.normal) {
+                reaction[contact.node][contact.normal] = 0.0;
+            }
+        }
     }
 
     /// Hold in stick, for the rest of the solve, every frictional node that
@@ -592,14 +600,25 @@ impl StepSystem<'_> {
         }
         let model = self.model;
         let mut normals = Vec::new();
+        // the nodes in contact (active and closed, FR7) share the normal force
+        let in_contact = |node: usize| {
+            self.setup.bins.node_active[node]
+                && edges
+                    .at(node)
+                    .is_some_and(|c| !self.dofs.is_free(2 * node + c.normal))
+        };
         edges.patch_normals(
-            |node| self.setup.bins.node_active[node],
+            in_contact,
             |c| model.reaction[c.node][c.normal] * c.inward,
             &mut normals,
         );
         for (k, contact) in edges.nodes.iter().enumerate() {
             let (node, t) = (contact.node, contact.tangent());
-            if !self.setup.bins.node_active[node] || self.dofs.index[2 * node + t] == NONE {
+            // an open node (its normal dof released, FR7) has no friction
+            if !self.setup.bins.node_active[node]
+                || !self.dofs.is_free(2 * node + t)
+                || self.dofs.is_free(2 * node + contact.normal)
+            {
                 continue;
             }
             let previous = model.reaction[node][t];
