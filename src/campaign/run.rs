@@ -60,7 +60,12 @@ fn scenes_in(dir: &Path) -> Result<Vec<PathBuf>, CampaignError> {
 /// `out/<scene>_dtK/`) and the time-step discrepancy of each curve is reported
 /// (`step_convergence.csv`, report section). Returns the runs in scene order,
 /// refinements after the scenes; a run's unreadable `curve.csv` is an error
-/// once every run has finished.
+/// once every run has finished. A run whose directory another process holds
+/// (a second campaign into the same `out`) is not run and nothing is
+/// recorded for it ([`CampaignError::Locked`]); after SIGINT/SIGTERM (with
+/// [`crate::interrupt`] installed) the runs in progress stop after a whole
+/// step, no other starts, and no report is written
+/// ([`CampaignError::Interrupted`]).
 pub fn run_campaign(
     dir: &Path,
     out: &Path,
