@@ -3,8 +3,9 @@
 //! renamed to its name only once every byte is written. A process killed or a
 //! disk filling up mid-write leaves the previous version (or nothing) under
 //! the name, never a cut-off file; a temporary file left by a killed process
-//! is removed with the run's other files by `--overwrite`
-//! ([`crate::output_dir`]).
+//! is removed by `resume` and, with the run's other files, by `--overwrite`:
+//! the run records the prefix `.tmp.<pid>.` of its temporary names in its
+//! manifest ([`crate::manifest`]).
 //!
 //! The rename is atomic against other processes and a killed writer; the data
 //! is not `fsync`ed, so a power loss may still lose the newest versions.

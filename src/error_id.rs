@@ -93,7 +93,13 @@ error_ids! {
         "make sure no run is writing there, then remove `.mpm-geo.lock`";
     OutputReused => "OUTPUT_REUSED":
         "the output directory holds an earlier run's files";
-        "choose another `--out`, or add `--overwrite` to remove that run's files (other files are kept)";
+        "choose another `--out`, or add `--overwrite` to remove the files that run lists in its `run.json` (other files are kept)";
+    OutputUnlisted => "OUTPUT_UNLISTED":
+        "`--overwrite` cannot tell the earlier run's files from yours: its `run.json` lists none (an older mpm-geo) or is damaged";
+        "remove that run's files yourself, or choose another `--out`";
+    OutputForeign => "OUTPUT_FOREIGN":
+        "the output directory holds files the run would write over (e.g. a `curve.csv`) that no earlier run recorded writing";
+        "move them, or choose another `--out`";
     OutputDirectory => "OUTPUT_DIRECTORY":
         "the output directory cannot be created or listed";
         "check the path, the permissions and the free space";
@@ -151,6 +157,9 @@ error_ids! {
     CheckpointScene => "CHECKPOINT_SCENE":
         "the scene stored with the checkpoint cannot be rebuilt";
         "run the scene again";
+    CheckpointCompleted => "CHECKPOINT_COMPLETED":
+        "the run in the directory completed: there is nothing to resume";
+        "to repeat it, run the scene again with `--overwrite`";
     CheckpointIo => "CHECKPOINT_IO":
         "the checkpoint could not be read or written";
         "check the free space and the permissions";
@@ -169,6 +178,9 @@ error_ids! {
     CampaignCurve => "CAMPAIGN_CURVE":
         "a run's `curve.csv` cannot be read as its curve";
         "run that scene again (its directory is named)";
+    Interrupted => "INTERRUPTED":
+        "SIGINT or SIGTERM stopped a campaign or study: the runs in progress ended after a whole step, their `run.json` says `interrupted` (exit code 130 or 143)";
+        "run the same command again: finished runs are not run again, and with `--checkpoint-every` a campaign resumes the stopped ones";
     StudySpec => "STUDY_SPEC":
         "the study spec is refused (the key is named)";
         "fix it; docs/study.md lists the keys";
@@ -224,6 +236,8 @@ impl Identified for OutputDirError {
             OutputDirError::Locked { .. } => ErrorId::OutputLocked,
             OutputDirError::LockUnreadable { .. } => ErrorId::OutputLockUnreadable,
             OutputDirError::InUse { .. } => ErrorId::OutputReused,
+            OutputDirError::Unlisted { .. } => ErrorId::OutputUnlisted,
+            OutputDirError::Foreign { .. } => ErrorId::OutputForeign,
             OutputDirError::Io { .. } => ErrorId::OutputDirectory,
         }
     }
@@ -273,6 +287,8 @@ impl Identified for CampaignError {
             CampaignError::Output(..) => ErrorId::CampaignOutput,
             CampaignError::Unfinished(_) => ErrorId::CampaignUnfinished,
             CampaignError::Curve { .. } => ErrorId::CampaignCurve,
+            CampaignError::Locked(_) => ErrorId::OutputLocked,
+            CampaignError::Interrupted { .. } => ErrorId::Interrupted,
         }
     }
 }
@@ -285,6 +301,7 @@ impl Identified for StudyError {
             StudyError::Io { .. } => ErrorId::StudyIo,
             StudyError::Unfinished(_) => ErrorId::StudyUnfinished,
             StudyError::Reference { .. } => ErrorId::StudyReference,
+            StudyError::Interrupted { .. } => ErrorId::Interrupted,
         }
     }
 }

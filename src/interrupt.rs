@@ -3,6 +3,8 @@
 //! ([`crate::simulation::Simulation::run`]); the run then finishes that
 //! step's outputs, writes `run.json` with status `interrupted` and the CLI
 //! exits with 128 + the signal number (130 for SIGINT, 143 for SIGTERM). A
+//! campaign's runs (threads of the process) each stop so and the campaign
+//! starts no other; a study passes the signal on to its run process. A
 //! second signal while the first is pending ends the process at once with the
 //! same code (the outputs already written stay whole: see
 //! [`crate::atomic_file`]).
@@ -49,9 +51,11 @@ fn flags() -> &'static Flags {
     })
 }
 
-/// Catch SIGINT and SIGTERM for the rest of the process (the `run` command).
-/// Without it a signal ends the process as usual and [`requested`] stays
-/// `None` (library use, campaigns).
+/// Catch SIGINT and SIGTERM for the rest of the process (the `run`,
+/// `resume`, `campaign` and `study` commands: every run in progress stops
+/// after its step, a campaign or study starts no further run). Without it a
+/// signal ends the process as usual and [`requested`] stays `None` (library
+/// use).
 pub fn install() -> std::io::Result<()> {
     use signal_hook::consts::{SIGINT, SIGTERM};
     let f = flags();

@@ -23,7 +23,8 @@
 //!   (TOML input and its validation), [`campaign`] and [`metrics`] (mesh
 //!   studies), [`study`] (error against run time), [`error`];
 //! - runs that survive: [`atomic_file`] (outputs whole or absent),
-//!   [`output_dir`] (the output directory's lock and reuse), [`interrupt`]
+//!   [`output_dir`] (the output directory's lock and reuse), [`manifest`]
+//!   (the files a run records it wrote), [`interrupt`]
 //!   (SIGINT/SIGTERM end a run after its step).
 
 // Index loops over nodes, components and Voigt entries mirror the equations
@@ -43,6 +44,7 @@ pub mod friction;
 pub mod grid;
 pub mod integrators;
 pub mod interrupt;
+pub mod manifest;
 pub mod metrics;
 pub mod model;
 pub mod monitor;

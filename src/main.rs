@@ -38,9 +38,11 @@ enum Command {
         /// not a terminal (a pipe, a log file; default 10).
         #[arg(long, value_name = "SECONDS", value_parser = parse_positive_seconds)]
         progress_every: Option<f64>,
-        /// Remove an earlier run's files from the output directory
-        /// (run.json, curve.csv, particles_*.vtu, *.pvd, checkpoints) instead
-        /// of refusing it; other files there are kept.
+        /// Remove the earlier run's files from the output directory instead
+        /// of refusing it: exactly the files that run listed in its run.json
+        /// (curve.csv, snapshots, particles.pvd, checkpoints, exported
+        /// systems, its temporary files); nothing else there is touched,
+        /// whatever its name.
         #[arg(long)]
         overwrite: bool,
         /// Memory limit for the run's estimate, e.g. `8G`, `512M` (default:
@@ -216,6 +218,7 @@ fn main() -> ExitCode {
                 part,
                 checkpoint_every: checkpoint_every.map(|n| n as usize),
             };
+            install_interrupt();
             match mpm_geo::campaign::run_campaign(&dir, &out, &options) {
                 Ok(runs) => {
                     let stopped = runs.iter().filter(|r| r.error.is_some()).count();
@@ -238,6 +241,10 @@ fn main() -> ExitCode {
                     } else {
                         ExitCode::from(1)
                     }
+                }
+                Err(e @ mpm_geo::campaign::CampaignError::Interrupted { signal, .. }) => {
+                    eprintln!("{e}");
+                    ExitCode::from(signal.exit_code())
                 }
                 Err(e) => fail_with(2, &e),
             }
@@ -276,6 +283,7 @@ fn main() -> ExitCode {
                 overrides,
                 part,
             };
+            install_interrupt();
             match mpm_geo::study::run_study(&spec, &out, &options) {
                 Ok(rows) => {
                     let stopped = rows.iter().filter(|r| !r.measured.completed()).count();
@@ -310,6 +318,10 @@ fn main() -> ExitCode {
                             ),
                         )
                     }
+                }
+                Err(e @ mpm_geo::study::StudyError::Interrupted { signal, .. }) => {
+                    eprintln!("{e}");
+                    ExitCode::from(signal.exit_code())
                 }
                 Err(e) => fail_with(2, &e),
             }
@@ -388,6 +400,7 @@ fn main() -> ExitCode {
                 overwrite,
                 checkpoint: checkpoint_every.map(|n| (source, n as usize)),
                 stop_after: stop_after_step,
+                extra_files: Vec::new(),
             };
             report(run_scene_with(loaded, &out, &options), &out, quiet)
         }
@@ -415,12 +428,15 @@ fn main() -> ExitCode {
                 checkpoint_every: checkpoint_every.map(|n| n as usize),
                 stop_after: stop_after_step,
                 progress_every,
+                extra_files: Vec::new(),
             };
             report(resumable.run(!quiet, &options), &dir, quiet)
         }
     }
 }
 
+/// Catch SIGINT and SIGTERM: the runs in progress end after a whole step
+/// with `run.json` saying `interrupted` (`run`, `resume`, `campaign`, `study`).
 fn install_interrupt() {
     if let Err(e) = mpm_geo::interrupt::install() {
         eprintln!("warning: SIGINT/SIGTERM will end the run without run.json: {e}");

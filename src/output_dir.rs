@@ -1,12 +1,13 @@
 //! The output directory of a run: locked while the run writes it (a lock
 //! file created with `create_new` holding the process id, removed at the
 //! end), and refused when it holds an earlier run's files unless the user
-//! asked to overwrite them, which then removes those files (and only those).
+//! asked to overwrite them, which then removes the files that run recorded
+//! in its `run.json` ([`crate::manifest`]) and nothing else.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use crate::atomic_file::TEMP_PREFIX;
+use crate::manifest::{self, Manifest};
 
 /// Name of the lock file inside a locked output directory.
 pub const LOCK_FILE: &str = ".mpm-geo.lock";
@@ -45,6 +46,29 @@ pub enum OutputDirError {
         /// Some of the run files found (at most a few).
         files: Vec<String>,
     },
+    /// The directory holds an earlier run whose `run.json` does not list
+    /// the files it wrote, so `--overwrite` cannot tell them from the user's.
+    #[error(
+        "output directory {dir} holds an earlier run whose files cannot be told from yours ({reason}); remove that run's files yourself, or choose another --out"
+    )]
+    Unlisted {
+        /// The directory.
+        dir: String,
+        /// Why the list is missing or not trusted.
+        reason: String,
+    },
+    /// The directory holds files this run would write over that no earlier
+    /// run recorded writing (the user's own, or an unrecorded run's).
+    #[error(
+        "output directory {dir} holds files this run would write over that no earlier run recorded ({}); move them, or choose another --out",
+        files.join(", ")
+    )]
+    Foreign {
+        /// The directory.
+        dir: String,
+        /// Some of those files (at most a few).
+        files: Vec<String>,
+    },
     /// The directory could not be created, read or cleared.
     #[error("output directory {path}: {source}")]
     Io {
@@ -61,37 +85,6 @@ fn io(path: &Path) -> impl FnOnce(std::io::Error) -> OutputDirError + '_ {
         path: path.display().to_string(),
         source,
     }
-}
-
-/// Whether `name` is a file a run writes into its directory: `run.json`,
-/// `curve.csv`, `particles_*.vtu`, `*.pvd`, `checkpoint*` and temporary
-/// files of [`crate::atomic_file`].
-pub fn is_run_file(name: &str) -> bool {
-    name == "run.json"
-        || name == "curve.csv"
-        || name == crate::campaign::RECORD_FILE
-        || (name.starts_with("particles_") && name.ends_with(".vtu"))
-        || name.ends_with(".pvd")
-        || name.starts_with("checkpoint")
-        || name.starts_with(TEMP_PREFIX)
-}
-
-/// The run files in `dir` (sorted); none if it does not exist.
-pub fn run_files(dir: &Path) -> Result<Vec<PathBuf>, OutputDirError> {
-    let entries = match std::fs::read_dir(dir) {
-        Ok(e) => e,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
-        Err(e) => return Err(io(dir)(e)),
-    };
-    let mut files = Vec::new();
-    for entry in entries {
-        let entry = entry.map_err(io(dir))?;
-        if is_run_file(&entry.file_name().to_string_lossy()) {
-            files.push(entry.path());
-        }
-    }
-    files.sort();
-    Ok(files)
 }
 
 /// A locked output directory; the lock file is removed on drop.
@@ -192,61 +185,126 @@ fn process_alive(pid: u32) -> bool {
     }
 }
 
-/// Lock `dir` for a run and make sure it holds no earlier run's files: with
-/// `overwrite` they are removed ([`is_run_file`]: nothing else the user put
-/// there), without it the directory is refused ([`OutputDirError::InUse`]).
-pub fn prepare(dir: &Path, overwrite: bool) -> Result<DirLock, OutputDirError> {
+/// Lock `dir` for a run that will write the files of `planned` and make
+/// sure it holds no earlier run's files. An earlier run is one whose
+/// `run.json` is there: without `overwrite` the directory is refused
+/// ([`OutputDirError::InUse`]); with it, the files that run's manifest lists
+/// are removed, and nothing else ([`Manifest::remove_from`]). A file this run
+/// would write over that no earlier run recorded (a user's `curve.csv`) is
+/// refused either way ([`OutputDirError::Foreign`]).
+pub fn prepare(dir: &Path, overwrite: bool, planned: &Manifest) -> Result<DirLock, OutputDirError> {
     let lock = DirLock::acquire(dir)?;
-    let files = run_files(dir)?;
-    if !files.is_empty() {
-        if !overwrite {
-            let mut names: Vec<String> = files
-                .iter()
-                .filter_map(|f| f.file_name())
-                .map(|n| n.to_string_lossy().into_owned())
-                .collect();
-            if names.len() > 4 {
-                let more = names.len() - 3;
-                names.truncate(3);
-                names.push(format!("and {more} more"));
-            }
-            return Err(OutputDirError::InUse {
-                dir: dir.display().to_string(),
-                files: names,
-            });
+    let earlier = earlier_run(dir)?;
+    match &earlier {
+        Some(Ok(manifest)) if !overwrite => {
+            let present = manifest.present(dir).map_err(io(dir))?;
+            return Err(in_use(dir, present));
         }
-        for file in &files {
-            let removed = if file.is_dir() {
-                std::fs::remove_dir_all(file)
-            } else {
-                std::fs::remove_file(file)
-            };
-            removed.map_err(io(file))?;
+        Some(Err(_)) if !overwrite => return Err(in_use(dir, vec!["run.json".into()])),
+        Some(Err(e)) => {
+            return Err(OutputDirError::Unlisted {
+                dir: dir.display().to_string(),
+                reason: e.to_string(),
+            })
+        }
+        _ => {}
+    }
+    let earlier = earlier.and_then(Result::ok).unwrap_or_default();
+    let foreign = foreign_files(dir, planned, &earlier)?;
+    if !foreign.is_empty() {
+        return Err(OutputDirError::Foreign {
+            dir: dir.display().to_string(),
+            files: first_few(foreign),
+        });
+    }
+    earlier.remove_from(dir).map_err(|(path, e)| io(&path)(e))?;
+    Ok(lock)
+}
+
+/// The manifest of the run whose `run.json` is in `dir` (`None`: no
+/// `run.json`; `Some(Err)`: one that does not list its files).
+fn earlier_run(
+    dir: &Path,
+) -> Result<Option<Result<Manifest, manifest::ManifestError>>, OutputDirError> {
+    let path = dir.join("run.json");
+    let text = match std::fs::read_to_string(&path) {
+        Ok(text) => text,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(io(&path)(e)),
+    };
+    let parsed = serde_json::from_str::<serde_json::Value>(&text)
+        .map_err(|e| manifest::ManifestError(format!("run.json is not JSON: {e}")))
+        .and_then(|value| Manifest::from_run_json(&value));
+    Ok(Some(parsed))
+}
+
+/// The files in `dir` a run recording `planned` may write over that
+/// `earlier` does not cover: its fixed names, snapshot names and exported
+/// systems.
+fn foreign_files(
+    dir: &Path,
+    planned: &Manifest,
+    earlier: &Manifest,
+) -> Result<Vec<String>, OutputDirError> {
+    let mut found = Vec::new();
+    for name in names(dir)? {
+        let ours = planned.contains(&name) || manifest::is_snapshot_name(&name);
+        if ours && !earlier.covers(&name) && dir.join(&name).is_file() {
+            found.push(name);
         }
     }
-    Ok(lock)
+    if let Some(systems) = &planned.systems {
+        for name in names(&dir.join(&systems.folder))? {
+            if manifest::system_file_step(&name).is_some() && !earlier.covers_system(&name) {
+                found.push(format!("{}/{name}", systems.folder));
+            }
+        }
+    }
+    Ok(found)
+}
+
+/// The names in `dir`, sorted (none if it does not exist).
+fn names(dir: &Path) -> Result<Vec<String>, OutputDirError> {
+    let entries = match std::fs::read_dir(dir) {
+        Ok(e) => e,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
+        Err(e) => return Err(io(dir)(e)),
+    };
+    let mut names = Vec::new();
+    for entry in entries {
+        names.push(
+            entry
+                .map_err(io(dir))?
+                .file_name()
+                .to_string_lossy()
+                .into_owned(),
+        );
+    }
+    names.sort();
+    Ok(names)
+}
+
+/// [`OutputDirError::InUse`] naming the first few of `files`.
+fn in_use(dir: &Path, files: Vec<String>) -> OutputDirError {
+    OutputDirError::InUse {
+        dir: dir.display().to_string(),
+        files: first_few(files),
+    }
+}
+
+/// At most four names: three and "and N more".
+fn first_few(mut names: Vec<String>) -> Vec<String> {
+    if names.len() > 4 {
+        let more = names.len() - 3;
+        names.truncate(3);
+        names.push(format!("and {more} more"));
+    }
+    names
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn run_files_are_told_from_the_users_files() {
-        for name in [
-            "run.json",
-            "curve.csv",
-            "particles_000012.vtu",
-            "particles.pvd",
-            "checkpoint_000100.bin",
-            ".tmp.123.4.run.json",
-        ] {
-            assert!(is_run_file(name), "{name}");
-        }
-        for name in ["notes.txt", "scene.toml", "curve.csv.bak", "particles.png"] {
-            assert!(!is_run_file(name), "{name}");
-        }
-    }
 
     #[test]
     fn a_lock_is_exclusive_and_released_on_drop() {
@@ -263,28 +321,91 @@ mod tests {
         DirLock::acquire(dir.path()).unwrap();
     }
 
-    #[test]
-    fn overwrite_removes_only_run_files() {
-        let dir = tempfile::tempdir().unwrap();
-        for name in ["run.json", "curve.csv", "particles_000001.vtu", "notes.txt"] {
-            std::fs::write(dir.path().join(name), "x").unwrap();
+    /// A manifest of `names` written as the `run.json` of `dir`.
+    fn earlier_run(dir: &Path, names: &[&str]) -> Manifest {
+        let mut m = Manifest::new();
+        for name in names {
+            m.add(name);
+            std::fs::write(dir.join(name), "x").unwrap();
         }
-        match prepare(dir.path(), false) {
+        m.add("run.json");
+        let json = serde_json::json!({"status": "completed", "manifest": m});
+        std::fs::write(dir.join("run.json"), json.to_string()).unwrap();
+        m
+    }
+
+    fn listing(dir: &Path) -> Vec<String> {
+        names(dir).unwrap()
+    }
+
+    #[test]
+    fn overwrite_removes_only_the_recorded_files() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        let planned = earlier_run(d, &["curve.csv", "particles_000001.vtu"]);
+        // the user's files, named like a run's
+        std::fs::create_dir_all(d.join("checkpoints")).unwrap();
+        std::fs::write(d.join("checkpoints/notes.txt"), "mine").unwrap();
+        for name in ["notes.txt", "mine.pvd", "checkpoint_plan.txt", ".tmp.mine"] {
+            std::fs::write(d.join(name), "mine").unwrap();
+        }
+        match prepare(d, false, &planned) {
             Err(OutputDirError::InUse { files, .. }) => {
                 assert_eq!(files, ["curve.csv", "particles_000001.vtu", "run.json"])
             }
             other => panic!("{other:?}"),
         }
         // the refusal released the lock and removed nothing
-        assert!(!dir.path().join(LOCK_FILE).exists());
-        assert!(dir.path().join("run.json").exists());
-        let lock = prepare(dir.path(), true).unwrap();
-        let mut left: Vec<String> = std::fs::read_dir(dir.path())
-            .unwrap()
-            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-            .collect();
-        left.sort();
-        assert_eq!(left, [LOCK_FILE, "notes.txt"]);
+        assert!(!d.join(LOCK_FILE).exists());
+        assert!(d.join("run.json").exists());
+        let lock = prepare(d, true, &planned).unwrap();
+        assert_eq!(
+            listing(d),
+            [
+                ".mpm-geo.lock",
+                ".tmp.mine",
+                "checkpoint_plan.txt",
+                "checkpoints",
+                "mine.pvd",
+                "notes.txt"
+            ]
+        );
+        assert_eq!(listing(&d.join("checkpoints")), ["notes.txt"]);
         drop(lock);
+    }
+
+    #[test]
+    fn a_file_the_run_would_write_over_is_refused_unless_recorded() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        let mut planned = Manifest::new();
+        planned.add("curve.csv");
+        std::fs::write(d.join("curve.csv"), "my own curve").unwrap();
+        std::fs::write(d.join("particles_000010.vtu"), "my own snapshot").unwrap();
+        for overwrite in [false, true] {
+            match prepare(d, overwrite, &planned) {
+                Err(OutputDirError::Foreign { files, .. }) => {
+                    assert_eq!(files, ["curve.csv", "particles_000010.vtu"])
+                }
+                other => panic!("{other:?}"),
+            }
+        }
+        assert_eq!(
+            std::fs::read_to_string(d.join("curve.csv")).unwrap(),
+            "my own curve"
+        );
+        // a run.json that lists nothing cannot be overwritten
+        std::fs::remove_file(d.join("curve.csv")).unwrap();
+        std::fs::remove_file(d.join("particles_000010.vtu")).unwrap();
+        std::fs::write(d.join("run.json"), r#"{"status": "completed"}"#).unwrap();
+        assert!(matches!(
+            prepare(d, true, &planned),
+            Err(OutputDirError::Unlisted { .. })
+        ));
+        assert!(matches!(
+            prepare(d, false, &planned),
+            Err(OutputDirError::InUse { .. })
+        ));
+        assert!(d.join("run.json").exists());
     }
 }

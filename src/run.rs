@@ -2,7 +2,9 @@
 //! checked ([`crate::output_dir`]), `run.json` says `running` before the first
 //! step, and the observer writes `curve.csv`, snapshots and their `.pvd`
 //! collection and drives the progress bar; at the end `run.json` says
-//! `completed`, `failed` or `interrupted`.
+//! `completed`, `failed` or `interrupted`. `run.json` lists the files the run
+//! writes before it writes them ([`crate::manifest`]), which is what
+//! `--overwrite` and `resume` remove.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -16,6 +18,7 @@ use crate::checkpoint::Checkpointer;
 use crate::error::RunError;
 use crate::integrators::StepReport;
 use crate::interrupt::Interruption;
+use crate::manifest::{self, Manifest, SNAPSHOTS_AHEAD};
 use crate::output::{
     deviatoric_hencky_strain, write_json, write_pvd, write_vtu, CurveWriter, OutputError,
 };
@@ -55,6 +58,8 @@ pub struct OutputObserver {
     stop: bool,
     /// Plain progress lines (stderr not a terminal).
     lines: Option<ProgressLines>,
+    /// The files of the run, recorded in `run.json` before they are written.
+    manifest: Manifest,
 }
 
 /// Where a run's outputs stood after a step: what a checkpoint stores so a
@@ -106,8 +111,14 @@ impl FieldSnapshot {
 }
 
 impl OutputObserver {
-    /// Create `dir` and `curve.csv` in it.
-    pub fn new(dir: &Path, sim: &Simulation, show_progress: bool) -> Result<Self, RunError> {
+    /// Create `dir` and `curve.csv` in it; `manifest` is the run's record
+    /// of its files (already in `run.json`), extended before each new snapshot.
+    pub fn new(
+        dir: &Path,
+        sim: &Simulation,
+        show_progress: bool,
+        manifest: Manifest,
+    ) -> Result<Self, RunError> {
         std::fs::create_dir_all(dir).map_err(|e| {
             OutputError {
                 path: dir.to_path_buf(),
@@ -134,22 +145,24 @@ impl OutputObserver {
             stop_after: None,
             stop: false,
             lines: None,
+            manifest,
         })
     }
 
     /// Continue the outputs of `dir` from `cursor` (`sim` restored from the
     /// same checkpoint): `curve.csv` cut back to the cursor's length, the
-    /// snapshots of later steps removed (the run writes them again) and the
-    /// `.pvd` rewritten with the earlier ones.
+    /// snapshots of later steps that `manifest` records removed (the run
+    /// writes them again) and the `.pvd` rewritten with the earlier ones.
     pub fn resume(
         dir: &Path,
         sim: &Simulation,
         cursor: OutputCursor,
         show_progress: bool,
+        manifest: Manifest,
     ) -> Result<Self, RunError> {
         let curve =
             CurveWriter::reopen(&dir.join("curve.csv"), cursor.curve_bytes).map_err(at(sim))?;
-        remove_snapshots_after(dir, sim.model.step).map_err(at(sim))?;
+        remove_snapshots_after(dir, sim.model.step, &manifest).map_err(at(sim))?;
         if !cursor.snapshots.is_empty() {
             write_pvd(&dir.join(PVD_FILE), &cursor.snapshots).map_err(at(sim))?;
         }
@@ -168,7 +181,13 @@ impl OutputObserver {
             stop_after: None,
             stop: false,
             lines: None,
+            manifest,
         })
+    }
+
+    /// The run's record of its files so far.
+    pub fn manifest(&self) -> &Manifest {
+        &self.manifest
     }
 
     /// Print plain progress lines every `every` seconds (`None`: none).
@@ -245,9 +264,24 @@ impl OutputObserver {
             || (o.snapshot_every > 0 && step.is_multiple_of(o.snapshot_every))
     }
 
-    /// Write `particles_<step>.vtu` and rewrite the `.pvd` collection.
+    /// Write `particles_<step>.vtu` and rewrite the `.pvd` collection; a
+    /// name `run.json` does not list yet is recorded there first, with the
+    /// next ones that can be foreseen.
     fn write_snapshot(&mut self, sim: &Simulation) -> Result<(), RunError> {
-        let name = format!("particles_{:06}.vtu", sim.model.step);
+        let name = manifest::snapshot_name(sim.model.step);
+        if !self.manifest.contains(&name) {
+            foresee_snapshots(&mut self.manifest, sim, sim.model.step);
+            self.manifest.add(&name);
+            self.manifest.add(PVD_FILE);
+            write_run_json(
+                &self.dir.join("run.json"),
+                sim,
+                0.0,
+                RunStatus::Running,
+                &self.manifest,
+            )
+            .map_err(at(sim))?;
+        }
         write_vtu(&self.dir.join(&name), &sim.model.particles).map_err(at(sim))?;
         self.snapshots.push((sim.model.time, name));
         write_pvd(&self.dir.join(PVD_FILE), &self.snapshots).map_err(at(sim))
@@ -356,25 +390,52 @@ fn progress_position(sim: &Simulation) -> u64 {
     }
 }
 
-/// Remove the snapshots `particles_NNNNNN.vtu` of steps after `step`.
-fn remove_snapshots_after(dir: &Path, step: usize) -> Result<(), OutputError> {
-    let io = |path: &Path, e: std::io::Error| OutputError {
-        path: path.to_path_buf(),
-        source: e,
-    };
-    for entry in std::fs::read_dir(dir).map_err(|e| io(dir, e))? {
-        let path = entry.map_err(|e| io(dir, e))?.path();
-        let later = path
-            .file_name()
-            .and_then(|n| n.to_str())
-            .and_then(|n| n.strip_prefix("particles_")?.strip_suffix(".vtu"))
-            .and_then(|n| n.parse::<usize>().ok())
-            .is_some_and(|n| n > step);
-        if later {
-            std::fs::remove_file(&path).map_err(|e| io(&path, e))?;
+/// Remove the snapshots `particles_NNNNNN.vtu` of steps after `step` that
+/// `manifest` records (a user's file of such a name stays).
+fn remove_snapshots_after(dir: &Path, step: usize, manifest: &Manifest) -> Result<(), OutputError> {
+    let later = manifest
+        .files
+        .iter()
+        .filter(|name| manifest::snapshot_step(name).is_some_and(|n| n > step));
+    for name in later {
+        let path = dir.join(name);
+        match std::fs::remove_file(&path) {
+            Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+                return Err(OutputError { path, source: e })
+            }
+            _ => {}
         }
     }
     Ok(())
+}
+
+/// Record in `manifest` the snapshot names of steps from `from` on that the
+/// run can foresee: the steps of `[output] snapshots`, and the next
+/// [`SNAPSHOTS_AHEAD`] multiples of `snapshot_every` (not past the last
+/// step when the step count is fixed). Snapshots at `snapshot_times` fall
+/// on steps known only when reached: they are recorded then.
+pub fn foresee_snapshots(manifest: &mut Manifest, sim: &Simulation, from: usize) {
+    let output = &sim.model.scene.output;
+    for &step in output.snapshots.iter().filter(|&&s| s >= from) {
+        manifest.add(&manifest::snapshot_name(step));
+    }
+    let every = output.snapshot_every;
+    if every == 0 {
+        return;
+    }
+    let fixed_steps = match sim.model.analysis() {
+        AnalysisKind::Explicit => None,
+        AnalysisKind::ImplicitDynamic if sim.model.scene.solver.adaptive() => None,
+        _ => sim.model.scene.scene.steps,
+    };
+    let first = from.next_multiple_of(every);
+    let mut last = first + (SNAPSHOTS_AHEAD - 1) * every;
+    if let Some(steps) = fixed_steps {
+        last = last.min(steps);
+    }
+    for step in (first..=last).step_by(every) {
+        manifest.add(&manifest::snapshot_name(step));
+    }
 }
 
 impl Observer for OutputObserver {
@@ -451,6 +512,9 @@ pub struct RunOutcome {
     pub interrupted: Option<Interruption>,
     /// The fields at the `[output] snapshot_times` the run reached.
     pub fields: Vec<FieldSnapshot>,
+    /// The output directory's lock, held until the outcome is dropped (a
+    /// campaign writes its run's record under it).
+    pub lock: Option<output_dir::DirLock>,
 }
 
 /// How a run writes its output directory.
@@ -474,6 +538,9 @@ pub struct RunOptions {
     /// `run.json` left `running`); the simulation in the outcome is then
     /// not finished.
     pub stop_after: Option<usize>,
+    /// Files the caller writes into the directory after the run (a
+    /// campaign's record), recorded in `run.json` with the run's own.
+    pub extra_files: Vec<String>,
 }
 
 /// Run a validated scene, writing `curve.csv`, snapshots and `run.json` into
@@ -505,39 +572,102 @@ pub fn run_scene_with(
 ) -> Result<RunOutcome, Box<dyn std::error::Error + Send + Sync>> {
     let start = Instant::now();
     let mut sim = Simulation::new(scene)?;
-    let _lock = output_dir::prepare(out, options.overwrite)?;
+    let manifest = planned_manifest(&sim, options);
+    let lock = output_dir::prepare(out, options.overwrite, &manifest)?;
     let systems = sim.model.scene.output.systems.clone();
     let max_mb = sim.model.scene.output.systems_max_mb;
     if let Some(implicit) = sim.integrator.implicit_mut() {
-        implicit.export_systems(out.join("systems"), systems, max_mb);
+        implicit.export_systems(out.join(manifest::SYSTEMS_FOLDER), systems, max_mb);
     }
-    let checkpoints = match &options.checkpoint {
-        Some((source, every)) => Some(Checkpointer::start(out, source, *every)?),
-        None => None,
-    };
     let (show, stop_after) = (options.show_progress, options.stop_after);
     let lines = progress_lines_every(show, options.progress_every);
-    drive(sim, out, start, move |sim| {
-        let observer = sim
-            .profile
-            .time(Stage::Output, || OutputObserver::new(out, sim, show))?;
+    let drive_options = Drive {
+        start,
+        lock,
+        manifest,
+        earlier: None,
+        written_later: options.extra_files.clone(),
+    };
+    drive(sim, out, drive_options, move |sim, manifest| {
+        let checkpoints = match &options.checkpoint {
+            Some((source, every)) => Some(
+                Checkpointer::start(out, source, *every)
+                    .map_err(|e| e.at(sim.model.step, sim.model.time))?,
+            ),
+            None => None,
+        };
+        let observer = sim.profile.time(Stage::Output, || {
+            OutputObserver::new(out, sim, show, manifest)
+        })?;
         Ok(observer
             .with_checkpoints(checkpoints, stop_after)
             .with_progress_lines(sim, lines))
     })
 }
 
+/// The files a new run of `sim` with `options` will write, as far as they
+/// can be foreseen: `run.json`, `curve.csv`, `particles.pvd` and the first
+/// snapshots, the checkpoint files, the caller's files and the exported
+/// systems.
+fn planned_manifest(sim: &Simulation, options: &RunOptions) -> Manifest {
+    let mut manifest = Manifest::new();
+    for name in ["run.json", "curve.csv", PVD_FILE] {
+        manifest.add(name);
+    }
+    if options.checkpoint.is_some() {
+        manifest.add(crate::checkpoint::CHECKPOINT_FILE);
+        manifest.add(crate::checkpoint::SOURCE_FILE);
+    }
+    for name in &options.extra_files {
+        manifest.add(name);
+    }
+    let systems = &sim.model.scene.output.systems;
+    if sim.integrator.implicit().is_some() && !systems.is_empty() {
+        manifest.systems = Some(manifest::SystemsRecord {
+            folder: manifest::SYSTEMS_FOLDER.into(),
+            steps: systems.clone(),
+        });
+    }
+    foresee_snapshots(&mut manifest, sim, sim.model.step);
+    manifest
+}
+
+/// What [`drive`] needs besides the simulation and the directory.
+pub(crate) struct Drive {
+    /// When the command started (for the wall time).
+    pub start: Instant,
+    /// The directory's lock, handed on to the outcome.
+    pub lock: output_dir::DirLock,
+    /// The run's files as recorded so far.
+    pub manifest: Manifest,
+    /// A resumed run: the `run.json` it continues, put back if the resume
+    /// fails before its time loop starts (it then changed nothing the
+    /// checkpoint does not restore, and the run stays as it was).
+    pub earlier: Option<Vec<u8>>,
+    /// Files the caller writes after the run (a campaign's record): kept
+    /// in the manifest though they do not exist yet when it is written.
+    pub written_later: Vec<String>,
+}
+
 /// Run `sim` in `out` (locked by the caller) with the observer `make`
-/// gives (a new run's or a resumed one's): `run.json` says `running`, the
-/// time loop, the last row, `run.json` with the end status.
+/// gives (a new run's or a resumed one's, holding the manifest it is
+/// given): `run.json` says `running`, the time loop, the last row,
+/// `run.json` with the end status and the files that exist.
 pub(crate) fn drive(
     mut sim: Simulation,
     out: &Path,
-    start: Instant,
-    make: impl FnOnce(&Simulation) -> Result<OutputObserver, RunError>,
+    options: Drive,
+    make: impl FnOnce(&Simulation, Manifest) -> Result<OutputObserver, RunError>,
 ) -> Result<RunOutcome, Box<dyn std::error::Error + Send + Sync>> {
+    let Drive {
+        start,
+        lock,
+        manifest,
+        earlier,
+        written_later,
+    } = options;
     let mut observer = None;
-    let result = start_and_run(&mut sim, out, make, &mut observer);
+    let result = start_and_run(&mut sim, out, &manifest, make, &mut observer);
     if let (Ok(_), Some(o)) = (&result, observer.as_mut()) {
         if o.stopped() {
             // the stop hook leaves what a kill leaves
@@ -548,6 +678,7 @@ pub(crate) fn drive(
                 error: None,
                 interrupted: None,
                 fields: observer.map(|o| o.fields).unwrap_or_default(),
+                lock: Some(lock),
             });
         }
     }
@@ -567,7 +698,25 @@ pub(crate) fn drive(
         (None, Some(signal)) => RunStatus::Interrupted(signal),
         (None, None) => RunStatus::Completed,
     };
-    if let Err(e) = write_run_json(&out.join("run.json"), &sim, wall_seconds, status) {
+    let path = out.join("run.json");
+    let written = match earlier.filter(|_| observer.is_none()) {
+        // a resume that never reached its time loop leaves the run as it was
+        Some(bytes) => {
+            crate::atomic_file::write_atomic(&path, bytes).map_err(|source| OutputError {
+                path: path.clone(),
+                source,
+            })
+        }
+        None => {
+            let mut manifest = observer.as_ref().map_or(manifest, |o| o.manifest.clone());
+            manifest.retain_existing(out);
+            for name in &written_later {
+                manifest.add(name);
+            }
+            write_run_json(&path, &sim, wall_seconds, status, &manifest)
+        }
+    };
+    if let Err(e) = written {
         // the first error is the one reported; run.json keeps its last
         // whole version (`running`) if even this fails
         error.get_or_insert(e.at(sim.model.step, sim.model.time));
@@ -578,6 +727,7 @@ pub(crate) fn drive(
         interrupted: interrupted.filter(|_| error.is_none()),
         error,
         fields: observer.map(|o| o.fields).unwrap_or_default(),
+        lock: Some(lock),
     })
 }
 
@@ -585,11 +735,19 @@ pub(crate) fn drive(
 fn start_and_run(
     sim: &mut Simulation,
     out: &Path,
-    make: impl FnOnce(&Simulation) -> Result<OutputObserver, RunError>,
+    manifest: &Manifest,
+    make: impl FnOnce(&Simulation, Manifest) -> Result<OutputObserver, RunError>,
     observer: &mut Option<OutputObserver>,
 ) -> Result<RunEnd, RunError> {
-    write_run_json(&out.join("run.json"), sim, 0.0, RunStatus::Running).map_err(at(sim))?;
-    let new = make(sim)?;
+    write_run_json(
+        &out.join("run.json"),
+        sim,
+        0.0,
+        RunStatus::Running,
+        manifest,
+    )
+    .map_err(at(sim))?;
+    let new = make(sim, manifest.clone())?;
     sim.run(observer.insert(new))
 }
 
@@ -622,12 +780,14 @@ impl RunStatus<'_> {
 /// `run.json`: resolved scene, crate version, solver choices and the tangent
 /// solver's factorisation counts, per-stage profile, work counters
 /// ([`crate::profile::Work`], every counter, zeros too), status (with the
-/// error, or the signal of an interrupted run), written whole.
+/// error, or the signal of an interrupted run), the files of the run
+/// (`manifest`), written whole.
 pub fn write_run_json(
     path: &Path,
     sim: &Simulation,
     wall_seconds: f64,
     status: RunStatus<'_>,
+    manifest: &Manifest,
 ) -> Result<(), OutputError> {
     let (error, error_id) = match status {
         RunStatus::Failed(e) => (
@@ -732,6 +892,7 @@ pub fn write_run_json(
         },
         "profile": sim.profile.totals(wall_seconds),
         "work": work,
+        "manifest": manifest,
         "scene": model.scene,
     });
     write_json(path, &value)

@@ -334,6 +334,7 @@ fn damaged_foreign_and_other_version_checkpoints_are_refused_and_nothing_changes
 #[test]
 fn a_checkpoint_written_on_request_at_any_step_resumes_identically() {
     use mpm_geo::checkpoint::{Checkpointer, SceneSource};
+    use mpm_geo::manifest::Manifest;
     use mpm_geo::run::OutputObserver;
     use mpm_geo::simulation::Simulation;
 
@@ -348,7 +349,7 @@ fn a_checkpoint_written_on_request_at_any_step_resumes_identically() {
     let source = SceneSource::read(&scene, &overrides).unwrap();
     let mut sim = Simulation::new(source.scene().unwrap()).unwrap();
     let checkpoints = Checkpointer::start(&stopped, &source, 0).unwrap_or_else(|e| panic!("{e}"));
-    let mut observer = OutputObserver::new(&stopped, &sim, false)
+    let mut observer = OutputObserver::new(&stopped, &sim, false, Manifest::new())
         .unwrap()
         .with_checkpoints(Some(checkpoints), Some(47));
     sim.run(&mut observer).unwrap();

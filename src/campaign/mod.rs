@@ -50,6 +50,23 @@ pub enum CampaignError {
     /// record: their shards have not run yet, or stopped.
     #[error("campaign runs not finished (run their shards first): {0}")]
     Unfinished(String),
+    /// Runs whose directories another live process holds (a second
+    /// campaign into the same `--out`): not run here, nothing recorded.
+    #[error("campaign runs being written by another process, not run here: {0}; run the campaign again once it has ended (finished runs are not run again)")]
+    Locked(String),
+    /// SIGINT or SIGTERM stopped the campaign: the runs in progress ended
+    /// after a whole step (`run.json` says `interrupted`), no other started.
+    #[error(
+        "campaign interrupted by {}: {}; run the same command again to finish it",
+        signal.name(),
+        if stopped.is_empty() { "no run was in progress".to_string() } else { format!("{} stopped after a whole step (run.json says interrupted)", stopped.join(", ")) }
+    )]
+    Interrupted {
+        /// The signal.
+        signal: crate::interrupt::Interruption,
+        /// The runs it stopped.
+        stopped: Vec<String>,
+    },
     /// A run's `curve.csv` cannot be read as its load curve.
     #[error("campaign curve {path}: {problem}")]
     Curve {

@@ -2,10 +2,18 @@
 //! everything the report needs beyond `curve.csv` (final fields, snapshots,
 //! effort, wall time), with a fingerprint of the scene as run.
 //!
+//! A record is written only by the process that ran the run to its end
+//! (completed, or stopped by a failed step), while it still holds the run
+//! directory's lock, and it names the run's end status and the length and
+//! CRC-32 of its `curve.csv`.
+//!
 //! It is what lets a campaign be re-run, spread and collected:
-//! - a re-run campaign skips every run whose record is present, readable and
+//! - a re-run campaign skips every run whose record is present, readable,
 //!   has the fingerprint of the scene it would run now (an edited scene or
-//!   another `--set` is run again);
+//!   another `--set` is run again), and still matches the directory: its
+//!   `run.json` says the same end status and its `curve.csv` has the same
+//!   bytes (a run killed or interrupted later, or a changed curve, is run
+//!   again);
 //! - `--shard K/N` runs one part of the campaign and leaves the records;
 //! - `--collect` builds the report from the records of all parts.
 //!
@@ -24,7 +32,7 @@ use crate::scene::Scene;
 pub const RECORD_FILE: &str = "campaign_run.json";
 
 /// Version of the record's layout; a record of another version is run again.
-const RECORD_FORMAT: u32 = 1;
+const RECORD_FORMAT: u32 = 2;
 
 /// A finished run, as the report needs it (the curve is read from `curve.csv`).
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -53,6 +61,18 @@ pub struct RunRecord {
     pub profile: String,
     /// Steps, Newton iterations and halvings.
     pub effort: Effort,
+    /// How the run ended, as its `run.json` says: `completed` or `failed`.
+    pub status: String,
+    /// Length of the run's `curve.csv` when it ended, bytes.
+    pub curve_bytes: u64,
+    /// CRC-32 of those bytes.
+    pub curve_crc32: u32,
+}
+
+/// Length and CRC-32 of the file `path`.
+fn curve_checksum(path: &Path) -> std::io::Result<(u64, u32)> {
+    let bytes = std::fs::read(path)?;
+    Ok((bytes.len() as u64, crc32fast::hash(&bytes)))
 }
 
 /// A stable fingerprint of `scene` run with `step_factor` times its steps:
@@ -89,19 +109,75 @@ impl RunRecord {
             wall_seconds: 0.0,
             profile: String::new(),
             effort: Effort::default(),
+            status: String::new(),
+            curve_bytes: 0,
+            curve_crc32: 0,
         }
     }
 
+    /// Name the run's end (`completed`, or `failed` with `error`) and its
+    /// `curve.csv` in `dir` as it is now.
+    pub fn seal(&mut self, dir: &Path) -> Result<(), CampaignError> {
+        let path = dir.join("curve.csv");
+        let (bytes, crc) = curve_checksum(&path)
+            .map_err(|e| CampaignError::Output(path.display().to_string(), e.to_string()))?;
+        self.status = if self.error.is_some() {
+            "failed"
+        } else {
+            "completed"
+        }
+        .into();
+        self.curve_bytes = bytes;
+        self.curve_crc32 = crc;
+        Ok(())
+    }
+
     /// The record in `dir` if it is there, readable, of this format and of
-    /// the scene with `fingerprint`, and the run's `curve.csv` is there too;
+    /// the scene with `fingerprint`, and still matches the run's files;
     /// `None` means the run has to be made (again).
     pub fn load_matching(dir: &Path, fingerprint: &str) -> Option<Self> {
-        let text = std::fs::read_to_string(dir.join(RECORD_FILE)).ok()?;
-        let record: RunRecord = serde_json::from_str(&text).ok()?;
-        let whole = record.format == RECORD_FORMAT
-            && record.fingerprint == fingerprint
-            && dir.join("curve.csv").is_file();
-        whole.then_some(record)
+        Self::verify(dir, fingerprint).ok().flatten()
+    }
+
+    /// The record in `dir` checked against the run's files: `Ok(None)` when
+    /// there is none, `Err(why)` when there is one that must not be reused
+    /// (another scene or format, a `run.json` that does not say the end the
+    /// record names — a run killed or interrupted after it — or a
+    /// `curve.csv` other than the one the run ended with).
+    pub fn verify(dir: &Path, fingerprint: &str) -> Result<Option<Self>, String> {
+        let text = match std::fs::read_to_string(dir.join(RECORD_FILE)) {
+            Ok(text) => text,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+            Err(e) => return Err(format!("its record cannot be read ({e})")),
+        };
+        let record: RunRecord = serde_json::from_str(&text)
+            .map_err(|_| "its record is of another format or damaged".to_string())?;
+        if record.format != RECORD_FORMAT {
+            return Err("its record is of another format".into());
+        }
+        if record.fingerprint != fingerprint {
+            return Err("its record is of another scene".into());
+        }
+        if !["completed", "failed"].contains(&record.status.as_str()) {
+            return Err(format!("its record says `{}`", record.status));
+        }
+        let status = std::fs::read_to_string(dir.join("run.json"))
+            .ok()
+            .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+            .and_then(|v| Some(v.get("status")?.as_str()?.to_string()))
+            .unwrap_or_else(|| "unreadable".into());
+        if status != record.status {
+            return Err(format!(
+                "its run.json says `{status}`, its record `{}`",
+                record.status
+            ));
+        }
+        match curve_checksum(&dir.join("curve.csv")) {
+            Ok((bytes, crc)) if bytes == record.curve_bytes && crc == record.curve_crc32 => {}
+            Ok(_) => return Err("its curve.csv is not the one the run ended with".into()),
+            Err(e) => return Err(format!("its curve.csv cannot be read ({e})")),
+        }
+        Ok(Some(record))
     }
 
     /// Write the record into `dir` under a temporary name and rename it, so
@@ -198,18 +274,42 @@ mod tests {
     }
 
     #[test]
-    fn a_record_is_reused_only_for_the_same_scene() {
+    fn a_record_is_reused_only_for_the_same_scene_and_the_same_end() {
         let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        let status = |s: &str| {
+            std::fs::write(d.join("run.json"), format!(r#"{{"status": "{s}"}}"#)).unwrap()
+        };
+        std::fs::write(d.join("curve.csv"), "step,time\n0,0\n1,0.1\n").unwrap();
+        status("completed");
         let mut record = RunRecord::new("00ff".into());
         record.eps_q = vec![0.1 + 0.2, 1.0 / 3.0, 5e-324];
-        record.save(dir.path()).unwrap();
-        // no curve.csv yet: not a finished run
-        assert!(RunRecord::load_matching(dir.path(), "00ff").is_none());
-        std::fs::write(dir.path().join("curve.csv"), "step,time\n").unwrap();
-        let read = RunRecord::load_matching(dir.path(), "00ff").unwrap();
+        record.seal(d).unwrap();
+        record.save(d).unwrap();
+        let read = RunRecord::load_matching(d, "00ff").unwrap();
         assert_eq!(read.eps_q, record.eps_q, "f64 round trip");
-        assert!(RunRecord::load_matching(dir.path(), "00fe").is_none());
-        std::fs::write(dir.path().join(RECORD_FILE), "{\"format\": 1").unwrap();
-        assert!(RunRecord::load_matching(dir.path(), "00ff").is_none());
+        assert_eq!(read.status, "completed");
+        assert!(RunRecord::load_matching(d, "00fe").is_none());
+        // the run was started again and killed, or interrupted
+        for later in ["running", "interrupted", "failed"] {
+            status(later);
+            assert!(RunRecord::verify(d, "00ff").unwrap_err().contains(later));
+        }
+        status("completed");
+        // a curve cut or changed after the run ended
+        std::fs::write(d.join("curve.csv"), "step,time\n0,0\n").unwrap();
+        assert!(RunRecord::load_matching(d, "00ff").is_none());
+        std::fs::write(d.join("curve.csv"), "step,time\n0,0\n1,0.2\n").unwrap();
+        assert!(RunRecord::load_matching(d, "00ff").is_none());
+        std::fs::write(d.join("curve.csv"), "step,time\n0,0\n1,0.1\n").unwrap();
+        assert!(RunRecord::load_matching(d, "00ff").is_some());
+        std::fs::remove_file(d.join("curve.csv")).unwrap();
+        assert!(RunRecord::load_matching(d, "00ff").is_none());
+        std::fs::write(d.join(RECORD_FILE), "{\"format\": 2").unwrap();
+        assert!(RunRecord::load_matching(d, "00ff").is_none());
+        assert!(matches!(
+            RunRecord::verify(tempfile::tempdir().unwrap().path(), "00ff"),
+            Ok(None)
+        ));
     }
 }

@@ -60,7 +60,12 @@ fn scenes_in(dir: &Path) -> Result<Vec<PathBuf>, CampaignError> {
 /// `out/<scene>_dtK/`) and the time-step discrepancy of each curve is reported
 /// (`step_convergence.csv`, report section). Returns the runs in scene order,
 /// refinements after the scenes; a run's unreadable `curve.csv` is an error
-/// once every run has finished.
+/// once every run has finished. A run whose directory another process holds
+/// (a second campaign into the same `out`) is not run and nothing is
+/// recorded for it ([`CampaignError::Locked`]); after SIGINT/SIGTERM (with
+/// [`crate::interrupt`] installed) the runs in progress stop after a whole
+/// step, no other starts, and no report is written
+/// ([`CampaignError::Interrupted`]).
 pub fn run_campaign(
     dir: &Path,
     out: &Path,
@@ -103,15 +108,23 @@ pub fn run_campaign(
         .collect();
     let costs: Vec<f64> = all.iter().map(Planned::cost).collect();
     let selected = options.part.selects(&costs);
-    // runs finished earlier (same scene, record and curve present) are not run again
-    let mut records: Vec<Option<RunRecord>> = all
-        .iter()
-        .map(|p| RunRecord::load_matching(&out.join(&p.name), &p.fingerprint))
-        .collect();
-    for ((planned, record), selected) in all.iter().zip(&records).zip(&selected) {
+    // runs finished earlier (same scene, their record matching their
+    // run.json and curve.csv) are not run again
+    let mut records: Vec<Option<RunRecord>> = Vec::with_capacity(all.len());
+    for (planned, selected) in all.iter().zip(&selected) {
+        let record = match RunRecord::verify(&out.join(&planned.name), &planned.fingerprint) {
+            Ok(record) => record,
+            Err(why) => {
+                if *selected {
+                    eprintln!("campaign: {} is run again: {why}", planned.name);
+                }
+                None
+            }
+        };
         if record.is_some() && *selected {
             eprintln!("campaign: {} finished earlier, not run again", planned.name);
         }
+        records.push(record);
     }
     // popped from the back: the longest runs (finest meshes, refinements) start first
     let mut queue: Vec<usize> = (0..all.len())
@@ -121,27 +134,19 @@ pub fn run_campaign(
     let queue = Mutex::new(queue);
     let results = Mutex::new(Vec::new());
     let run_queued = || loop {
+        // after SIGINT/SIGTERM no further run starts
+        if crate::interrupt::requested().is_some() {
+            break;
+        }
         let next = queue.lock().map(|mut q| q.pop()).unwrap_or(None);
         let Some(index) = next else {
             break;
         };
         let planned = &all[index];
-        let record = execute(planned, &out.join(&planned.name), options.checkpoint_every);
-        match &record {
-            Ok(record) => eprintln!(
-                "campaign: {} finished in {:.1} s{}",
-                planned.name,
-                record.wall_seconds,
-                record
-                    .error
-                    .as_ref()
-                    .map(|e| format!(" (stopped: {e})"))
-                    .unwrap_or_default()
-            ),
-            Err(e) => eprintln!("campaign: {}: {e}", planned.name),
-        }
+        let executed = execute(planned, &out.join(&planned.name), options.checkpoint_every);
+        say(&planned.name, &executed);
         if let Ok(mut r) = results.lock() {
-            r.push((index, record));
+            r.push((index, executed));
         }
     };
     let jobs = options.jobs.max(1);
@@ -157,8 +162,23 @@ pub fn run_campaign(
             });
         }
     });
-    for (index, record) in results.into_inner().unwrap_or_default() {
-        records[index] = Some(record?);
+    let (mut locked, mut stopped) = (Vec::new(), Vec::new());
+    for (index, executed) in results.into_inner().unwrap_or_default() {
+        match executed? {
+            Executed::Finished(record) | Executed::NotSetUp(record) => {
+                records[index] = Some(record)
+            }
+            Executed::Locked(why) => locked.push(format!("{} ({why})", all[index].name)),
+            Executed::Interrupted(_) => stopped.push(all[index].name.clone()),
+        }
+    }
+    if let Some(signal) = crate::interrupt::requested() {
+        stopped.sort();
+        return Err(CampaignError::Interrupted { signal, stopped });
+    }
+    if !locked.is_empty() {
+        locked.sort();
+        return Err(CampaignError::Locked(locked.join("; ")));
     }
     let in_scope: Vec<usize> = match options.part {
         Part::Shard { .. } => (0..all.len()).filter(|&i| selected[i]).collect(),
@@ -252,7 +272,44 @@ fn refine_steps(name: &str, scene: &Scene, k: usize) -> Result<Scene, CampaignEr
     Ok(refined)
 }
 
-/// Run one planned scene into `out` and leave its [`RunRecord`] there. With
+/// How one planned run of a campaign ended in this process.
+enum Executed {
+    /// It ran to its end (completed, or stopped by a failed step); its
+    /// record is saved in its directory.
+    Finished(RunRecord),
+    /// It could not be set up (the message is in the record, which is not
+    /// saved: the run is tried again by the next campaign).
+    NotSetUp(RunRecord),
+    /// Another live process holds its directory (why, with the process id).
+    Locked(String),
+    /// A signal stopped it after a whole step; its `run.json` says
+    /// `interrupted` and no record is saved.
+    Interrupted(crate::interrupt::Interruption),
+}
+
+/// Print how a run ended.
+fn say(name: &str, executed: &Result<Executed, CampaignError>) {
+    match executed {
+        Ok(Executed::Finished(record)) | Ok(Executed::NotSetUp(record)) => eprintln!(
+            "campaign: {name} finished in {:.1} s{}",
+            record.wall_seconds,
+            record
+                .error
+                .as_ref()
+                .map(|e| format!(" (stopped: {e})"))
+                .unwrap_or_default()
+        ),
+        Ok(Executed::Locked(why)) => eprintln!("campaign: {name} not run here: {why}"),
+        Ok(Executed::Interrupted(signal)) => eprintln!(
+            "campaign: {name} interrupted by {} after a whole step",
+            signal.name()
+        ),
+        Err(e) => eprintln!("campaign: {name}: {e}"),
+    }
+}
+
+/// Run one planned scene into `out` and, if it ran to its end, leave its
+/// [`RunRecord`] there, written while the run's lock is still held. With
 /// `checkpoint_every`, the run writes checkpoints, and a run of the same
 /// scene stopped earlier in `out` (a killed campaign) is resumed from its
 /// checkpoint instead of started again.
@@ -260,9 +317,10 @@ fn execute(
     planned: &Planned,
     out: &Path,
     checkpoint_every: Option<usize>,
-) -> Result<RunRecord, CampaignError> {
+) -> Result<Executed, CampaignError> {
     let mut record = RunRecord::new(planned.fingerprint.clone());
     let start = Instant::now();
+    let extra_files = vec![super::RECORD_FILE.to_string()];
     let outcome = match checkpoint_every.and_then(|_| resumable(planned, out)) {
         Some(resumable) => {
             eprintln!(
@@ -270,7 +328,11 @@ fn execute(
                 planned.name,
                 resumable.step()
             );
-            resumable.run(false, &ResumeOptions::default())
+            let options = ResumeOptions {
+                extra_files,
+                ..ResumeOptions::default()
+            };
+            resumable.run(false, &options)
         }
         None => {
             // the campaign owns its runs' directories: an earlier campaign's
@@ -289,45 +351,62 @@ fn execute(
                 show_progress: false,
                 overwrite: true,
                 checkpoint: checkpoint_every.map(source),
+                extra_files,
                 ..Default::default()
             };
             run_scene_with(planned.scene.clone(), out, &options)
         }
     };
-    match outcome {
-        Err(e) => record.error = Some(e.to_string()),
-        Ok(outcome) => {
-            let model = &outcome.simulation.model;
-            let p = &model.particles;
-            record.positions = p.position.clone();
-            record.volumes = p.volume.clone();
-            let usage = outcome.simulation.integrator.usage();
-            record.effort = Effort {
-                steps: model.step,
-                newton_iterations: usage.newton_iterations,
-                halvings: usage.halvings,
-            };
-            record.eps_q = p.def_grad.iter().map(deviatoric_hencky_strain).collect();
-            if planned.scene.nonlocal.is_some() {
-                record.kappa_bar = p
-                    .state
-                    .iter()
-                    .map(|s| s.plastic_strain_eq_nonlocal)
-                    .collect();
+    let outcome = match outcome {
+        Ok(outcome) => outcome,
+        Err(e) => {
+            if let Some(lock) = e.downcast_ref::<crate::output_dir::OutputDirError>() {
+                if matches!(
+                    lock,
+                    crate::output_dir::OutputDirError::Locked { .. }
+                        | crate::output_dir::OutputDirError::LockUnreadable { .. }
+                ) {
+                    return Ok(Executed::Locked(lock.to_string()));
+                }
             }
-            record.error = outcome.error.as_ref().map(|e| e.to_string());
-            let lost_mass: f64 = model.lost_points.iter().map(|l| l.mass).sum();
-            let total_mass = p.mass.iter().sum::<f64>() + lost_mass;
-            record.lost_points = (model.lost_points.len(), lost_mass / total_mass);
-            record.profile = outcome.simulation.profile.table(outcome.wall_seconds);
-            record.fields = outcome.fields;
+            record.error = Some(e.to_string());
+            record.wall_seconds = start.elapsed().as_secs_f64();
+            return Ok(Executed::NotSetUp(record));
         }
+    };
+    if let Some(signal) = outcome.interrupted {
+        return Ok(Executed::Interrupted(signal));
     }
+    let model = &outcome.simulation.model;
+    let p = &model.particles;
+    record.positions = p.position.clone();
+    record.volumes = p.volume.clone();
+    let usage = outcome.simulation.integrator.usage();
+    record.effort = Effort {
+        steps: model.step,
+        newton_iterations: usage.newton_iterations,
+        halvings: usage.halvings,
+    };
+    record.eps_q = p.def_grad.iter().map(deviatoric_hencky_strain).collect();
+    if planned.scene.nonlocal.is_some() {
+        record.kappa_bar = p
+            .state
+            .iter()
+            .map(|s| s.plastic_strain_eq_nonlocal)
+            .collect();
+    }
+    record.error = outcome.error.as_ref().map(|e| e.to_string());
+    let lost_mass: f64 = model.lost_points.iter().map(|l| l.mass).sum();
+    let total_mass = p.mass.iter().sum::<f64>() + lost_mass;
+    record.lost_points = (model.lost_points.len(), lost_mass / total_mass);
+    record.profile = outcome.simulation.profile.table(outcome.wall_seconds);
     record.wall_seconds = start.elapsed().as_secs_f64();
-    if out.is_dir() {
-        record.save(out)?;
-    }
-    Ok(record)
+    record.fields = outcome.fields;
+    // still under the run's lock (`outcome.lock`, released below)
+    record.seal(out)?;
+    record.save(out)?;
+    drop(outcome.lock);
+    Ok(Executed::Finished(record))
 }
 
 /// The checkpointed run of `planned`'s scene in `out`, if there is one.

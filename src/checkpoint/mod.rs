@@ -43,6 +43,7 @@ use serde::{Deserialize, Serialize};
 pub use state::{Misfit, SavedState};
 
 use crate::error::RunError;
+use crate::manifest::Manifest;
 use crate::run::{OutputCursor, OutputObserver, RunOutcome};
 use crate::scene::{Scene, SceneError};
 use crate::simulation::Simulation;
@@ -134,6 +135,12 @@ pub enum CheckpointError {
         #[source]
         source: SceneError,
     },
+    /// The run in the directory completed: there is nothing to resume.
+    #[error("{path} says the run completed; there is nothing to resume (to repeat it, run the scene again with --overwrite)")]
+    Completed {
+        /// The run's `run.json`.
+        path: String,
+    },
     /// Reading or writing a checkpoint file failed.
     #[error("{path}: {message}")]
     Io {
@@ -163,6 +170,7 @@ impl crate::error_id::Identified for CheckpointError {
             Self::Foreign { .. } => ErrorId::CheckpointForeign,
             Self::Outputs { .. } => ErrorId::CheckpointOutputs,
             Self::Scene { .. } => ErrorId::CheckpointScene,
+            Self::Completed { .. } => ErrorId::CheckpointCompleted,
             Self::Io { .. } => ErrorId::CheckpointIo,
         }
     }
@@ -180,6 +188,7 @@ impl CheckpointError {
             | Self::Foreign { path, .. }
             | Self::Outputs { path, .. }
             | Self::Scene { path, .. }
+            | Self::Completed { path }
             | Self::Io { path, .. } => path.clone(),
         };
         RunError::Output {
@@ -247,22 +256,20 @@ struct SourceRecord {
 }
 
 /// Replace `path` by `bytes` atomically: write a temporary file in the same
-/// directory, flush it to disk, rename it over `path`.
+/// directory (named as [`crate::atomic_file`] names them, so the run's
+/// manifest covers it), flush it to disk, rename it over `path`.
 pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), CheckpointError> {
     let dir = path.parent().unwrap_or(Path::new("."));
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let temporary = dir.join(format!("{}{name}", crate::atomic_file::TEMP_PREFIX));
+    let target = crate::atomic_file::AtomicPath::new(path);
     let written = (|| {
-        let mut file = std::fs::File::create(&temporary)?;
+        let mut file = std::fs::File::create(target.temp())?;
         file.write_all(bytes)?;
         file.sync_all()?;
-        std::fs::rename(&temporary, path)
+        drop(file);
+        // an uncommitted target removes its temporary file
+        target.commit()
     })();
     if let Err(e) = written {
-        let _ = std::fs::remove_file(&temporary);
         return Err(io_error(path, e));
     }
     // make the rename itself durable where the platform allows
@@ -462,6 +469,9 @@ pub struct ResumeOptions {
     pub stop_after: Option<usize>,
     /// Seconds between plain progress lines (see [`RunOptions`](crate::run::RunOptions)).
     pub progress_every: Option<f64>,
+    /// Files the caller writes into the directory after the run (a
+    /// campaign's record), recorded in `run.json` with the run's own.
+    pub extra_files: Vec<String>,
 }
 
 /// A checkpointed run directory, locked, checked and ready to continue.
@@ -473,6 +483,11 @@ pub struct Resumable {
     simulation: Simulation,
     state: SavedState,
     curve: CurveTracker,
+    /// The run's `run.json` as found (put back if the resume fails before
+    /// its time loop), if there is one.
+    earlier: Option<Vec<u8>>,
+    /// The run's files as its `run.json` records them.
+    manifest: Manifest,
 }
 
 impl Resumable {
@@ -519,6 +534,7 @@ impl Resumable {
             });
         }
         let source = record.scene;
+        let (earlier, manifest) = earlier_run(dir)?;
         let checkpoint_path = dir.join(CHECKPOINT_FILE);
         let bytes = read(CHECKPOINT_FILE)?;
         let state = decode(&checkpoint_path, &bytes, source.fingerprint())?;
@@ -556,6 +572,7 @@ impl Resumable {
                 ),
             });
         }
+        let manifest = manifest.unwrap_or_else(|| unlisted_run_files(&state.cursor));
         Ok(Self {
             _lock: lock,
             dir: dir.to_path_buf(),
@@ -564,6 +581,8 @@ impl Resumable {
             simulation,
             state,
             curve,
+            earlier,
+            manifest,
         })
     }
 
@@ -582,9 +601,12 @@ impl Resumable {
         self.state.step
     }
 
-    /// Continue the run to its end: `curve.csv` is cut back to the
+    /// Continue the run to its end: `run.json` says `running` (its manifest
+    /// naming this process's temporary files too), the temporary files the
+    /// earlier processes left are removed, `curve.csv` is cut back to the
     /// checkpoint's rows, later snapshots are removed and written again,
-    /// checkpoints go on, and `run.json` is written at the end.
+    /// checkpoints go on, and `run.json` is written at the end. A resume
+    /// that fails before its time loop puts the earlier `run.json` back.
     pub fn run(
         self,
         show_progress: bool,
@@ -599,7 +621,14 @@ impl Resumable {
             mut simulation,
             state,
             curve,
+            earlier,
+            mut manifest,
         } = self;
+        let left_behind = manifest.temporary_prefixes.clone();
+        manifest.add_own_temporary_prefix();
+        for name in &options.extra_files {
+            manifest.add(name);
+        }
         let cursor = state.restore(&mut simulation);
         let checkpoints = Checkpointer {
             dir: dir.clone(),
@@ -609,13 +638,67 @@ impl Resumable {
         };
         let stop_after = options.stop_after;
         let lines = crate::run::progress_lines_every(show_progress, options.progress_every);
-        crate::run::drive(simulation, &dir, start, |sim| {
-            let observer = OutputObserver::resume(&dir, sim, cursor, show_progress)?;
+        let drive = crate::run::Drive {
+            start,
+            lock: _lock,
+            manifest,
+            earlier,
+            written_later: options.extra_files.clone(),
+        };
+        crate::run::drive(simulation, &dir, drive, |sim, mut manifest| {
+            manifest
+                .remove_temporaries(&dir, &left_behind)
+                .map_err(|(path, e)| io_error(&path, e).at(sim.model.step, sim.model.time))?;
+            manifest
+                .temporary_prefixes
+                .retain(|p| !left_behind.contains(p));
+            manifest.add_own_temporary_prefix();
+            let observer = OutputObserver::resume(&dir, sim, cursor, show_progress, manifest)?;
             Ok(observer
                 .with_checkpoints(Some(checkpoints), stop_after)
                 .with_progress_lines(sim, lines))
         })
     }
+}
+
+/// The `run.json` of `dir` (its bytes) and the files it records, if it is
+/// there and lists them; a run that says it completed is refused.
+fn earlier_run(dir: &Path) -> Result<(Option<Vec<u8>>, Option<Manifest>), CheckpointError> {
+    let path = dir.join("run.json");
+    let bytes = match std::fs::read(&path) {
+        Ok(bytes) => bytes,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok((None, None)),
+        Err(e) => return Err(io_error(&path, e)),
+    };
+    let value: Option<serde_json::Value> = serde_json::from_slice(&bytes).ok();
+    if value.as_ref().and_then(|v| v.get("status")?.as_str()) == Some("completed") {
+        return Err(CheckpointError::Completed {
+            path: path.display().to_string(),
+        });
+    }
+    let manifest = value.and_then(|v| Manifest::from_run_json(&v).ok());
+    Ok((Some(bytes), manifest))
+}
+
+/// The files of a checkpointed run whose `run.json` lists none (written by
+/// an mpm-geo that did not record them): its fixed files and the snapshots
+/// the checkpoint knows.
+fn unlisted_run_files(cursor: &OutputCursor) -> Manifest {
+    let mut manifest = Manifest::new();
+    manifest.temporary_prefixes.clear();
+    for name in [
+        "run.json",
+        "curve.csv",
+        crate::run::PVD_FILE,
+        CHECKPOINT_FILE,
+        SOURCE_FILE,
+    ] {
+        manifest.add(name);
+    }
+    for (_, name) in &cursor.snapshots {
+        manifest.add(name);
+    }
+    manifest
 }
 
 /// `mpm-geo resume DIR`: check `dir`'s checkpoint and continue the run.

@@ -116,6 +116,10 @@ pub fn median(values: &[f64]) -> f64 {
 /// `dir` (its `scene.toml` is the scene run, so a run is reproduced by
 /// `mpm-geo run dir/scene.toml`; its stderr is `dir/stderr.txt`), each
 /// process killed after `timeout` seconds. A run the plan refused is not run.
+/// Each run process has a process group of its own, so a signal caught by
+/// [`crate::interrupt`] (SIGINT, SIGTERM) reaches it once, passed on by the
+/// study: the run ends after a whole step and the study returns
+/// [`StudyError::Interrupted`].
 pub fn execute(
     exe: &Path,
     planned: &PlannedRun,
@@ -138,6 +142,9 @@ pub fn execute(
     let mut runs: Vec<(f64, Vec<f64>)> = Vec::new();
     let mut last_status = String::new();
     for _ in 0..repeats.max(1) {
+        if let Some(signal) = crate::interrupt::requested() {
+            return Err(StudyError::Interrupted { signal, run: None });
+        }
         // a refused or stopped run must not be read from an earlier run's files
         if out.exists() {
             std::fs::remove_dir_all(&out).map_err(|e| io(&out, &e))?;
@@ -145,7 +152,8 @@ pub fn execute(
         let stderr_path = dir.join("stderr.txt");
         let stderr_file = std::fs::File::create(&stderr_path).map_err(|e| io(&stderr_path, &e))?;
         let start = Instant::now();
-        let mut child = Command::new(exe)
+        let mut command = Command::new(exe);
+        command
             .arg("run")
             .arg(&scene_path)
             .arg("--out")
@@ -153,12 +161,19 @@ pub fn execute(
             .arg("--quiet")
             .stdin(Stdio::null())
             .stdout(Stdio::null())
-            .stderr(stderr_file)
-            .spawn()
-            .map_err(|e| io(exe, &e))?;
+            .stderr(stderr_file);
+        own_process_group(&mut command);
+        let mut child = command.spawn().map_err(|e| io(exe, &e))?;
+        let mut passed_on = None;
         let (status, timed_out) = loop {
             if let Some(status) = child.try_wait().map_err(|e| io(exe, &e))? {
                 break (Some(status), false);
+            }
+            if passed_on.is_none() {
+                if let Some(signal) = crate::interrupt::requested() {
+                    pass_on(&child, signal);
+                    passed_on = Some(signal);
+                }
             }
             let elapsed = start.elapsed().as_secs_f64();
             if timeout.is_some_and(|t| elapsed > t) {
@@ -170,6 +185,13 @@ pub fn execute(
             // poll finely at first: the wall time is measured to ~0.5 %
             std::thread::sleep(Duration::from_secs_f64((elapsed / 200.0).clamp(2e-4, 0.02)));
         };
+        if let Some(signal) = passed_on {
+            // not measured: the run is made again by the next study
+            return Err(StudyError::Interrupted {
+                signal,
+                run: Some(planned.name.clone()),
+            });
+        }
         let wall = start.elapsed().as_secs_f64();
         let stderr = std::fs::read_to_string(&stderr_path).unwrap_or_default();
         last_status = match (timed_out, status.and_then(|s| s.code())) {
@@ -217,6 +239,36 @@ pub fn execute(
         linear: read_linear(&out.join("run.json")).unwrap_or_default(),
         histories,
     })
+}
+
+/// Start the run process in a process group of its own (Unix), so a
+/// terminal's Ctrl-C reaches only the study, which passes it on once (a
+/// second SIGINT would end the run at once, without its `run.json`).
+fn own_process_group(command: &mut Command) {
+    #[cfg(unix)]
+    {
+        use std::os::unix::process::CommandExt;
+        command.process_group(0);
+    }
+    #[cfg(not(unix))]
+    let _ = command;
+}
+
+/// Send `signal` to the run process `child` (Unix; elsewhere it is killed).
+fn pass_on(child: &std::process::Child, signal: crate::interrupt::Interruption) {
+    #[cfg(unix)]
+    {
+        if let Ok(pid) = libc::pid_t::try_from(child.id()) {
+            // SAFETY: sends a signal to our own child process.
+            unsafe {
+                libc::kill(pid, signal.signal);
+            }
+        }
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = (child, signal);
+    }
 }
 
 /// The `error:` line of a run's stderr (else its last non-empty line), and

@@ -68,6 +68,20 @@ pub enum StudyError {
     /// `--collect` (or a shard) found runs not measured yet.
     #[error("study runs not measured yet (run their shards first): {0}")]
     Unfinished(String),
+    /// SIGINT or SIGTERM stopped the study: the run in progress was passed
+    /// the signal and ended after a whole step (its `run.json` says
+    /// `interrupted`); it is not recorded as measured, and no other starts.
+    #[error(
+        "study interrupted by {}: {}; run the same command again to finish it (measured runs are not run again)",
+        signal.name(),
+        run.as_ref().map_or("no run was in progress".to_string(), |r| format!("run {r} stopped after a whole step (its run.json says interrupted)"))
+    )]
+    Interrupted {
+        /// The signal.
+        signal: crate::interrupt::Interruption,
+        /// The run it stopped, if one was in progress.
+        run: Option<String>,
+    },
     /// A reference run that did not complete (a study without cases).
     #[error("reference run {run} did not complete: {status}")]
     Reference {
@@ -166,6 +180,9 @@ pub fn run_spec(
                 Some(measured)
             }
             (None, None) if selected[i] => {
+                if let Some(signal) = crate::interrupt::requested() {
+                    return Err(StudyError::Interrupted { signal, run: None });
+                }
                 let measured =
                     execute::execute(&options.executable, planned, &dir, repeats_of(i), timeout)?;
                 execute::save_measured(&dir, &fingerprint, &measured)?;
