@@ -251,6 +251,39 @@ kind = "point_stress"
 point = [2.78, 0.34]
 quantity = "q"
 
+# the stress at B as Fig. 11 reads it: the points that started within one
+# cell of B, volume-weighted (a single point's p carries 10-40 % rms noise;
+# docs/scene.md `neighbourhood_stress`): q, p, kappa_bar and the group's centre
+[[monitor]]
+name = "qB_neighbourhood"
+kind = "neighbourhood_stress"
+point = [2.78, 0.34]
+quantity = "q"
+
+[[monitor]]
+name = "pB_neighbourhood"
+kind = "neighbourhood_stress"
+point = [2.78, 0.34]
+quantity = "p"
+
+[[monitor]]
+name = "kappa_bar_B_neighbourhood"
+kind = "neighbourhood_stress"
+point = [2.78, 0.34]
+quantity = "kappa_bar"
+
+[[monitor]]
+name = "xB_neighbourhood"
+kind = "neighbourhood_stress"
+point = [2.78, 0.34]
+quantity = "x"
+
+[[monitor]]
+name = "yB_neighbourhood"
+kind = "neighbourhood_stress"
+point = [2.78, 0.34]
+quantity = "y"
+
 [[monitor]]
 name = "run_out"
 kind = "run_out"
