@@ -47,16 +47,16 @@ fn overrides_change_values_and_reject_unknown_paths() {
     assert!(e.to_string().contains("cel_size"), "{e}");
 }
 
-/// An empty value removes a key, so that its default applies: the cut
+/// An empty value removes a key, so that its default applies: the biaxial
 /// scene's Newmark γ = 0.6 gives way to generalised-α, which the scene
 /// refuses beside γ; a key inside an array's table goes too; an array
 /// element cannot be removed.
 #[test]
 fn empty_override_removes_a_key() {
-    let cut = include_str!("../../validation/vertical_cut/local_h100.toml");
+    let biaxial = include_str!("../../validation/biaxial/local_h300.toml");
     let scene = |overrides: &[&str]| {
         let overrides: Vec<String> = overrides.iter().map(|o| o.to_string()).collect();
-        Scene::from_str_with_overrides(cut, "cut", &overrides)
+        Scene::from_str_with_overrides(biaxial, "biaxial", &overrides)
     };
     let both = scene(&["solver.rho_infinity=0.8"]).unwrap_err();
     assert!(both.to_string().contains("newmark_gamma"), "{both}");
