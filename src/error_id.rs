@@ -74,7 +74,7 @@ error_ids! {
         "a `--set key=value` does not apply (no such key, or a value of the wrong type)";
         "write it as `--set table.key=value`, arrays by index (`body.0.box`)";
     SceneInvalid => "SCENE_INVALID":
-        "values out of range or inconsistent: every field is listed (also contradictory conditions on one dof, self-intersecting polygons, initial stresses far outside the yield surface)";
+        "values out of range or inconsistent: every field is listed (also contradictory conditions on one dof, a line held where a rigid body drives, pressures that would add up, self-intersecting polygons, initial stresses far outside the yield surface)";
         "fix each listed field; `mpm-geo check` shows them without running";
     SceneNonFinite => "SCENE_NON_FINITE":
         "a number in the scene is `nan` or `inf` (the keys are named)";

@@ -13,6 +13,7 @@
 use std::path::Path;
 
 mod budget;
+mod conflicts;
 mod overrides;
 mod schema;
 mod validation;

@@ -336,3 +336,98 @@ fn bad_ramp_times_are_refused_naming_the_field() {
         "{e}"
     );
 }
+
+/// MINIMAL with a `[bc]` table holding `entries`.
+fn with_bc(entries: &[&str]) -> String {
+    format!("{MINIMAL}\n[bc]\n{}\n", entries.join("\n"))
+}
+
+/// The message of a refused scene (panics when it is accepted).
+fn refusal(text: &str) -> String {
+    Scene::from_str_with_overrides(text, "t", &[])
+        .expect_err("contradictory scene accepted")
+        .to_string()
+}
+
+/// Issue 41 item 6: a fixed or prescribed line through the top that a rigid
+/// body drives is refused naming both entries, when it gives a driven
+/// component another motion; a condition that agrees with the body (a
+/// roller in x under a vertical platen, a prescribed line moving with it)
+/// is accepted.
+#[test]
+fn a_line_holding_what_a_rigid_body_drives_is_refused_naming_both() {
+    let platen =
+        r#"rigid = [{ name = "platen", footprint = [0.0, 1.0], velocity = [0.0, -0.01] }]"#;
+    let e = refusal(&with_bc(&[
+        platen,
+        r#"fixed = [{ line = "y=0", dofs = ["y"] }, { line = "y=1", dofs = ["y"] }]"#,
+    ]));
+    assert!(
+        e.contains("bc.rigid[0]") && e.contains("bc.fixed[1]") && e.contains("`platen`"),
+        "{e}"
+    );
+    assert!(!e.contains("bc.fixed[0]"), "the base is not driven: {e}");
+    // a vertical line meeting the top, fixed in the driven component
+    let e = refusal(&with_bc(&[
+        platen,
+        r#"fixed = [{ line = "y=0", dofs = ["y"] }, { line = "x=0", dofs = ["x", "y"] }]"#,
+    ]));
+    assert!(
+        e.contains("bc.rigid[0]") && e.contains("bc.fixed[1]") && e.contains("(0, 1) m"),
+        "{e}"
+    );
+    // a prescribed top moving otherwise than the platen
+    let e = refusal(&with_bc(&[
+        platen,
+        r#"prescribed = [{ line = "y=1", dof = "y", rate = -0.02 }]"#,
+    ]));
+    assert!(
+        e.contains("bc.rigid[0]") && e.contains("bc.prescribed[0]"),
+        "{e}"
+    );
+    // conditions that agree with the platen
+    for agreeing in [
+        r#"fixed = [{ line = "y=0", dofs = ["y"] }, { line = "x=0", dofs = ["x"] }, { line = "y=1", dofs = ["x"] }]"#,
+        r#"prescribed = [{ line = "y=1", dof = "y", rate = -0.01 }]"#,
+    ] {
+        let text = with_bc(&[platen, agreeing]);
+        assert!(
+            Scene::from_str_with_overrides(&text, "t", &[]).is_ok(),
+            "{agreeing}"
+        );
+    }
+}
+
+/// Issue 41 item 6: two pressures on the same side of a box body (one
+/// naming the body, one defaulting to it), or on overlapping edges of a
+/// polygon body, are refused naming both entries and the sum they would
+/// make; different sides and disjoint edges are accepted.
+#[test]
+fn pressures_that_would_add_up_are_refused_naming_both() {
+    let e = refusal(&with_bc(&[
+        r#"pressure = [{ side = "top", p = 100.0 }, { side = "right", p = 50.0 }, { body = "body0", side = "top", p = 20.0 }]"#,
+    ]));
+    assert!(
+        e.contains("bc.pressure[2]") && e.contains("bc.pressure[0]") && e.contains("120 kPa"),
+        "{e}"
+    );
+    assert!(!e.contains("bc.pressure[1]"), "{e}");
+    let accepted =
+        with_bc(&[r#"pressure = [{ side = "top", p = 100.0 }, { side = "right", p = 50.0 }]"#]);
+    assert!(Scene::from_str_with_overrides(&accepted, "t", &[]).is_ok());
+    let polygon = |edges: &str| {
+        MINIMAL.replace(
+            "box = [[0.0, 0.0], [1.0, 1.0]]",
+            "polygon = [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.5, 1.0], [0.0, 1.0]]",
+        ) + &format!("\n[bc]\npressure = {edges}\n")
+    };
+    let e = refusal(&polygon(
+        "[{ edges = [1, 2], p = 10.0 }, { edges = [2, 3], p = 10.0 }]",
+    ));
+    assert!(
+        e.contains("bc.pressure[1]") && e.contains("bc.pressure[0]") && e.contains("edge 2"),
+        "{e}"
+    );
+    let disjoint = polygon("[{ edges = [1, 2], p = 10.0 }, { edges = [3, 3], p = 10.0 }]");
+    assert!(Scene::from_str_with_overrides(&disjoint, "t", &[]).is_ok());
+}
