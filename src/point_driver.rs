@@ -40,14 +40,14 @@ pub struct PointArgs {
     #[arg(long, value_enum, default_value = "biaxial")]
     pub test: PointTest,
     /// Confining pressure (kPa, compression positive); also the initial isotropic stress.
-    #[arg(long, default_value_t = 100.0)]
+    #[arg(long, default_value_t = 100.0, value_parser = crate::cli_values::number)]
     pub confinement: f64,
     /// Final axial strain magnitude −εyy (biaxial, triaxial) or shear strain γxy (simple shear).
     /// Default 0.0452 = 2.26 mm / 0.05 m, the end of the paper's biaxial test.
-    #[arg(long, default_value_t = 0.0452)]
+    #[arg(long, default_value_t = 0.0452, value_parser = crate::cli_values::number)]
     pub strain: f64,
     /// Number of equal strain steps.
-    #[arg(long, default_value_t = 2260)]
+    #[arg(long, default_value_t = 2260, value_parser = crate::cli_values::count)]
     pub steps: usize,
     /// TOML file with HmcParameters keys at top level (missing keys keep Table 1 values).
     #[arg(long)]
