@@ -166,6 +166,13 @@ pub fn explain(message: &str, keys: Option<&str>) -> (String, Option<String>) {
     (format!("{explained}{context}"), keys)
 }
 
+/// An error of deserialising a `toml::Value` (a parameter table, say) in
+/// plain words, naming its key: [`message_and_keys`] then [`explain`].
+pub fn plain_toml_error(error: &toml::de::Error) -> String {
+    let (message, keys) = message_and_keys(error);
+    explain(&message, keys.as_deref()).0
+}
+
 /// Split a leading `in `k`: ` (a model's own key path) off `message` and
 /// append it to `keys`.
 fn split_inner_key<'m>(message: &'m str, keys: Option<&str>) -> (&'m str, Option<String>) {

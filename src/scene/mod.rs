@@ -28,7 +28,7 @@ pub use budget::{
     available_memory, human_bytes, parse_memory, MemoryPart, ResourceEstimate, ResourceLimits,
     DEFAULT_MAX_STEPS, DEFAULT_MEMORY_SHARE,
 };
-pub use diagnostics::Location;
+pub use diagnostics::{plain_toml_error, Location};
 pub use overrides::apply_override;
 pub use schema::*;
 pub use validation::{polygon_contains, FieldError};
