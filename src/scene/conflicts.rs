@@ -144,10 +144,10 @@ impl Scene {
     }
 
     /// A `[[bc.rigid]]` entry drives the top of its body (DESIGN D40–D41); a
-    /// fixed or prescribed line through those nodes that gives a component
-    /// the body moves (velocity ≠ 0) another motion contradicts it. Refused naming both entries:
-    /// on the top line itself compared at both ends of the driven part, on a
-    /// vertical line at the node where it meets the top.
+    /// fixed or prescribed line there that gives a component the body moves
+    /// (velocity ≠ 0) another motion contradicts it. Refused naming both
+    /// entries: a line along the top compared at both ends of the driven
+    /// part, a vertical line where it meets the top.
     pub(super) fn validate_rigid_line_conflicts(&self, e: &mut Vec<FieldError>) {
         let conditions = self.line_conditions();
         for (r, rigid) in self.bc.rigid.iter().enumerate() {
@@ -179,47 +179,11 @@ impl Scene {
                     named.push(&c.field);
                     e.push(FieldError {
                         field: format!("bc.rigid[{r}]"),
-                        message: self.rigid_conflict_message(&driven, rigid, c, x),
+                        message: rigid_conflict_message(&driven, rigid, c, x),
                     });
                 }
             }
         }
-    }
-
-    /// The message of [`Scene::validate_rigid_line_conflicts`]: where, what
-    /// each entry asks of the dof, and what to do.
-    fn rigid_conflict_message(
-        &self,
-        driven: &DrivenTop,
-        rigid: &RigidSpec,
-        c: &LineCondition,
-        x: [f64; 2],
-    ) -> String {
-        let where_ = if c.line.axis == 1 {
-            format!(
-                "the top of body `{}` (y = {} m, x from {} to {} m)",
-                driven.body, driven.top, driven.x_from, driven.x_to
-            )
-        } else {
-            format!(
-                "the node ({}, {}) m on the top of body `{}`",
-                x[0], x[1], driven.body
-            )
-        };
-        let ramp = if rigid.ramp_time == c.ramp_time {
-            String::new()
-        } else {
-            format!(" (ramp time {})", rigid.ramp_time)
-        };
-        format!(
-            "`{}` moves {where_} in {} at {} m per unit time{ramp}, but {} (`{}`) {}: one dof takes one condition; remove one of the two or make them agree",
-            rigid.name,
-            component_name(c.component),
-            rigid.velocity[c.component.index()],
-            c.field,
-            c.text,
-            c.describe(x, rigid.ramp_time)
-        )
     }
 
     /// Two `[[bc.pressure]]` entries on the same side of a box body, or on
@@ -252,6 +216,41 @@ impl Scene {
             }
         }
     }
+}
+
+/// The message of `Scene::validate_rigid_line_conflicts`: where, what
+/// each entry asks of the dof, and what to do.
+fn rigid_conflict_message(
+    driven: &DrivenTop,
+    rigid: &RigidSpec,
+    c: &LineCondition,
+    x: [f64; 2],
+) -> String {
+    let where_ = if c.line.axis == 1 {
+        format!(
+            "the top of body `{}` (y = {} m, x from {} to {} m)",
+            driven.body, driven.top, driven.x_from, driven.x_to
+        )
+    } else {
+        format!(
+            "the point ({}, {}) m where `{}` meets the top of body `{}`",
+            x[0], x[1], c.text, driven.body
+        )
+    };
+    let ramp = if rigid.ramp_time == c.ramp_time {
+        String::new()
+    } else {
+        format!(" (ramp time {})", rigid.ramp_time)
+    };
+    format!(
+        "`{}` moves {where_} in {} at {} m per unit time{ramp}, but {} (`{}`) {}: one dof takes one condition; remove one of the two or make them agree",
+        rigid.name,
+        component_name(c.component),
+        rigid.velocity[c.component.index()],
+        c.field,
+        c.text,
+        c.describe(x, rigid.ramp_time)
+    )
 }
 
 /// The place two pressure entries on one body both load, for messages
