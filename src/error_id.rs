@@ -62,19 +62,19 @@ macro_rules! error_ids {
 
 error_ids! {
     CliArgument => "CLI_ARGUMENT":
-        "a command-line argument is malformed (e.g. `--shard 4/3`)";
+        "a command-line argument is unknown, missing or malformed (e.g. `--jobs two`, `--shard 4/3`); clap's usage line follows";
         "see `mpm-geo help COMMAND`";
     SceneRead => "SCENE_READ":
         "the scene file cannot be read";
         "check the path and the file's permissions";
     SceneSyntax => "SCENE_SYNTAX":
-        "the scene is not valid TOML, has an unknown key or a value of the wrong type (the message names the key)";
+        "the scene is not valid TOML, has an unknown key or a value of the wrong type: the message gives file, line and column, the key, and the key or value probably meant";
         "fix the named key; docs/scene.md lists every key and type";
     SceneOverride => "SCENE_OVERRIDE":
-        "a `--set key=value` does not apply (no such key, or a value of the wrong type)";
+        "a `--set key=value` does not apply (no such key, or a value of the wrong type); the message names the override and the key probably meant";
         "write it as `--set table.key=value`, arrays by index (`body.0.box`)";
     SceneInvalid => "SCENE_INVALID":
-        "values out of range or inconsistent: every field is listed (also contradictory conditions on one dof, self-intersecting polygons, initial stresses far outside the yield surface)";
+        "values out of range or inconsistent: every field is listed (also contradictory conditions on one dof, a line held where a rigid body drives, pressures that would add up, self-intersecting polygons, initial stresses far outside the yield surface)";
         "fix each listed field; `mpm-geo check` shows them without running";
     SceneNonFinite => "SCENE_NON_FINITE":
         "a number in the scene is `nan` or `inf` (the keys are named)";
@@ -220,7 +220,7 @@ impl Identified for SceneError {
     fn error_id(&self) -> ErrorId {
         match self {
             SceneError::Io { .. } => ErrorId::SceneRead,
-            SceneError::Parse { .. } => ErrorId::SceneSyntax,
+            SceneError::Parse { .. } | SceneError::Located { .. } => ErrorId::SceneSyntax,
             SceneError::Override { .. } => ErrorId::SceneOverride,
             SceneError::Invalid { .. } => ErrorId::SceneInvalid,
             SceneError::NonFinite { .. } => ErrorId::SceneNonFinite,

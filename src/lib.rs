@@ -35,6 +35,7 @@ pub mod atomic_file;
 pub mod bc;
 pub mod campaign;
 pub mod checkpoint;
+pub mod cli_values;
 pub mod constitutive;
 pub mod dofs;
 pub mod energy;

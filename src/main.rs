@@ -7,6 +7,7 @@ use clap::{Parser, Subcommand};
 
 use mpm_geo::campaign::{CampaignOptions, Part};
 use mpm_geo::checkpoint::{Resumable, ResumeOptions, SceneSource};
+use mpm_geo::cli_values;
 use mpm_geo::error_id::{ErrorId, Identified};
 use mpm_geo::run::{run_scene_with, RunOptions, RunOutcome};
 use mpm_geo::scene::{Formulation, Scene};
@@ -50,15 +51,15 @@ enum Command {
         #[arg(long, value_name = "SIZE", value_parser = parse_memory_arg)]
         max_memory: Option<f64>,
         /// Step-count limit (default 1e7; scene key `limits.max_steps`).
-        #[arg(long, value_name = "N")]
+        #[arg(long, value_name = "N", value_parser = cli_values::positive_u64)]
         max_steps: Option<u64>,
         /// Write the whole state to OUT/checkpoint.bin every N steps (and on
         /// SIGINT/SIGTERM), so `mpm-geo resume OUT` can continue the run.
-        #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
+        #[arg(long, value_name = "N", value_parser = cli_values::positive_u64)]
         checkpoint_every: Option<u64>,
         /// Test hook: end the run after step M as a kill would (no last
         /// row, run.json left `running`), leaving the last periodic checkpoint.
-        #[arg(long, value_name = "M", hide = true)]
+        #[arg(long, value_name = "M", hide = true, value_parser = cli_values::whole_number)]
         stop_after_step: Option<usize>,
     },
     /// Continue a run started with `--checkpoint-every` from its last
@@ -74,10 +75,10 @@ enum Command {
         #[arg(long, value_name = "SECONDS", value_parser = parse_positive_seconds)]
         progress_every: Option<f64>,
         /// Checkpoint interval instead of the run's own.
-        #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
+        #[arg(long, value_name = "N", value_parser = cli_values::positive_u64)]
         checkpoint_every: Option<u64>,
         /// Test hook: end the run after step M as a kill would.
-        #[arg(long, value_name = "M", hide = true)]
+        #[arg(long, value_name = "M", hide = true, value_parser = cli_values::whole_number)]
         stop_after_step: Option<usize>,
     },
     /// Run every scene of a directory (in parallel) and write curves.csv,
@@ -89,14 +90,14 @@ enum Command {
         #[arg(long)]
         out: Option<PathBuf>,
         /// Scenes run at the same time.
-        #[arg(long, default_value_t = 2)]
+        #[arg(long, default_value_t = 2, value_parser = cli_values::count)]
         jobs: usize,
         /// Override a value in every scene; an empty value removes the key (repeatable).
         #[arg(long = "set", value_name = "KEY=VALUE")]
         overrides: Vec<String>,
         /// Also run every scene with K times the steps at Δt / K and report
         /// the time-step discrepancy of each curve (step_convergence.csv).
-        #[arg(long, value_name = "K")]
+        #[arg(long, value_name = "K", value_parser = cli_values::factor)]
         step_refinement: Option<usize>,
         /// `ours` (the scenes as written: GIMP, m as written, no double
         /// mapping) or `paper` (bilinear cells, Gauss points, m = 1, double
@@ -114,7 +115,7 @@ enum Command {
         collect: bool,
         /// Checkpoint every run every N steps; a run stopped earlier (a
         /// killed campaign) is then resumed from its checkpoint.
-        #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
+        #[arg(long, value_name = "N", value_parser = cli_values::positive_u64)]
         checkpoint_every: Option<u64>,
     },
     /// Error against run time: run a study spec's sweep (each run a whole
@@ -127,7 +128,7 @@ enum Command {
         #[arg(long)]
         out: Option<PathBuf>,
         /// Repeats per run instead of the spec's `study.repeats`.
-        #[arg(long)]
+        #[arg(long, value_parser = cli_values::count)]
         repeats: Option<usize>,
         /// Override a value in every run's scene, after the spec's own
         /// overrides (repeatable), e.g. `--set scene.steps=2` for a quick look.
@@ -157,7 +158,7 @@ enum Command {
         #[arg(long, value_name = "SIZE", value_parser = parse_memory_arg)]
         max_memory: Option<f64>,
         /// Step-count limit (default 1e7; scene key `limits.max_steps`).
-        #[arg(long, value_name = "N")]
+        #[arg(long, value_name = "N", value_parser = cli_values::positive_u64)]
         max_steps: Option<u64>,
     },
 }
@@ -181,7 +182,10 @@ fn parse_part(shard: Option<String>, collect: bool) -> Result<Part, String> {
 }
 
 fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => return usage_error(&e),
+    };
     // this thread runs the parallel loops itself (`mpm_geo::parallel`)
     mpm_geo::parallel::join_global_pool();
     match cli.command {
@@ -555,6 +559,37 @@ fn parse_positive_seconds(text: &str) -> Result<f64, String> {
     match text.trim().parse::<f64>() {
         Ok(s) if s.is_finite() && s > 0.0 => Ok(s),
         _ => Err(format!("`{text}` is not a number of seconds > 0")),
+    }
+}
+
+/// A command-line usage error (clap's: an unknown argument, a missing or
+/// malformed value) printed as `error[CLI_ARGUMENT]: …` with clap's usage
+/// lines; `--help` and `--version` print as usual, and a missing command
+/// prints the help before its error line.
+fn usage_error(error: &clap::Error) -> ExitCode {
+    use clap::error::ErrorKind;
+    match error.kind() {
+        ErrorKind::DisplayHelp | ErrorKind::DisplayVersion => {
+            let _ = error.print();
+            ExitCode::SUCCESS
+        }
+        ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand => {
+            let _ = error.print();
+            fail(
+                2,
+                ErrorId::CliArgument,
+                "a command is needed (listed above)",
+            )
+        }
+        _ => {
+            let rendered = error.render().to_string();
+            let text = rendered.trim_end();
+            fail(
+                2,
+                ErrorId::CliArgument,
+                text.strip_prefix("error: ").unwrap_or(text),
+            )
+        }
     }
 }
 

@@ -40,14 +40,14 @@ pub struct PointArgs {
     #[arg(long, value_enum, default_value = "biaxial")]
     pub test: PointTest,
     /// Confining pressure (kPa, compression positive); also the initial isotropic stress.
-    #[arg(long, default_value_t = 100.0)]
+    #[arg(long, default_value_t = 100.0, value_parser = crate::cli_values::number)]
     pub confinement: f64,
     /// Final axial strain magnitude −εyy (biaxial, triaxial) or shear strain γxy (simple shear).
     /// Default 0.0452 = 2.26 mm / 0.05 m, the end of the paper's biaxial test.
-    #[arg(long, default_value_t = 0.0452)]
+    #[arg(long, default_value_t = 0.0452, value_parser = crate::cli_values::number)]
     pub strain: f64,
     /// Number of equal strain steps.
-    #[arg(long, default_value_t = 2260)]
+    #[arg(long, default_value_t = 2260, value_parser = crate::cli_values::count)]
     pub steps: usize,
     /// TOML file with HmcParameters keys at top level (missing keys keep Table 1 values).
     #[arg(long)]
@@ -175,9 +175,12 @@ pub fn load_parameters(
             .map_err(|_| PointDriverError::BadOverride(item.clone()))?;
         table.insert(key.trim().to_string(), toml::Value::Float(value));
     }
-    let parameters: HmcParameters = toml::Value::Table(table)
-        .try_into()
-        .map_err(|e: toml::de::Error| PointDriverError::ParseMaterial(e.to_string()))?;
+    let parameters: HmcParameters =
+        toml::Value::Table(table)
+            .try_into()
+            .map_err(|e: toml::de::Error| {
+                PointDriverError::ParseMaterial(crate::scene::plain_toml_error(&e))
+            })?;
     let problems = parameters.validate();
     if problems.is_empty() {
         Ok(parameters)
@@ -668,6 +671,12 @@ mod tests {
         assert!(bad("omega").contains("KEY=VALUE"));
         assert!(bad("omega=2").contains("material.omega"));
         assert!(bad("phi_post=3").contains("phi_post"));
+        // a misspelt key gets the one meant (issue 41, item 11)
+        assert!(
+            bad("omga=0.5").contains("unknown key `omga`; did you mean `omega`?"),
+            "{}",
+            bad("omga=0.5")
+        );
         let mut bad_args = args.clone();
         bad_args.steps = 0;
         assert!(run(&bad_args).is_err());

@@ -36,26 +36,72 @@ fn valid_scene_passes_check() {
     assert_eq!(code, 0, "{text}");
 }
 
+/// A misspelt key in a `--set` is `SCENE_OVERRIDE`, naming the override and
+/// the key meant (issue 41, item 11).
 #[test]
 fn unknown_key_is_refused_naming_it() {
-    // a misspelt key inside a known table
     check_refused(
         &["--set", "grid.cel_size=0.1"],
-        &["cel_size", "unknown field"],
+        &[
+            "error[SCENE_OVERRIDE]",
+            "`grid.cel_size=0.1`",
+            "unknown key `cel_size`",
+            "did you mean `cell_size`?",
+        ],
     );
 }
 
+/// A misspelt key in the file is reported with the file, line and column,
+/// the line itself and the key meant (issue 41, item 11).
 #[test]
 fn unknown_key_in_file_is_refused_naming_it() {
     let dir = tempfile::tempdir().unwrap();
     let text = std::fs::read_to_string(common::validation("elastic/oedometer.toml"))
         .unwrap()
         .replace("density = 2.0", "density = 2.0\ndensty = 2.0");
+    let line = text.lines().position(|l| l == "densty = 2.0").unwrap() + 1;
     let path = dir.path().join("typo.toml");
     std::fs::write(&path, text).unwrap();
     let (code, msg) = mpm_geo(&["check", path.to_str().unwrap()]);
-    assert_ne!(code, 0);
-    assert!(msg.contains("densty"), "{msg}");
+    assert_eq!(code, 2, "{msg}");
+    let place = format!("error[SCENE_SYNTAX]: {}:{line}:1: ", path.display());
+    assert!(msg.contains(&place), "lacks `{place}`: {msg}");
+    assert!(
+        msg.contains("unknown key `densty` in `materials.soil`; did you mean `density`?")
+            && msg.contains(&format!("{line} | densty = 2.0")),
+        "{msg}"
+    );
+}
+
+/// Every command-line usage error carries `error[CLI_ARGUMENT]` and exits
+/// with 2; numbers are asked for in plain words (issue 41, item 11); help
+/// is no error.
+#[test]
+fn every_usage_error_carries_an_identifier() {
+    let scene = common::validation("elastic/oedometer.toml");
+    let scene = scene.to_str().unwrap();
+    for args in [
+        &["check", scene, "--bogus"][..],
+        &["frobnicate"][..],
+        &["check"][..],
+        &[][..],
+        &["run", scene, "--checkpoint-every", "0"][..],
+        &["campaign", "validation/biaxial", "--jobs", "two"][..],
+        &["point", "--steps", "-3"][..],
+    ] {
+        let (code, text) = mpm_geo(args);
+        assert_eq!(code, 2, "{args:?}: {text}");
+        assert!(text.contains("error[CLI_ARGUMENT]: "), "{args:?}: {text}");
+        assert!(!text.contains("\nerror: "), "{args:?}: {text}");
+    }
+    let (_, text) = mpm_geo(&["campaign", "validation/biaxial", "--jobs", "two"]);
+    assert!(
+        text.contains("a whole number ≥ 1") && !text.contains("invalid digit"),
+        "{text}"
+    );
+    let (code, text) = mpm_geo(&["check", "--help"]);
+    assert_eq!(code, 0, "{text}");
+    assert!(!text.contains("error["), "{text}");
 }
 
 #[test]
@@ -372,6 +418,41 @@ fn contradictory_conditions_on_one_dof_are_refused_naming_both() {
     assert_eq!(code, 0, "{text}");
 }
 
+/// A fixed line on the top a rigid platen drives, and a second pressure on
+/// a side already loaded, are refused naming both entries (issue 41, item 6).
+#[test]
+fn contradictory_boundary_entries_are_refused_naming_both() {
+    let (code, text) = check_scene(
+        "elastic/platen.toml",
+        &[
+            "--set",
+            "bc.fixed=[{ line = \"x=0\", dofs = [\"x\"] }, { line = \"y=0\", dofs = [\"y\"] }, { line = \"y=0.2\", dofs = [\"y\"] }]",
+        ],
+    );
+    assert_refused(
+        code,
+        &text,
+        &[
+            "error[SCENE_INVALID]",
+            "bc.rigid[0]",
+            "`platen`",
+            "bc.fixed[2]",
+        ],
+    );
+    let (code, text) = check_scene(
+        "biaxial/local_h300.toml",
+        &[
+            "--set",
+            "bc.pressure=[{ side = \"right\", p = 100.0 }, { side = \"top\", p = 100.0 }, { side = \"right\", p = 50.0 }]",
+        ],
+    );
+    assert_refused(
+        code,
+        &text,
+        &["bc.pressure[2]", "bc.pressure[0]", "150 kPa"],
+    );
+}
+
 /// A bow-tie outline is refused naming the polygon and the crossing edges.
 #[test]
 fn self_intersecting_polygon_is_refused() {
@@ -399,7 +480,10 @@ fn type_error_inside_a_material_names_the_key() {
     assert_refused(
         code,
         &text,
-        &["`phi_res`", "materials.soil", "expected f64"],
+        &[
+            "error[SCENE_OVERRIDE]",
+            "`materials.soil.phi_res` must be a number, not the string \"steep\"",
+        ],
     );
 }
 

@@ -255,7 +255,9 @@ fn names_something(error: &SceneError, file: &str) -> bool {
         SCENE_KEYS.contains(&first)
     };
     match error {
-        SceneError::Io { path, .. } | SceneError::Parse { path, .. } => path == file,
+        SceneError::Io { path, .. }
+        | SceneError::Parse { path, .. }
+        | SceneError::Located { path, .. } => path == file,
         SceneError::Override { .. } => false,
         SceneError::Invalid { errors, .. } => {
             !errors.is_empty() && errors.iter().all(|e| key(&e.field))

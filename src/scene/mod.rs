@@ -7,12 +7,17 @@
 //!
 //! The module is split by concern: `schema.rs` holds the serde structures and
 //! configuration enums, `validation.rs` the checks of [`Scene::validate`] and
-//! [`Scene::warnings`], `overrides.rs` the `--set key=value` edits of the TOML
-//! table. Every public item is re-exported here (`crate::scene::X`).
+//! [`Scene::warnings`] (`conflicts.rs` those of entries that contradict each
+//! other), `overrides.rs` the `--set key=value` edits of the TOML table,
+//! `diagnostics.rs` the explanation of a file or override that cannot be
+//! read (file, line and column, plain words, "did you mean"). Every public
+//! item is re-exported here (`crate::scene::X`).
 
 use std::path::Path;
 
 mod budget;
+mod conflicts;
+mod diagnostics;
 mod overrides;
 mod schema;
 mod validation;
@@ -23,6 +28,7 @@ pub use budget::{
     available_memory, human_bytes, parse_memory, MemoryPart, ResourceEstimate, ResourceLimits,
     DEFAULT_MAX_STEPS, DEFAULT_MEMORY_SHARE,
 };
+pub use diagnostics::{plain_toml_error, Location};
 pub use overrides::apply_override;
 pub use schema::*;
 pub use validation::{polygon_contains, FieldError};
@@ -41,12 +47,24 @@ pub enum SceneError {
         /// The I/O error.
         source: std::io::Error,
     },
-    /// TOML syntax error, unknown key, or a value of the wrong type.
+    /// TOML syntax error, unknown key, or a value of the wrong type, where
+    /// its position in the file is not known.
     #[error("scene {path}: {message}")]
     Parse {
         /// The scene path.
         path: String,
-        /// The parser's message (names the key and its location).
+        /// What is wrong (names the key).
+        message: String,
+    },
+    /// TOML syntax error, unknown key, or a value of the wrong type, at a
+    /// position in the file: `path:line:column: message` and the line.
+    #[error("{path}:{}:{}: {message}\n{location}", location.line, location.column)]
+    Located {
+        /// The scene path.
+        path: String,
+        /// Where in the file.
+        location: Location,
+        /// What is wrong, in plain words, naming the key.
         message: String,
     },
     /// A `--set key=value` override that cannot be applied.
@@ -124,6 +142,64 @@ fn non_finite_keys(value: &toml::Value, path: &str, keys: &mut Vec<String>) {
     }
 }
 
+/// A TOML syntax error of the scene `text`, at its position.
+fn syntax_error(origin: &str, text: &str, error: &toml::de::Error) -> SceneError {
+    let location = error.span().map(|span| Location::of(text, span));
+    parse_error(origin, location, error.message().trim().to_string())
+}
+
+/// A [`SceneError::Located`] error, or [`SceneError::Parse`] without a location.
+fn parse_error(origin: &str, location: Option<Location>, message: String) -> SceneError {
+    let path = origin.to_string();
+    match location {
+        Some(location) => SceneError::Located {
+            path,
+            location,
+            message,
+        },
+        None => SceneError::Parse { path, message },
+    }
+}
+
+/// The scene of a TOML table (serde's checks: keys, types, required keys).
+fn deserialize(table: &toml::Table) -> Result<Scene, toml::de::Error> {
+    toml::Value::Table(table.clone()).try_into()
+}
+
+/// Explain `error`, the failure to read the scene `text` with `overrides`
+/// applied: in plain words, and from the input it comes from. An error of
+/// the file itself (`base`, its table) gives its line and column; one that
+/// first appears with the k-th override is that override's error.
+fn explain_failure(
+    origin: &str,
+    text: &str,
+    base: &toml::Table,
+    overrides: &[String],
+    error: &toml::de::Error,
+) -> SceneError {
+    let (raw, keys) = diagnostics::message_and_keys(error);
+    let (message, keys) = diagnostics::explain(&raw, keys.as_deref());
+    let shown = error.to_string();
+    let same = |table: &toml::Table| deserialize(table).is_err_and(|e| e.to_string() == shown);
+    if overrides.is_empty() || same(base) {
+        let location = diagnostics::locate(text, error, &raw, keys.as_deref());
+        return parse_error(origin, location, message);
+    }
+    let mut table = base.clone();
+    for assignment in overrides {
+        if apply_override(&mut table, assignment).is_err() {
+            break;
+        }
+        if same(&table) {
+            return SceneError::Override {
+                assignment: assignment.clone(),
+                message,
+            };
+        }
+    }
+    parse_error(origin, None, message)
+}
+
 fn list(errors: &[FieldError]) -> String {
     errors
         .iter()
@@ -148,12 +224,10 @@ impl Scene {
         origin: &str,
         overrides: &[String],
     ) -> Result<Scene, SceneError> {
-        let mut table: toml::Table =
-            text.parse()
-                .map_err(|e: toml::de::Error| SceneError::Parse {
-                    path: origin.to_string(),
-                    message: e.to_string(),
-                })?;
+        let base: toml::Table = text
+            .parse()
+            .map_err(|e: toml::de::Error| syntax_error(origin, text, &e))?;
+        let mut table = base.clone();
         for assignment in overrides {
             apply_override(&mut table, assignment)?;
         }
@@ -165,12 +239,8 @@ impl Scene {
                 keys,
             });
         }
-        let scene: Scene = toml::Value::Table(table)
-            .try_into()
-            .map_err(|e: toml::de::Error| SceneError::Parse {
-                path: origin.to_string(),
-                message: e.to_string(),
-            })?;
+        let scene =
+            deserialize(&table).map_err(|e| explain_failure(origin, text, &base, overrides, &e))?;
         let errors = scene.validate();
         if errors.is_empty() {
             Ok(scene)

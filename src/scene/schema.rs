@@ -514,7 +514,7 @@ impl Default for SolverSpec {
 
 /// A material, tagged by `model`. Read by `model` first, then as the
 /// model's own parameter table, so that an error names the key inside the
-/// material (`materials.soil`: `E`: invalid type …).
+/// material (`` `materials.soil.E` must be a number, not … (model `hmc`) ``).
 #[derive(Debug, Clone, Serialize, PartialEq)]
 #[serde(tag = "model", rename_all = "snake_case")]
 pub enum MaterialSpec {
@@ -529,19 +529,26 @@ pub enum MaterialSpec {
 }
 
 impl<'de> Deserialize<'de> for MaterialSpec {
+    /// `model` first, then the model's own parameter table; an error names
+    /// the key inside the table (`in `E`: …`, see `scene::diagnostics`)
+    /// and the model.
     fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        use super::diagnostics::{message_and_keys, with_inner_key};
         use serde::de::Error;
         const MODELS: &str = "`linear_elastic`, `hmc` or `von_mises`";
         let mut table = toml::Table::deserialize(deserializer)?;
         let model = match table.remove("model") {
             Some(toml::Value::String(model)) => model,
             Some(other) => {
-                return Err(D::Error::custom(format!(
-                    "key `model`: expected a string ({MODELS}), found {}",
-                    other.type_str()
+                return Err(D::Error::custom(with_inner_key(
+                    &format!(
+                        "must be a string naming the model ({MODELS}), not {}",
+                        other.type_str()
+                    ),
+                    Some("model"),
                 )))
             }
-            None => return Err(D::Error::custom(format!("missing key `model` ({MODELS})"))),
+            None => return Err(D::Error::custom("missing field `model`")),
         };
         let parameters = toml::Value::Table(table);
         let parsed = match model.as_str() {
@@ -549,15 +556,17 @@ impl<'de> Deserialize<'de> for MaterialSpec {
             "hmc" => parameters.try_into().map(MaterialSpec::Hmc),
             "von_mises" => parameters.try_into().map(MaterialSpec::VonMises),
             other => {
-                return Err(D::Error::custom(format!(
-                    "key `model`: unknown model `{other}`, expected {MODELS}"
+                return Err(D::Error::custom(with_inner_key(
+                    &format!("unknown variant `{other}`, expected one of {MODELS}"),
+                    Some("model"),
                 )))
             }
         };
         parsed.map_err(|e: toml::de::Error| {
+            let (message, keys) = message_and_keys(&e);
             D::Error::custom(format!(
-                "model `{model}`: {}",
-                e.to_string().trim().replace('\n', " ")
+                "{} (model `{model}`)",
+                with_inner_key(&message, keys.as_deref())
             ))
         })
     }

@@ -336,3 +336,230 @@ fn bad_ramp_times_are_refused_naming_the_field() {
         "{e}"
     );
 }
+
+/// MINIMAL with a `[bc]` table holding `entries`.
+fn with_bc(entries: &[&str]) -> String {
+    format!("{MINIMAL}\n[bc]\n{}\n", entries.join("\n"))
+}
+
+/// The message of a refused scene (panics when it is accepted).
+fn refusal(text: &str) -> String {
+    Scene::from_str_with_overrides(text, "t", &[])
+        .expect_err("contradictory scene accepted")
+        .to_string()
+}
+
+/// Issue 41 item 6: a fixed or prescribed line through the top that a rigid
+/// body drives is refused naming both entries, when it gives a driven
+/// component another motion; a condition that agrees with the body (a
+/// roller in x under a vertical platen, a prescribed line moving with it)
+/// is accepted.
+#[test]
+fn a_line_holding_what_a_rigid_body_drives_is_refused_naming_both() {
+    let platen =
+        r#"rigid = [{ name = "platen", footprint = [0.0, 1.0], velocity = [0.0, -0.01] }]"#;
+    let e = refusal(&with_bc(&[
+        platen,
+        r#"fixed = [{ line = "y=0", dofs = ["y"] }, { line = "y=1", dofs = ["y"] }]"#,
+    ]));
+    assert!(
+        e.contains("bc.rigid[0]") && e.contains("bc.fixed[1]") && e.contains("`platen`"),
+        "{e}"
+    );
+    assert!(!e.contains("bc.fixed[0]"), "the base is not driven: {e}");
+    // a vertical line meeting the top, fixed in the driven component
+    let e = refusal(&with_bc(&[
+        platen,
+        r#"fixed = [{ line = "y=0", dofs = ["y"] }, { line = "x=0", dofs = ["x", "y"] }]"#,
+    ]));
+    assert!(
+        e.contains("bc.rigid[0]") && e.contains("bc.fixed[1]") && e.contains("(0, 1) m"),
+        "{e}"
+    );
+    // a prescribed top moving otherwise than the platen
+    let e = refusal(&with_bc(&[
+        platen,
+        r#"prescribed = [{ line = "y=1", dof = "y", rate = -0.02 }]"#,
+    ]));
+    assert!(
+        e.contains("bc.rigid[0]") && e.contains("bc.prescribed[0]"),
+        "{e}"
+    );
+    // conditions that agree with the platen
+    for agreeing in [
+        r#"fixed = [{ line = "y=0", dofs = ["y"] }, { line = "x=0", dofs = ["x"] }, { line = "y=1", dofs = ["x"] }]"#,
+        r#"prescribed = [{ line = "y=1", dof = "y", rate = -0.01 }]"#,
+    ] {
+        let text = with_bc(&[platen, agreeing]);
+        assert!(
+            Scene::from_str_with_overrides(&text, "t", &[]).is_ok(),
+            "{agreeing}"
+        );
+    }
+}
+
+/// Issue 41 item 6: two pressures on the same side of a box body (one
+/// naming the body, one defaulting to it), or on overlapping edges of a
+/// polygon body, are refused naming both entries and the sum they would
+/// make; different sides and disjoint edges are accepted.
+#[test]
+fn pressures_that_would_add_up_are_refused_naming_both() {
+    let e = refusal(&with_bc(&[
+        r#"pressure = [{ side = "top", p = 100.0 }, { side = "right", p = 50.0 }, { body = "body0", side = "top", p = 20.0 }]"#,
+    ]));
+    assert!(
+        e.contains("bc.pressure[2]") && e.contains("bc.pressure[0]") && e.contains("120 kPa"),
+        "{e}"
+    );
+    assert!(!e.contains("bc.pressure[1]"), "{e}");
+    let accepted =
+        with_bc(&[r#"pressure = [{ side = "top", p = 100.0 }, { side = "right", p = 50.0 }]"#]);
+    assert!(Scene::from_str_with_overrides(&accepted, "t", &[]).is_ok());
+    let polygon = |edges: &str| {
+        MINIMAL.replace(
+            "box = [[0.0, 0.0], [1.0, 1.0]]",
+            "polygon = [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.5, 1.0], [0.0, 1.0]]",
+        ) + &format!("\n[bc]\npressure = {edges}\n")
+    };
+    let e = refusal(&polygon(
+        "[{ edges = [1, 2], p = 10.0 }, { edges = [2, 3], p = 10.0 }]",
+    ));
+    assert!(
+        e.contains("bc.pressure[1]") && e.contains("bc.pressure[0]") && e.contains("edge 2"),
+        "{e}"
+    );
+    let disjoint = polygon("[{ edges = [1, 2], p = 10.0 }, { edges = [3, 3], p = 10.0 }]");
+    assert!(Scene::from_str_with_overrides(&disjoint, "t", &[]).is_ok());
+}
+
+/// Line and column (from 1) of the first `needle` in `text`.
+fn line_and_column(text: &str, needle: &str) -> (usize, usize) {
+    let at = text.find(needle).expect("needle in text");
+    let line_start = text[..at].rfind('\n').map_or(0, |i| i + 1);
+    (
+        text[..at].matches('\n').count() + 1,
+        text[line_start..at].chars().count() + 1,
+    )
+}
+
+/// Issue 41 item 11: a misspelt key in the file is reported at its line and
+/// column, with the line and the key it was meant to be; an override that is
+/// fine does not take the blame.
+#[test]
+fn a_typo_in_the_file_gives_line_column_and_suggestion() {
+    let typo = MINIMAL.replace("cell_size = 0.5", "cel_size = 0.5");
+    let (line, column) = line_and_column(&typo, "cel_size");
+    for overrides in [vec![], vec!["scene.steps=2".to_string()]] {
+        let e = Scene::from_str_with_overrides(&typo, "typo.toml", &overrides).unwrap_err();
+        assert_eq!(
+            crate::error_id::Identified::error_id(&e),
+            crate::error_id::ErrorId::SceneSyntax
+        );
+        let SceneError::Located {
+            ref location,
+            ref message,
+            ..
+        } = e
+        else {
+            panic!("no location: {e}");
+        };
+        assert_eq!((location.line, location.column), (line, column), "{e}");
+        assert!(
+            message.contains("unknown key `cel_size` in `grid`")
+                && message.contains("did you mean `cell_size`?"),
+            "{e}"
+        );
+        let shown = e.to_string();
+        assert!(
+            shown.starts_with(&format!("typo.toml:{line}:{column}: "))
+                && shown.contains("cel_size = 0.5\n"),
+            "{shown}"
+        );
+    }
+}
+
+/// Issue 41 item 11: a `--set` that names no key or gives a value of the
+/// wrong type is `SCENE_OVERRIDE`, naming that override (not the ones
+/// before it) with a suggestion or the value wanted in plain words.
+#[test]
+fn a_bad_override_is_scene_override_naming_it() {
+    let set = |overrides: &[&str]| {
+        let overrides: Vec<String> = overrides.iter().map(|o| o.to_string()).collect();
+        Scene::from_str_with_overrides(MINIMAL, "t", &overrides).unwrap_err()
+    };
+    for (overrides, culprit, words) in [
+        (
+            &["scene.steps=2", "grid.cel_size=0.25"][..],
+            "grid.cel_size=0.25",
+            "did you mean `cell_size`?",
+        ),
+        (
+            &["gird.cell_size=0.25"][..],
+            "gird.cell_size=0.25",
+            "did you mean `grid`?",
+        ),
+        (
+            &["scene.steps=abc"][..],
+            "scene.steps=abc",
+            "a whole number ≥ 1",
+        ),
+        (
+            &["scene.analysis=explict"][..],
+            "scene.analysis=explict",
+            "did you mean `explicit`?",
+        ),
+        (
+            &["materials.soil.nu=true"][..],
+            "materials.soil.nu=true",
+            "`materials.soil.nu` must be a number",
+        ),
+    ] {
+        let e = set(overrides);
+        assert_eq!(
+            crate::error_id::Identified::error_id(&e),
+            crate::error_id::ErrorId::SceneOverride,
+            "{e}"
+        );
+        let SceneError::Override { ref assignment, .. } = e else {
+            panic!("{e}");
+        };
+        assert_eq!(assignment, culprit);
+        assert!(e.to_string().contains(words), "{e}");
+    }
+}
+
+/// Issue 41 item 11: values of the wrong type are described in plain words
+/// with the key's range, at the value's position, also inside a material's
+/// parameter table (whose errors toml places at the table's header).
+#[test]
+fn wrong_types_are_named_in_plain_words_at_the_value() {
+    let located = |text: &str| match Scene::from_str_with_overrides(text, "t", &[]) {
+        Err(SceneError::Located {
+            location, message, ..
+        }) => (location.line, location.column, message),
+        other => panic!("{other:?}"),
+    };
+    let steps = MINIMAL.replace("steps = 1", "steps = 2.5");
+    let (line, column, message) = located(&steps);
+    assert_eq!((line, column), line_and_column(&steps, "2.5"));
+    assert_eq!(message, "`scene.steps` must be a whole number ≥ 1, not 2.5");
+    let mut messages = vec![message];
+    let young = MINIMAL.replace("E = 1000.0", "E = \"stiff\"");
+    let (line, column, message) = located(&young);
+    assert_eq!((line, column), line_and_column(&young, "\"stiff\""));
+    assert!(
+        message.starts_with("`materials.soil.E` must be a number, not the string \"stiff\""),
+        "{message}"
+    );
+    messages.push(message);
+    let extra = MINIMAL.replace("nu = 0.3", "nu = 0.3\nnu0 = 0.2");
+    let (line, column, message) = located(&extra);
+    assert_eq!((line, column), line_and_column(&extra, "nu0"));
+    assert!(message.contains("did you mean `nu`?"), "{message}");
+    messages.push(message);
+    for message in &messages {
+        for rust_type in ["usize", "f64", "expected", "invalid type"] {
+            assert!(!message.contains(rust_type), "{message}");
+        }
+    }
+}

@@ -833,6 +833,8 @@ impl Scene {
         }
         self.validate_friction(e);
         self.validate_dof_conflicts(e);
+        self.validate_rigid_line_conflicts(e);
+        self.validate_pressure_duplicates(e);
         for (i, p) in self.bc.pressure.iter().enumerate() {
             let f = format!("bc.pressure[{i}]");
             match self.body_index(p.body.as_deref()) {
