@@ -19,6 +19,7 @@
 //!   each a list of named stages in the order of paper Fig. 1);
 //! - the run: [`simulation`] (time loop, monitors), [`monitor`], [`output`],
 //!   [`run`] and [`profile`] (what a run writes and measures),
+//!   [`provenance`] (where a run came from, what it found),
 //!   [`checkpoint`] (saving and resuming a run), [`scene`]
 //!   (TOML input and its validation), [`campaign`] and [`metrics`] (mesh
 //!   studies), [`study`] (error against run time), [`error`];
@@ -58,6 +59,7 @@ pub mod plot;
 pub mod point_driver;
 pub mod profile;
 pub mod progress_lines;
+pub mod provenance;
 pub mod run;
 pub mod scene;
 pub mod seeding;

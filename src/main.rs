@@ -9,6 +9,7 @@ use mpm_geo::campaign::{CampaignOptions, Part};
 use mpm_geo::checkpoint::{Resumable, ResumeOptions, SceneSource};
 use mpm_geo::cli_values;
 use mpm_geo::error_id::{ErrorId, Identified};
+use mpm_geo::provenance::{monitor_summaries, Provenance};
 use mpm_geo::run::{run_scene_with, RunOptions, RunOutcome};
 use mpm_geo::scene::{Formulation, Scene};
 
@@ -35,6 +36,10 @@ enum Command {
         /// No progress bar (and no progress lines).
         #[arg(long)]
         quiet: bool,
+        /// Print the stage profile and work counters at the end (they are in
+        /// run.json in any case).
+        #[arg(long)]
+        profile: bool,
         /// Seconds between the plain progress lines printed when stderr is
         /// not a terminal (a pipe, a log file; default 10).
         #[arg(long, value_name = "SECONDS", value_parser = parse_positive_seconds)]
@@ -70,6 +75,10 @@ enum Command {
         /// No progress bar (and no progress lines).
         #[arg(long)]
         quiet: bool,
+        /// Print the stage profile and work counters at the end (they are in
+        /// run.json in any case).
+        #[arg(long)]
+        profile: bool,
         /// Seconds between the plain progress lines printed when stderr is
         /// not a terminal (default 10).
         #[arg(long, value_name = "SECONDS", value_parser = parse_positive_seconds)]
@@ -373,6 +382,7 @@ fn main() -> ExitCode {
             out,
             overrides,
             quiet,
+            profile,
             progress_every,
             overwrite,
             max_memory,
@@ -405,12 +415,14 @@ fn main() -> ExitCode {
                 checkpoint: checkpoint_every.map(|n| (source, n as usize)),
                 stop_after: stop_after_step,
                 extra_files: Vec::new(),
+                provenance: Some(Provenance::now(Some(&scene), &overrides)),
             };
-            report(run_scene_with(loaded, &out, &options), &out, quiet)
+            report(run_scene_with(loaded, &out, &options), &out, quiet, profile)
         }
         Command::Resume {
             dir,
             quiet,
+            profile,
             progress_every,
             checkpoint_every,
             stop_after_step,
@@ -434,7 +446,7 @@ fn main() -> ExitCode {
                 progress_every,
                 extra_files: Vec::new(),
             };
-            report(resumable.run(!quiet, &options), &dir, quiet)
+            report(resumable.run(!quiet, &options), &dir, quiet, profile)
         }
     }
 }
@@ -447,17 +459,18 @@ fn install_interrupt() {
     }
 }
 
-/// Print a run's summary and turn its outcome into the exit code.
+/// Print a run's summary (with `profile` its stage profile and work
+/// counters) and turn its outcome into the exit code.
 fn report(
     outcome: Result<RunOutcome, Box<dyn std::error::Error + Send + Sync>>,
     out: &Path,
     quiet: bool,
+    profile: bool,
 ) -> ExitCode {
     let outcome = match outcome {
         Err(e) => return fail_with(2, e.as_ref()),
         Ok(outcome) => outcome,
     };
-    let usage = outcome.simulation.integrator.usage();
     let sim = &outcome.simulation.model;
     let succeeded = outcome.error.is_none() && outcome.interrupted.is_none();
     if quiet && succeeded && outcome.simulation.finished() {
@@ -465,38 +478,37 @@ fn report(
         print_warnings(sim);
         return ExitCode::SUCCESS;
     }
-    eprintln!("{}", outcome.simulation.profile.table(outcome.wall_seconds));
-    eprintln!("{}", outcome.simulation.profile.work_line());
-    eprintln!(
-        "steps {}  time {:.6e} s  Newton iterations {}  factorisations: Cholesky {} LU {}  halvings {}  stagnated steps {}",
-        sim.step,
-        sim.time,
-        usage.newton_iterations,
-        usage.cholesky,
-        usage.lu,
-        usage.halvings,
-        usage.stagnated_steps
-    );
-    if let (Some((lo, hi)), Some(by)) = (usage.explicit_time_step, &usage.time_step_limited_by) {
-        eprintln!("explicit time step {lo:.3e} to {hi:.3e} s (limited by {by})");
+    if profile {
+        eprintln!("{}", outcome.simulation.profile.table(outcome.wall_seconds));
+        eprintln!("{}", outcome.simulation.profile.work_line());
     }
+    print_run_summary(&outcome, out);
     print_warnings(sim);
+    let resume = || {
+        if out.join("checkpoint.bin").exists() {
+            format!("; continue with `mpm-geo resume {}`", out.display())
+        } else {
+            String::new()
+        }
+    };
     match (outcome.error, outcome.interrupted) {
         (Some(e), _) => fail(
             1,
             e.error_id(),
             &format!(
-                "run stopped: {e}\noutputs up to the last completed step are in {}",
-                out.display()
+                "run stopped: {e}\noutputs up to the last completed step are in {}{}",
+                out.display(),
+                resume()
             ),
         ),
         (None, Some(signal)) => {
             eprintln!(
-                "interrupted by {} after step {} (t = {:.6e} s); outputs up to it are in {}",
+                "interrupted by {} after step {} (t = {:.6e} s); outputs up to it are in {}{}",
                 signal.name(),
                 sim.step,
                 sim.time,
-                out.display()
+                out.display(),
+                resume()
             );
             ExitCode::from(signal.exit_code())
         }
@@ -509,9 +521,55 @@ fn report(
             ExitCode::SUCCESS
         }
         (None, None) => {
-            eprintln!("outputs in {}", out.display());
+            let pvd = out.join(mpm_geo::run::PVD_FILE);
+            let view = if pvd.exists() {
+                format!(" (open {} in ParaView)", pvd.display())
+            } else {
+                String::new()
+            };
+            eprintln!("outputs in {}{view}", out.display());
             ExitCode::SUCCESS
         }
+    }
+}
+
+/// The physics summary of a run: steps, time and effort, then each
+/// monitor's last value and its peak (largest magnitude) with its time, as
+/// `run.json` → `summary` records them.
+fn print_run_summary(outcome: &RunOutcome, out: &Path) {
+    let (sim, usage) = (
+        &outcome.simulation.model,
+        outcome.simulation.integrator.usage(),
+    );
+    let mut effort = format!(
+        "{} steps to t = {:.4e} s in {:.2} s",
+        sim.step, sim.time, outcome.wall_seconds
+    );
+    if usage.newton_iterations > 0 {
+        effort += &format!(
+            "; {} Newton iterations, {} halvings",
+            usage.newton_iterations, usage.halvings
+        );
+    }
+    if let (Some((lo, hi)), Some(by)) = (usage.explicit_time_step, &usage.time_step_limited_by) {
+        effort += &format!("; time step {lo:.3e} to {hi:.3e} s (limited by {by})");
+    }
+    eprintln!("{effort}");
+    let names: Vec<String> = outcome
+        .simulation
+        .monitors
+        .iter()
+        .map(|m| m.name.clone())
+        .collect();
+    let Some(monitors) = monitor_summaries(&out.join("curve.csv"), &names) else {
+        return;
+    };
+    let width = monitors.iter().map(|m| m.name.len()).max().unwrap_or(0);
+    for m in monitors {
+        eprintln!(
+            "  {:width$}  last {:>11.4e}  peak {:>11.4e} at t = {:.4e} s",
+            m.name, m.last, m.peak, m.peak_time
+        );
     }
 }
 

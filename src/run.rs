@@ -24,6 +24,7 @@ use crate::output::{
 };
 use crate::output_dir;
 use crate::profile::Stage;
+use crate::provenance::{monitor_summaries, Provenance};
 use crate::scene::{AnalysisKind, Scene};
 use crate::simulation::{Observer, RunEnd, Simulation};
 
@@ -60,6 +61,9 @@ pub struct OutputObserver {
     lines: Option<ProgressLines>,
     /// The files of the run, recorded in `run.json` before they are written.
     manifest: Manifest,
+    /// Where the run comes from, for the `run.json` it rewrites (set by
+    /// [`drive`]).
+    provenance: Option<Provenance>,
 }
 
 /// Where a run's outputs stood after a step: what a checkpoint stores so a
@@ -146,6 +150,7 @@ impl OutputObserver {
             stop: false,
             lines: None,
             manifest,
+            provenance: None,
         })
     }
 
@@ -182,6 +187,7 @@ impl OutputObserver {
             stop: false,
             lines: None,
             manifest,
+            provenance: None,
         })
     }
 
@@ -279,6 +285,7 @@ impl OutputObserver {
                 0.0,
                 RunStatus::Running,
                 &self.manifest,
+                self.provenance.as_ref(),
             )
             .map_err(at(sim))?;
         }
@@ -541,6 +548,9 @@ pub struct RunOptions {
     /// Files the caller writes into the directory after the run (a
     /// campaign's record), recorded in `run.json` with the run's own.
     pub extra_files: Vec<String>,
+    /// Where the run comes from (`run.json` → `provenance`); `None`: this
+    /// process, no scene file named.
+    pub provenance: Option<Provenance>,
 }
 
 /// Run a validated scene, writing `curve.csv`, snapshots and `run.json` into
@@ -587,6 +597,10 @@ pub fn run_scene_with(
         manifest,
         earlier: None,
         written_later: options.extra_files.clone(),
+        provenance: options
+            .provenance
+            .clone()
+            .unwrap_or_else(|| Provenance::now(None, &[])),
     };
     drive(sim, out, drive_options, move |sim, manifest| {
         let checkpoints = match &options.checkpoint {
@@ -647,6 +661,8 @@ pub(crate) struct Drive {
     /// Files the caller writes after the run (a campaign's record): kept
     /// in the manifest though they do not exist yet when it is written.
     pub written_later: Vec<String>,
+    /// Where the run comes from.
+    pub provenance: Provenance,
 }
 
 /// Run `sim` in `out` (locked by the caller) with the observer `make`
@@ -665,9 +681,10 @@ pub(crate) fn drive(
         manifest,
         earlier,
         written_later,
+        provenance,
     } = options;
     let mut observer = None;
-    let result = start_and_run(&mut sim, out, &manifest, make, &mut observer);
+    let result = start_and_run(&mut sim, out, &manifest, &provenance, make, &mut observer);
     if let (Ok(_), Some(o)) = (&result, observer.as_mut()) {
         if o.stopped() {
             // the stop hook leaves what a kill leaves
@@ -713,7 +730,14 @@ pub(crate) fn drive(
             for name in &written_later {
                 manifest.add(name);
             }
-            write_run_json(&path, &sim, wall_seconds, status, &manifest)
+            write_run_json(
+                &path,
+                &sim,
+                wall_seconds,
+                status,
+                &manifest,
+                Some(&provenance),
+            )
         }
     };
     if let Err(e) = written {
@@ -736,6 +760,7 @@ fn start_and_run(
     sim: &mut Simulation,
     out: &Path,
     manifest: &Manifest,
+    provenance: &Provenance,
     make: impl FnOnce(&Simulation, Manifest) -> Result<OutputObserver, RunError>,
     observer: &mut Option<OutputObserver>,
 ) -> Result<RunEnd, RunError> {
@@ -745,9 +770,11 @@ fn start_and_run(
         0.0,
         RunStatus::Running,
         manifest,
+        Some(provenance),
     )
     .map_err(at(sim))?;
-    let new = make(sim, manifest.clone())?;
+    let mut new = make(sim, manifest.clone())?;
+    new.provenance = Some(provenance.clone());
     sim.run(observer.insert(new))
 }
 
@@ -788,6 +815,7 @@ pub fn write_run_json(
     wall_seconds: f64,
     status: RunStatus<'_>,
     manifest: &Manifest,
+    provenance: Option<&Provenance>,
 ) -> Result<(), OutputError> {
     let (error, error_id) = match status {
         RunStatus::Failed(e) => (
@@ -893,9 +921,57 @@ pub fn write_run_json(
         "profile": sim.profile.totals(wall_seconds),
         "work": work,
         "manifest": manifest,
+        "provenance": provenance_record(provenance, sim, status),
+        "summary": run_summary(path, sim, status),
         "scene": model.scene,
     });
     write_json(path, &value)
+}
+
+/// `run.json` → `provenance`: where the run came from, the scene's
+/// fingerprint (FNV-1a of its resolved form, as campaign records keep it)
+/// and, once it ended, when.
+fn provenance_record(
+    provenance: Option<&Provenance>,
+    sim: &Simulation,
+    status: RunStatus<'_>,
+) -> serde_json::Value {
+    let mut record = match provenance {
+        Some(p) => serde_json::to_value(p).unwrap_or_default(),
+        None => serde_json::to_value(Provenance::now(None, &[])).unwrap_or_default(),
+    };
+    let scene = serde_json::to_string(&sim.model.scene).unwrap_or_default();
+    record["scene_fingerprint"] = crate::campaign::fingerprint_text(&scene).into();
+    record["ended_at"] = match status {
+        RunStatus::Running => serde_json::Value::Null,
+        _ => crate::provenance::timestamp().into(),
+    };
+    record
+}
+
+/// `run.json` → `summary` of a run that ended (null while it runs): its
+/// status, steps and time, each monitor's last and peak value over
+/// `curve.csv` (beside `run_json`), and where to look.
+fn run_summary(run_json: &Path, sim: &Simulation, status: RunStatus<'_>) -> serde_json::Value {
+    if matches!(status, RunStatus::Running) {
+        return serde_json::Value::Null;
+    }
+    let dir = run_json.parent().unwrap_or(Path::new("."));
+    let names: Vec<String> = sim.monitors.iter().map(|m| m.name.clone()).collect();
+    let monitors = monitor_summaries(&dir.join("curve.csv"), &names).unwrap_or_default();
+    let pvd = dir.join(PVD_FILE);
+    json!({
+        "status": status.name(),
+        "steps": sim.model.step,
+        "time": sim.model.time,
+        "monitors": monitors,
+        "outputs": dir.display().to_string(),
+        "paraview": pvd.exists().then(|| pvd.display().to_string()),
+        "resume": matches!(status, RunStatus::Interrupted(_) | RunStatus::Failed(_))
+            .then(|| dir.join("checkpoint.bin"))
+            .filter(|c| c.exists())
+            .map(|_| format!("mpm-geo resume {}", dir.display())),
+    })
 }
 
 /// The largest point volume at the end of the run, in cell areas h², and

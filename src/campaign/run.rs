@@ -1,6 +1,7 @@
 //! Running a campaign: finding the scenes, running them `jobs` at a time into
 //! `out/<scene>/`, and the time-step refinement of each scene.
 
+use crate::provenance::Provenance;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::time::Instant;
@@ -352,6 +353,7 @@ fn execute(
                 overwrite: true,
                 checkpoint: checkpoint_every.map(source),
                 extra_files,
+                provenance: Some(Provenance::now(Some(Path::new(&planned.scene_file)), &[])),
                 ..Default::default()
             };
             run_scene_with(planned.scene.clone(), out, &options)

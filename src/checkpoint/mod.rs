@@ -644,6 +644,10 @@ impl Resumable {
             manifest,
             earlier,
             written_later: options.extra_files.clone(),
+            provenance: crate::provenance::Provenance::now(
+                Some(Path::new(&source.origin)),
+                &source.overrides,
+            ),
         };
         crate::run::drive(simulation, &dir, drive, |sim, mut manifest| {
             manifest

@@ -1,0 +1,149 @@
+//! `run.json` says where a run came from and what it found (issue 41
+//! items 8–9): the provenance (build, command line, overrides, scene and its
+//! fingerprint, start and end, host, CPU, threads) and the summary (status,
+//! steps, each monitor's last and peak value, where the files are); `run`
+//! prints that summary, and the stage profile only with `--profile`.
+
+use std::process::Command;
+
+mod common;
+
+const BIN: &str = env!("CARGO_BIN_EXE_mpm-geo");
+
+/// Run the tossed block quietly for 30 steps with `extra` arguments;
+/// returns the output folder (kept alive) and its `run.json`.
+fn run(extra: &[&str]) -> (tempfile::TempDir, serde_json::Value) {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let scene = common::validation("friction/tossed_block.toml");
+    let output = Command::new(BIN)
+        .args([
+            "run",
+            scene.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ])
+        .args(["--set", "scene.steps=30", "--quiet"])
+        .args(extra)
+        .output()
+        .unwrap();
+    assert!(output.status.success(), "{output:?}");
+    let json =
+        serde_json::from_str(&std::fs::read_to_string(out.join("run.json")).unwrap()).unwrap();
+    (dir, json)
+}
+
+fn is_utc_second(s: &serde_json::Value) -> bool {
+    let s = s.as_str().unwrap_or("");
+    s.len() == 20 && s.ends_with('Z') && s.as_bytes()[10] == b'T'
+}
+
+#[test]
+fn run_json_holds_provenance_and_summary() {
+    let (dir, json) = run(&["--set", "loads.gravity=9.0"]);
+    let p = &json["provenance"];
+    let command: Vec<&str> = p["command_line"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_str().unwrap())
+        .collect();
+    assert!(command.contains(&"loads.gravity=9.0"), "{command:?}");
+    assert_eq!(
+        p["overrides"],
+        serde_json::json!(["scene.steps=30", "loads.gravity=9.0"])
+    );
+    assert!(p["scene_path"]
+        .as_str()
+        .unwrap()
+        .ends_with("friction/tossed_block.toml"));
+    let fingerprint = p["scene_fingerprint"].as_str().unwrap();
+    assert!(fingerprint.len() == 16 && fingerprint.chars().all(|c| c.is_ascii_hexdigit()));
+    assert!(
+        is_utc_second(&p["started_at"]) && is_utc_second(&p["ended_at"]),
+        "{p}"
+    );
+    assert!(p["started_at"].as_str() <= p["ended_at"].as_str());
+    assert_eq!(p["version"], env!("CARGO_PKG_VERSION"));
+    // built from a checkout here: a 40-digit commit and a dirty flag
+    let commit = p["git_commit"].as_str().unwrap_or("");
+    assert!(
+        commit.is_empty() || (commit.len() == 40 && p["git_dirty"].is_boolean()),
+        "{p}"
+    );
+    assert!(p["threads"].as_u64().unwrap() >= 1);
+    assert!(!p["host"].as_str().unwrap().is_empty() && !p["cpu"].as_str().unwrap().is_empty());
+
+    let s = &json["summary"];
+    assert_eq!(
+        (s["status"].as_str(), s["steps"].as_u64()),
+        (Some("completed"), Some(30))
+    );
+    // the monitors' last values are the curve's last row
+    let curve = std::fs::read_to_string(dir.path().join("out/curve.csv")).unwrap();
+    let header: Vec<&str> = curve.lines().next().unwrap().split(',').collect();
+    let last: Vec<f64> = curve
+        .lines()
+        .last()
+        .unwrap()
+        .split(',')
+        .map(|v| v.parse().unwrap())
+        .collect();
+    let monitors = s["monitors"].as_array().unwrap();
+    assert_eq!(monitors.len(), 2);
+    for m in monitors {
+        let i = header
+            .iter()
+            .position(|h| *h == m["name"].as_str().unwrap())
+            .unwrap();
+        assert_eq!(m["last"].as_f64().unwrap(), last[i]);
+        assert!(m["peak"].as_f64().unwrap().abs() >= last[i].abs());
+    }
+    // the block starts with all its kinetic energy, ½ m v² = ½ · 1 t · 4 = 2 kJ/m
+    let kinetic = monitors
+        .iter()
+        .find(|m| m["name"] == "kinetic_energy")
+        .unwrap();
+    assert_eq!(
+        (kinetic["peak"].as_f64(), kinetic["peak_time"].as_f64()),
+        (Some(2.0), Some(0.0))
+    );
+}
+
+/// Without `--quiet` the summary is printed; the stage profile only with
+/// `--profile`.
+#[test]
+fn run_prints_its_summary_and_the_profile_on_demand() {
+    let plain = |extra: &[&str]| {
+        let mut args = vec!["--progress-every", "100"];
+        args.extend_from_slice(extra);
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("out");
+        let scene = common::validation("friction/tossed_block.toml");
+        let output = Command::new(BIN)
+            .args([
+                "run",
+                scene.to_str().unwrap(),
+                "--out",
+                out.to_str().unwrap(),
+            ])
+            .args(["--set", "scene.steps=30"])
+            .args(&args)
+            .output()
+            .unwrap();
+        assert!(output.status.success());
+        String::from_utf8_lossy(&output.stderr).into_owned()
+    };
+    let summary = plain(&[]);
+    assert!(summary.contains("30 steps to t = "), "{summary}");
+    assert!(
+        summary.contains("kinetic_energy") && summary.contains("peak"),
+        "{summary}"
+    );
+    assert!(!summary.contains("wall"), "{summary}");
+    let profiled = plain(&["--profile"]);
+    assert!(
+        profiled.contains("wall") && profiled.contains("work:"),
+        "{profiled}"
+    );
+}
