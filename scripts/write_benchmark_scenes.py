@@ -295,7 +295,7 @@ CUT_FRICTION_BASE = dict(
     time_scheme="# generalised-alpha (docs/theory.md GA1-GA3): damps the two-step mode like\n"
                 "# Newmark gamma = 0.6 but stays second order. The explicit twin runs\n"
                 "# undamped (damping = 0) at CFL 0.5.\nrho_infinity = 0.8\n",
-    base_note="frictional\n# base (Coulomb, mu = tan 15 deg, the residual friction angle; docs/theory.md §5)",
+    base_note="frictional\n# base (Coulomb, mu = tan 15 deg, the residual friction angle; docs/theory.md §10.3)",
     base_friction='friction = [{ line = "y=0", mu = 0.2679491924311227 }]\n',
     base_fixed="",
 )
