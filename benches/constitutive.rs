@@ -1,4 +1,4 @@
-//! Stress-update throughput of the HMC model (DESIGN §5.6): elastic branch and plastic
+//! Stress-update throughput of the HMC model (theory §5.6): elastic branch and plastic
 //! (softening) branch, reported by criterion as updates per second (throughput in elements).
 //!
 //! Run: `cargo bench --bench constitutive`.

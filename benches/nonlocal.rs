@@ -1,4 +1,4 @@
-//! Criterion benchmark of the nonlocal averaging operator (DESIGN §6, [D33]–[D36]; paper
+//! Criterion benchmark of the nonlocal averaging operator (theory §6, [D33]–[D36]; paper
 //! eq. 6) at 10k and 50k MPs on a regular 2×2-Gauss-point lattice with l_s = 3 h (≈ 10³
 //! neighbours within R_c = 3 l_s), and on the 6,000 points of the finest biaxial mesh
 //! (≈ 4,700 neighbours, the case where nearly every point neighbours every other):

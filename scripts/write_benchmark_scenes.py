@@ -30,7 +30,7 @@ kind = "energy_remainder"
 """
 
 FOOTING = """\
-# Rigid rough strip footing (paper §3.2, Figs. 6-8; DESIGN §8.2), {family} model{ls_note}.
+# Rigid rough strip footing (paper §3.2, Figs. 6-8; theory §8.2), {family} model{ls_note}.
 # Soil {width_note} m x 8 m, weightless, zero initial stress; footing B = 1.5 m centred
 # at x = 7 m driven down 2.5e-3 m per step to 0.3 m (120 steps); normal
 # fixity on the sides and the base; free surface; Table 1 with the Table 2
@@ -39,7 +39,7 @@ FOOTING = """\
 # Written by scripts/write_benchmark_scenes.py.
 [scene]
 name = "footing_{name}"
-# Implicit dynamic with slow loading, as the biaxial scenes (DESIGN decision
+# Implicit dynamic with slow loading, as the biaxial scenes (theory decision
 # 26): the footing moves at 0.125 m/s, 1/2500 of the P-wave speed (308 m/s),
 # and the whole run lasts 92 transit times of the 8 m soil depth, so inertia
 # is negligible before the peak. Displacement-controlled quasi-static Newton
@@ -59,12 +59,12 @@ cell_size = {h}
 shape_functions = "gimp"
 point_layout = "uniform"
 # points squeezed out at the footing corners and thrown off the free surface
-# are removed and listed in run.json (DESIGN decision 28)
+# are removed and listed in run.json (theory decision 28)
 lost_points = "remove"
 {nonlocal_table}
 [smoothing]
 # Double mapping off, as in the biaxial scenes: the formulation chosen there
-# (DESIGN decision 27) carries over unchanged. `--formulation paper` turns
+# (theory decision 27) carries over unchanged. `--formulation paper` turns
 # the increment mapping back on.
 double_mapping = "off"
 
@@ -91,7 +91,7 @@ box = [[{left_box}, 0.0], [{right_box}, 8.0]]
 
 [bc]
 fixed = [{{ line = "x={left}", dofs = ["x"] }}, {{ line = "x={right}", dofs = ["x"] }}, {{ line = "y=0", dofs = ["y"] }}]
-# perfectly rough footing tied at the soil surface (DESIGN decision 25)
+# perfectly rough footing tied at the soil surface (theory decision 25)
 rigid = [{{ name = "footing", footprint = [6.25, 7.75], velocity = [0.0, -0.125], contact = "surface" }}]
 
 [output]
@@ -127,7 +127,7 @@ kind = "kinetic_energy"
 FOOTING_NONLOCAL = """
 [nonlocal]
 length_scale = 0.8
-# over-nonlocal factor chosen on the biaxial benchmark (DESIGN decision 24)
+# over-nonlocal factor chosen on the biaxial benchmark (theory decision 24)
 over_nonlocal = 1.1
 # Room for every weight the step's plastic points need (the default 512 MiB
 # holds part of them at h = 0.1 m, ~7,000 neighbours a point). Measured at
@@ -138,11 +138,11 @@ weight_cache_mb = 4096
 """
 
 CUT = """\
-# Vertical cut under increasing gravity (paper §3.3, Figs. 9-12; DESIGN §8.3), {family} model{ls_note}.
+# Vertical cut under increasing gravity (paper §3.3, Figs. 9-12; theory §8.3), {family} model{ls_note}.
 # Soil block 3 m x 3 m (free face x = 3, crest y = 3); rollers on x = 0, {base_note}; zero initial stress, at
 # rest; gravity raised by 0.1 g every 1 ms to 60 g at t = 0.6 s, then held,
 # to t = 1.0 s; Table 1 with the Table 3 changes (E = 10,000 kPa, nu = 0.35,
-# c_ini = 100 kPa, b_post = 5), density 2.0 t/m3 (DESIGN decision 18); cell
+# c_ini = 100 kPa, b_post = 5), density 2.0 t/m3 (theory decision 18); cell
 # size h = 1/{n} m. The campaign (`mpm-geo campaign validation/{campaign}`)
 # runs this file as written (implicit generalised-alpha) and again with explicit MUSL.
 # Written by scripts/write_benchmark_scenes.py.
@@ -159,7 +159,7 @@ dt = 1.0e-3
 # 40 m wide: x = 40 is a wall that the material does not reach. Measured at
 # h = 0.1 m (nonlocal), the front is at 21.8 m at t = 1 s (explicit); on a
 # 20 m grid both integrators ran into the wall (19.9 m). 5 m of air
-# above the crest (DESIGN §8.3: 0.5 m). The implicit runs stay below the
+# above the crest (theory §8.3: 0.5 m). The implicit runs stay below the
 # crest, but the undamped explicit twin throws material up at 60 g: with 1 m
 # of air, 18 % of the mass left through the top at h = 0.1 m (at up to
 # 50 m/s, i.e. up to ~2 m more rise), and at h = 0.0625 m the crest point A
@@ -170,7 +170,7 @@ cell_size = {h}
 shape_functions = "gimp"
 point_layout = "uniform"
 # fragments thrown off the free surface that leave the grid are removed and
-# listed in run.json (DESIGN decision 28)
+# listed in run.json (theory decision 28)
 lost_points = "remove"
 # A point softened to the apex carries no tension and the grid stretches it
 # without limit: measured at h = 0.1 m (nonlocal), V/V0 reached 2.6e6 by
@@ -182,7 +182,7 @@ max_point_volume = 1.0
 {nonlocal_table}
 [smoothing]
 # Double mapping off, as in the biaxial scenes: the formulation chosen there
-# (DESIGN decision 27) carries over unchanged. Here it also keeps the energy
+# (theory decision 27) carries over unchanged. Here it also keeps the energy
 # balance: the increment mapping adds stress without work wherever the
 # mapping changes under a moving point, and at 20 g the explicit run feeds
 # on it. Measured at h = 0.1 m with an elastic soil (c = 1e6 kPa), explicit,
@@ -225,7 +225,7 @@ box = [[0.0, 0.0], [3.0, 3.0]]
 snapshots = [0]
 snapshot_times = [0.6, 0.7, 1.0]
 
-# A: the point initially nearest the crest corner (3, 3) (DESIGN decision 20)
+# A: the point initially nearest the crest corner (3, 3) (theory decision 20)
 [[monitor]]
 name = "uA"
 kind = "point_displacement"
@@ -244,7 +244,7 @@ kind = "point_displacement"
 point = [3.0, 3.0]
 component = "y"
 
-# B: the point initially nearest (3 - 0.22, 0.34), on the toe band (DESIGN decision 19)
+# B: the point initially nearest (3 - 0.22, 0.34), on the toe band (theory decision 19)
 [[monitor]]
 name = "qB"
 kind = "point_stress"
@@ -310,7 +310,7 @@ kind = "kinetic_energy"
 CUT_NONLOCAL = """
 [nonlocal]
 length_scale = 0.4
-# over-nonlocal factor chosen on the biaxial benchmark (DESIGN decision 24)
+# over-nonlocal factor chosen on the biaxial benchmark (theory decision 24)
 over_nonlocal = 1.1
 """
 
@@ -333,7 +333,7 @@ CUT_FRICTION_BASE = dict(
     time_scheme="# generalised-alpha (docs/theory.md GA1-GA3): damps the two-step mode like\n"
                 "# Newmark gamma = 0.6 but stays second order. The explicit twin runs\n"
                 "# undamped (damping = 0) at CFL 0.5.\nrho_infinity = 0.8\n",
-    base_note="frictional\n# base (Coulomb, mu = tan 15 deg, the residual friction angle; docs/theory.md §5)",
+    base_note="frictional\n# base (Coulomb, mu = tan 15 deg, the residual friction angle; docs/theory.md §10.3)",
     base_friction='friction = [{ line = "y=0", mu = 0.2679491924311227 }]\n',
     base_fixed="",
 )

@@ -1,4 +1,4 @@
-//! Boundary conditions and loads on the boundary (DESIGN §3 "Linear system",
+//! Boundary conditions and loads on the boundary (theory §3 "Linear system",
 //! §8.0): grid-line Dirichlet conditions, prescribed nodal values, follower
 //! pressure through traction points, and rigid rough platens/footings through
 //! penalty-tied ("driven") material points.
@@ -167,7 +167,7 @@ fn loaded_edges(
         .collect()
 }
 
-/// Massless boundary points carrying a follower pressure (DESIGN §8.0).
+/// Massless boundary points carrying a follower pressure (theory §8.0).
 #[derive(Clone, Debug, Default)]
 pub struct TractionPoints {
     /// Current position x_s, m.
@@ -305,10 +305,10 @@ impl TractionPoints {
 }
 
 /// The points that tie rigid rough bodies (platens, footings) to the soil by
-/// penalty springs (DESIGN D40–D41), each anchored to its body. Per
+/// penalty springs (theory D40–D41), each anchored to its body. Per
 /// `[[bc.rigid]] contact`:
 ///
-/// - `top_points` (DESIGN §8.0): the material points of the body's top point
+/// - `top_points` (theory §8.0): the material points of the body's top point
 ///   row inside the footprint. The soil between that row and the surface
 ///   (0.21 h for Gauss points, h/4 for sub-cell centres) moves with the rigid
 ///   body, which stiffens the response by O(h).
@@ -316,7 +316,7 @@ impl TractionPoints {
 ///   per cell-wide segment at the Gauss positions (like traction points),
 ///   moving with the surface (x_s += Σ N_i(x_s) Δu_i, with the grid motion
 ///   that moves the material points), so the tie never jumps from a grid row
-///   to the next (DESIGN's reason for not using nodal rows). Explicit runs
+///   to the next (theory §8.0's reason for not using nodal rows). Explicit runs
 ///   are stable up to CFL 0.9 with it (1.0 with `top_points`).
 ///   The first step then equals a bilinear FE model with the top nodes
 ///   tied: 12,635 kN/m per m on the biaxial at h = 1/300 m, as an independent
@@ -394,7 +394,7 @@ impl DrivenPoints {
         particles.material.get(p).map_or(0, |&m| m as usize)
     }
 
-    /// DESIGN §8.0: the material points of the top row of the body of rigid
+    /// theory §8.0: the material points of the top row of the body of rigid
     /// entry `r` whose x lies in its footprint.
     fn tie_top_points(&mut self, r: usize, scene: &Scene, particles: &Particles) {
         let spec = &scene.bc.rigid[r];
@@ -502,7 +502,7 @@ impl DrivenPoints {
         self.particle[k].map_or(self.position[k], |p| particles.position[p])
     }
 
-    /// Anchor X̄(t) = x(0) + ū(t) of point `k` (DESIGN D40), ū(t) = D(t) v
+    /// Anchor X̄(t) = x(0) + ū(t) of point `k` (theory D40), ū(t) = D(t) v
     /// with v the body's velocity and D its start ramp's displacement factor
     /// ([`StartRamp::displacement`]; D = t without ramp).
     pub fn anchor(&self, k: usize, t: f64) -> [f64; 2] {
@@ -532,7 +532,7 @@ impl DrivenPoints {
     }
 
     /// Penalty forces f_i^pen = Σ k N_i (X̄(t) − x − Σ_j N_j Δu_j) added into `force`
-    /// (DESIGN D40) by the points that bear on soil; `du` is the current
+    /// (theory D40) by the points that bear on soil; `du` is the current
     /// nodal displacement increment (zeros for explicit).
     pub fn add_forces(
         &self,
@@ -571,7 +571,7 @@ impl DrivenPoints {
         [anchor[0] - x[0] - u[0], anchor[1] - x[1] - u[1]]
     }
 
-    /// Add K_pen = Σ k N Nᵀ ⊗ I₂ (DESIGN D41) into the patch blocks of the
+    /// Add K_pen = Σ k N Nᵀ ⊗ I₂ (theory D41) into the patch blocks of the
     /// active cells (one flat array, block `slot` at `slot · dofs²`, `dofs`
     /// per block row). A point that does not bear on soil
     /// ([`DrivenPoints::bears_on_soil`]) adds nothing, as it adds no force.
@@ -645,7 +645,7 @@ impl DrivenPoints {
         }
     }
 
-    /// Force exerted by rigid body `r` on the soil, R = Σ k (X̄ − x) (DESIGN D40), kN/m,
+    /// Force exerted by rigid body `r` on the soil, R = Σ k (X̄ − x) (theory D40), kN/m,
     /// at the committed positions and time `t`.
     pub fn force_on_soil(&self, r: usize, particles: &Particles, t: f64) -> [f64; 2] {
         let mut f = [0.0; 2];

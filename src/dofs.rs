@@ -1,4 +1,4 @@
-//! Numbering of the unknowns of one step (DESIGN §3 "Linear system"): the
+//! Numbering of the unknowns of one step (theory §3 "Linear system"): the
 //! free degrees of freedom of the active nodes, and the system indices of
 //! every element of the tangent.
 

@@ -1,4 +1,4 @@
-//! The energy budget of a run (DESIGN §9 M5, issue 39 item 5), kJ per metre
+//! The energy budget of a run (theory §9 M5, issue 39 item 5), kJ per metre
 //! run, closed per step by its remainder:
 //!
 //! W = W_int + (K − K0) + B + R,                                    (E1)
@@ -16,7 +16,7 @@
 //! W_int = U + D + G,                                               (E2)
 //!
 //! U = Σ_p ½ V_p σ_p·Cσ_p the stored elastic energy, D the plastic
-//! dissipation (DESIGN D43), and G the gap of the hypoelastic update: U is
+//! dissipation (theory D43), and G the gap of the hypoelastic update: U is
 //! weighted with the current volumes while each step's work uses V_p(n), so
 //! G = −Σ_steps Σ_p ½ σ·Cσ ΔV_p (a point compressed under load stores less
 //! than the work put in, one dilating under load more), plus what the

@@ -68,7 +68,7 @@ impl fmt::Display for BoundaryPointKind {
     }
 }
 
-/// What limits the explicit stable time step (DESIGN D20, §4).
+/// What limits the explicit stable time step (theory D20, §4).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum TimeStepLimit {
     /// h / (c_p + |v_p|) of the material points.
@@ -80,9 +80,9 @@ pub enum TimeStepLimit {
 impl fmt::Display for TimeStepLimit {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(match self {
-            TimeStepLimit::WaveSpeed => "wave speed, DESIGN D20",
+            TimeStepLimit::WaveSpeed => "wave speed, theory D20",
             TimeStepLimit::WaveSpeedAndSprings => {
-                "wave speed and penalty springs of driven points, DESIGN §4"
+                "wave speed and penalty springs of driven points, theory §4"
             }
         })
     }
@@ -131,7 +131,7 @@ pub enum NewtonFailure {
     },
     /// A non-finite residual or solution.
     NonFinite(&'static str),
-    /// A point moved more than half a cell in one dynamic step (DESIGN §3).
+    /// A point moved more than half a cell in one dynamic step (theory §3).
     Motion {
         /// The point.
         particle: usize,

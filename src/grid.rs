@@ -1,6 +1,6 @@
-//! The fixed regular background grid (DESIGN §2): square cells of side `h`,
+//! The fixed regular background grid (theory §2): square cells of side `h`,
 //! node numbering, cell lookup, and the shape functions of a point: bilinear
-//! (DESIGN D9, the paper's) or uGIMP (particle-domain averaged, an option that
+//! (theory D9, the paper's) or uGIMP (particle-domain averaged, an option that
 //! removes the cell-crossing error of D9).
 
 use crate::shape;
@@ -11,7 +11,7 @@ pub const MAX_SUPPORT: usize = 9;
 /// Which shape functions connect points and nodes.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub enum ShapeFunctions {
-    /// Bilinear N_a of the cell that holds the point (DESIGN D9); the support
+    /// Bilinear N_a of the cell that holds the point (theory D9); the support
     /// is the cell's 4 nodes and ∇N jumps when a point crosses a cell edge.
     #[default]
     Bilinear,
@@ -114,7 +114,7 @@ impl Support for ShapeAt {
     }
 }
 
-/// Bilinear shape functions of a point (DESIGN D9) in compact form: what
+/// Bilinear shape functions of a point (theory D9) in compact form: what
 /// they are evaluated from (the holding cell, its first node, the natural
 /// coordinates ξ, η), in 40 bytes instead of the 272 of a [`ShapeAt`]. N_a
 /// and ∇N_a are formed where a kernel reads them, by the expressions of
@@ -292,7 +292,7 @@ impl Grid {
     }
 
     /// Cell `(ci, cj)` containing `x`, by floor((x − x0)/h) clamped to the grid
-    /// (DESIGN §2). Returns `None` when `x` is outside the grid.
+    /// (theory §2). Returns `None` when `x` is outside the grid.
     #[inline]
     pub fn locate(&self, x: [f64; 2]) -> Option<(usize, usize)> {
         if !self.contains(x) || !x[0].is_finite() || !x[1].is_finite() {
@@ -306,7 +306,7 @@ impl Grid {
     }
 
     /// Bilinear shape functions of the cell `(ci, cj)` evaluated at `x`
-    /// (DESIGN D9), whatever the grid's point shape functions (traction
+    /// (theory D9), whatever the grid's point shape functions (traction
     /// points use these: they are boundary quadrature points, not volumes).
     pub fn shape_in_cell(&self, ci: usize, cj: usize, x: [f64; 2]) -> ShapeAt {
         let h = self.cell_size;

@@ -3,7 +3,7 @@
 //! A 2D plane-strain material point method (MPM) for brittle geomaterials,
 //! after "Objective modelling of failure processes in brittle materials: mesh
 //! dependence and regularisation in the MPM". Equations are cited as *paper
-//! eq. N* and as *DESIGN DN* (the physics reference `shared/DESIGN.md`).
+//! eq. N* and as *theory DN* (the physics reference `docs/theory.md`).
 //!
 //! Layout, one module per concept:
 //! - the model: [`grid`] and [`shape`] (background grid, bilinear and GIMP

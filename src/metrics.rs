@@ -1,4 +1,4 @@
-//! Mesh-objectivity metrics of DESIGN §9 (M1–M5), on plain data.
+//! Mesh-objectivity metrics of theory §9 (M1–M5), on plain data.
 //!
 //! Every function here takes slices (load curves as `(δ, F)` pairs, material
 //! point positions and values, Voigt 4-vectors) and none of the engine's
@@ -294,7 +294,7 @@ pub fn clip_outliers(values: &[f64], quantile: f64) -> Vec<f64> {
         .collect()
 }
 
-/// M4 shear-band width (DESIGN §9) over all material points.
+/// M4 shear-band width (theory §9) over all material points.
 ///
 /// `positions` and `eps_q` (εq of \[D8\]) per MP, `h` the cell size, `l_s`
 /// the nonlocal length (0 for local runs). See [`shear_band_width_in`].
@@ -310,7 +310,7 @@ pub fn shear_band_width(
 /// M4 shear-band width restricted to the MPs for which `region(x)` is true
 /// (e.g. the main Prandtl branch of the footing).
 ///
-/// Steps (DESIGN §9, M4):
+/// Steps (theory §9, M4):
 /// 1. band points: εq ≥ ½ max εq; principal-component line fit (centroid and
 ///    major axis of their covariance) gives the direction t and normal n;
 /// 2. midpoint m: the middle of the band points' extent along t;
@@ -638,8 +638,8 @@ pub fn work_and_dissipation_density(
 /// ΔD = Σ_p V_p(n) · σ_p(n+1) · Δε^p_p,
 /// Δε^p = Δε − C(σ(n+1) − σ^R(n)),
 ///
-/// with Voigt dot products (engineering shear, \[D2\]). DESIGN's D43
-/// weights Δε^p with ½(σ(n+1) + σ^R(n)), which can be negative: a point
+/// with Voigt dot products (engineering shear, \[D2\]). D43 as first
+/// written weighted Δε^p with ½(σ(n+1) + σ^R(n)), which can be negative: a point
 /// torn from compression to the apex in one step flows dilatantly under
 /// the compressive σ^R(n) (measured on the vertical cut: D fell to
 /// −7·10⁵ kJ/m). σ(n+1) · Δε^p is the dissipation of the backward-Euler

@@ -84,19 +84,19 @@ pub struct Model {
     /// (increasing), when known; `None`: any node may hold a value. Lets
     /// the commit write the nodes of the body only.
     pub nodal_results_at: Option<Vec<u32>>,
-    /// Accumulated plastic dissipation D (DESIGN D43), kJ per metre run.
+    /// Accumulated plastic dissipation D (theory D43), kJ per metre run.
     pub dissipated_energy: f64,
     /// Work W of the external loads on the soil so far, kJ per metre run: the
     /// follower pressures (trapezoidal per step) and the rigid bodies (their
     /// force on the soil times their prescribed motion, trapezoidal per step;
     /// the penalty springs' own energy, ½ k gap², is left out) and gravity
-    /// (−g Σ_p m_p Δy_p per step, with the step's g). Energy balance (DESIGN
+    /// (−g Σ_p m_p Δy_p per step, with the step's g). Energy balance (theory
     /// §9, M5): W = W_int + ΔK + numerical losses.
     pub external_work: f64,
     /// Σ_p m_p y_p of the committed points (t·m/m), from which a step's
     /// gravity work follows; recomputed from the positions on a restore.
     pub(crate) mass_height: f64,
-    /// Work of the stresses on the strain increments so far (DESIGN D43 with the
+    /// Work of the stresses on the strain increments so far (theory D43 with the
     /// total strain increment), kJ per metre run: elastic energy stored plus
     /// plastic dissipation.
     pub internal_work: f64,
@@ -135,7 +135,7 @@ pub fn build_material(
 }
 
 /// Share of |σ₀| by which an initial stress may lie outside the yield
-/// surface (measured by its projection onto the surface, DESIGN D39).
+/// surface (measured by its projection onto the surface, theory D39).
 const INITIAL_STRESS_TOLERANCE: f64 = 0.1;
 
 /// An initial stress (`stress0`, `k0`) far outside the yield surface at the
@@ -269,7 +269,7 @@ impl Model {
         self.materials.iter().all(|m| m.has_symmetric_tangent())
     }
 
-    /// The stresses whose internal force (DESIGN D11) the grid receives:
+    /// The stresses whose internal force (theory D11) the grid receives:
     /// `stress` itself, or with B-bar each point's mean stress replaced by its
     /// cell's volume average ([`crate::volumetric`] B4).
     pub fn force_stresses<'a>(
@@ -305,7 +305,7 @@ impl Model {
 
     /// The double-mapping mode in force: `auto` means `increment` with
     /// bilinear cells when some material can soften (the paper's use), else
-    /// `off`: GIMP has no cell-crossing error to smooth, and DESIGN decision
+    /// `off`: GIMP has no cell-crossing error to smooth, and theory decision
     /// 27 keeps the mapping off there (it made the biaxial bands irregular,
     /// and it adds stress without work, on which an explicit run can feed).
     pub fn double_mapping(&self) -> DoubleMapping {
@@ -358,7 +358,7 @@ impl Model {
     /// Add the work of gravity `g` (along −y) over the step that moved the
     /// points from [`Self::mass_height`] to their present positions:
     /// −g Σ_p m_p Δy_p, which equals Σ_i f_i^g · Δu_i of the body forces
-    /// (DESIGN D10) because a point moves by Σ_i N_ip Δu_i.
+    /// (theory D10) because a point moves by Σ_i N_ip Δu_i.
     pub(crate) fn account_gravity_work(&mut self, g: f64) {
         let now = self.current_mass_height();
         self.external_work -= g * (now - self.mass_height);
@@ -367,7 +367,7 @@ impl Model {
 
     /// Add the work of the rigid bodies on the soil over the step that began at
     /// `start`: ½ (R_n + R_n+1)·(X̄_n+1 − X̄_n) per body (R and the anchor X̄ of
-    /// DESIGN D40), the anchor's motion being (D(t_n+1) − D(t_n)) v with the
+    /// theory D40), the anchor's motion being (D(t_n+1) − D(t_n)) v with the
     /// start ramp's D (v Δt without ramp).
     pub fn account_rigid_work(&mut self, start: f64) {
         let bodies = self.driven.velocity.len();
@@ -462,7 +462,7 @@ fn build_grid(scene: &Scene) -> Grid {
 }
 
 /// The rigid bodies' tied points, with the penalty factor of the analysis
-/// (DESIGN §8.0: β_pen = 1e3 implicit, 10 explicit).
+/// (theory §8.0: β_pen = 1e3 implicit, 10 explicit).
 fn build_driven_points(
     scene: &Scene,
     particles: &Particles,

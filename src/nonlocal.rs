@@ -1,4 +1,4 @@
-//! Nonlocal averaging over material points (DESIGN §6, \[D33\]–\[D36\]; paper eq. 6).
+//! Nonlocal averaging over material points (theory §6, \[D33\]–\[D36\]; paper eq. 6).
 //!
 //! The paper replaces the local equivalent plastic strain by its nonlocal counterpart
 //! (paper eq. 6), `ε̄(x) = ∫ w(x, ξ) ε(ξ) dξ`, with the Galavi–Schweiger radial weight
@@ -63,7 +63,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::sync::{Mutex, OnceLock};
 
-/// Default cutoff factor: `R_c = 3 l_s` (DESIGN §6 / decision log item 12). Beyond `3 l_s` the
+/// Default cutoff factor: `R_c = 3 l_s` (theory §6 / decision log item 12). Beyond `3 l_s` the
 /// area-weighted tail of [`weight`] holds 4.4e−4 of its integral.
 pub const DEFAULT_CUTOFF_FACTOR: f64 = 3.0;
 
@@ -75,7 +75,7 @@ const BIN_SAFETY: f64 = 1.0 + 1e-9;
 const MIN_CHUNK: usize = 64;
 
 /// Default budget of stored weights of [`NonlocalAverager::cache_sources`]: 64 Mi weights,
-/// 8 bytes each (512 MiB). Tiles beyond it are evaluated on the fly (DESIGN §6 warns that a
+/// 8 bytes each (512 MiB). Tiles beyond it are evaluated on the fly (theory §6 warns that a
 /// full pair list of the footing at h = 0.1 would hold ~350M pairs).
 pub const DEFAULT_PAIR_BUDGET: usize = 64 << 20;
 
@@ -86,19 +86,19 @@ const TILE: usize = 128;
 /// beyond `R_c` of the row's MP ([`weight_row_culled`]).
 const CHUNK: usize = 16;
 
-/// Parameters of the nonlocal averaging (DESIGN §6, \[D33\]–\[D34\]; paper eq. 6).
+/// Parameters of the nonlocal averaging (theory §6, \[D33\]–\[D34\]; paper eq. 6).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct NonlocalParameters {
     /// Material length scale `l_s` (m) of the weight \[D33\]; must be finite and `> 0`.
     pub length_scale: f64,
-    /// Cutoff radius in units of `l_s`: `R_c = cutoff_factor · l_s` (default 3, DESIGN §6);
+    /// Cutoff radius in units of `l_s`: `R_c = cutoff_factor · l_s` (default 3, theory §6);
     /// must be finite and `> 0`.
     pub cutoff_factor: f64,
 }
 
 impl NonlocalParameters {
     /// Parameters with the given length scale `l_s` and the default cutoff `R_c = 3 l_s`
-    /// ([`DEFAULT_CUTOFF_FACTOR`], DESIGN §6).
+    /// ([`DEFAULT_CUTOFF_FACTOR`], theory §6).
     pub fn new(length_scale: f64) -> Self {
         Self {
             length_scale,
@@ -106,7 +106,7 @@ impl NonlocalParameters {
         }
     }
 
-    /// Cutoff radius `R_c = cutoff_factor · l_s` (m), DESIGN §6.
+    /// Cutoff radius `R_c = cutoff_factor · l_s` (m), theory §6.
     pub fn cutoff_radius(&self) -> f64 {
         self.cutoff_factor * self.length_scale
     }
@@ -132,7 +132,7 @@ pub enum NonlocalError {
     /// `l_s` is not finite or not strictly positive (\[D33\]).
     #[error("nonlocal length scale must be finite and > 0, got {0}")]
     InvalidLengthScale(f64),
-    /// The cutoff factor is not finite or not strictly positive (DESIGN §6).
+    /// The cutoff factor is not finite or not strictly positive (theory §6).
     #[error("nonlocal cutoff factor must be finite and > 0, got {0}")]
     InvalidCutoffFactor(f64),
     /// Positions, volumes and groups of the MPs have different lengths.
@@ -177,7 +177,7 @@ pub enum NonlocalError {
     },
 }
 
-/// Galavi–Schweiger weight \[D33\]: `w(r) = (r / l_s²) · exp(−(r/l_s)²)` (paper eq. 6, DESIGN §6).
+/// Galavi–Schweiger weight \[D33\]: `w(r) = (r / l_s²) · exp(−(r/l_s)²)` (paper eq. 6, theory §6).
 ///
 /// Zero at `r = 0` (an MP never weights itself), maximal at `r = l_s/√2`; no cutoff is applied
 /// here (the cutoff belongs to [`NonlocalAverager`]).
@@ -537,7 +537,7 @@ pub struct CacheStats {
 
 impl NonlocalAverager {
     /// Builds the operator \[D34\] from start-of-step positions `x_q`, volumes `V_q` and a group
-    /// (material) id per MP; only MPs of the same group average together (DESIGN §6).
+    /// (material) id per MP; only MPs of the same group average together (theory §6).
     ///
     /// Sorts the MPs into a cell-linked list with bins of size `R_c`. The weight denominators
     /// `Σ_s w(|x_p − x_s|) V_s` (sum over same-group MPs within `R_c`) are computed once, at
@@ -1018,7 +1018,7 @@ impl NonlocalAverager {
 
     /// Statistics of the number of same-group neighbours within `R_c` (the MP itself
     /// excluded): `(min, mean, max)` over all MPs; `(0, 0.0, 0)` if empty. Useful to check
-    /// the resolution rule of DESIGN §6 (`h ≲ 0.2 l_s`) and to predict the cost of \[D36\].
+    /// the resolution rule of theory §6 (`h ≲ 0.2 l_s`) and to predict the cost of \[D36\].
     pub fn neighbour_count_stats(&self) -> (usize, f64, usize) {
         self.weights().stats
     }

@@ -137,7 +137,7 @@ impl CurveWriter {
 }
 
 /// Equivalent deviatoric Hencky strain εq = sqrt(⅔ e:e) of a deformation
-/// gradient F (in-plane, row-major, F_zz = 1) (DESIGN D8).
+/// gradient F (in-plane, row-major, F_zz = 1) (theory D8).
 pub fn deviatoric_hencky_strain(f: &[f64; 4]) -> f64 {
     // b = F Fᵀ (2×2 symmetric), eigen-decomposition in closed form.
     let b11 = f[0] * f[0] + f[1] * f[1];

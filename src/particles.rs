@@ -1,4 +1,4 @@
-//! Material points as a structure of arrays (DESIGN §2).
+//! Material points as a structure of arrays (theory §2).
 //!
 //! Every array has one entry per material point (MP). Quantities not needed
 //! by a scene (velocity and acceleration in a quasi-static run) stay zero.

@@ -1,6 +1,6 @@
-//! Homogeneous single-material-point tests of the HMC model (DESIGN §5, §8.1):
+//! Homogeneous single-material-point tests of the HMC model (theory §5, §8.1):
 //! plane-strain biaxial, "triaxial" (σxx = σzz held) and simple shear, with mixed
-//! stress/strain control solved by Newton on the consistent tangent (DESIGN D32).
+//! stress/strain control solved by Newton on the consistent tangent (theory D32).
 //!
 //! The engine's CLI calls [`run`] under its `point` subcommand; the loops are
 //! library functions ([`run_biaxial`], [`run_triaxial`], [`run_simple_shear`]) so
@@ -127,11 +127,11 @@ pub struct PointRecord {
     pub strain: Voigt,
     /// Stress [σxx, σyy, σzz, σxy] (kPa, tension positive).
     pub stress: Voigt,
-    /// Mean stress p (kPa, compression positive, DESIGN D1).
+    /// Mean stress p (kPa, compression positive, theory D1).
     pub mean_stress: f64,
-    /// Deviatoric stress q = sqrt(3 J2) (kPa, DESIGN D5).
+    /// Deviatoric stress q = sqrt(3 J2) (kPa, theory D5).
     pub deviatoric_stress: f64,
-    /// Equivalent plastic strain κ (DESIGN D27).
+    /// Equivalent plastic strain κ (theory D27).
     pub plastic_strain_eq: f64,
     /// Axial load of the quarter biaxial specimen F = −σyy·w (kN/m, w = 0.03 m).
     pub load: f64,
@@ -191,7 +191,7 @@ pub fn load_parameters(
 
 /// Solve one load step under mixed control: components in `driven` take the prescribed
 /// strain increment from `increment`; the other components are found by Newton on the
-/// consistent tangent (DESIGN D32) so that σ_i = `stress_target[i]`.
+/// consistent tangent (theory D32) so that σ_i = `stress_target[i]`.
 fn mixed_control_step(
     model: &Hmc,
     stress_n: &Voigt,
@@ -319,7 +319,7 @@ fn run_path(
     Ok(records)
 }
 
-/// Plane-strain biaxial test (DESIGN §8.1 homogeneous reference): εzz = γxy = 0,
+/// Plane-strain biaxial test (theory §8.1 homogeneous reference): εzz = γxy = 0,
 /// σxx = −confinement (kPa) held, εyy follows `axial_strains` (total values, negative in
 /// compression). Initial stress −confinement·(1,1,1,0).
 pub fn run_biaxial(
@@ -461,7 +461,7 @@ mod tests {
         (-beta - (beta * beta - 4.0 * alpha * gamma).sqrt()) / (2.0 * alpha)
     }
 
-    /// DESIGN §5.6 check values: first yield on the plane-strain path at Δσyy = −552.26 kPa (0.1 %),
+    /// theory §5.6 check values: first yield on the plane-strain path at Δσyy = −552.26 kPa (0.1 %),
     /// σzz = −210.45 kPa (0.1 %), p = 320.9 kPa, q = 506.2 kPa (0.1 %), θ = +19.1° (±0.1°);
     /// F = 19.57 kN/m at δ = 1.325 mm (0.1 %).
     #[test]
@@ -502,7 +502,7 @@ mod tests {
         );
     }
 
-    /// DESIGN §8.1 homogeneous softening branch: F = 19.46, 18.32, 16.66, 15.15, 13.94 kN/m at
+    /// theory §8.1 homogeneous softening branch: F = 19.46, 18.32, 16.66, 15.15, 13.94 kN/m at
     /// δ = 1.4 … 2.2 mm (1 %), with δ steps of 1 µm; the peak is the first-yield load 19.57 kN/m
     /// (0.2 %).
     #[test]
@@ -522,7 +522,7 @@ mod tests {
         ] {
             let k = (delta_mm * 1e-3 / step).round() as usize;
             let f = records[k].load;
-            eprintln!("δ = {delta_mm} mm: F = {f:.4} kN/m (DESIGN {expected})");
+            eprintln!("δ = {delta_mm} mm: F = {f:.4} kN/m (theory {expected})");
             assert!(
                 (f - expected).abs() <= 0.01 * expected,
                 "δ = {delta_mm} mm: F = {f} vs {expected}"

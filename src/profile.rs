@@ -25,14 +25,14 @@ pub enum Stage {
     Setup,
     /// Particle-to-grid transfers (mass, momentum, external and internal forces).
     P2G,
-    /// Explicit: stable time step and nodal momentum update (DESIGN D20–D21).
+    /// Explicit: stable time step and nodal momentum update (theory D20–D21).
     TimeStep,
     /// Implicit: the Newton loop's own work (convergence checks, residual
     /// norms, line-search bookkeeping), not the stages it calls.
     Newton,
     /// Constitutive stress update at the material points.
     StressUpdate,
-    /// Nonlocal weights and averaging (DESIGN §6).
+    /// Nonlocal weights and averaging (theory §6).
     Nonlocal,
     /// Tangent assembly (cell blocks and CSC values).
     Assembly,
@@ -47,7 +47,7 @@ pub enum Stage {
     /// Converged stresses: step energies and what the stresses stage does
     /// besides the nonlocal commit and double mapping.
     Stresses,
-    /// Double mapping of the stresses (DESIGN §7).
+    /// Double mapping of the stresses (theory §7).
     DoubleMapping,
     /// Committing the step at the points: F, V, stresses, boundary points.
     Commit,
@@ -109,15 +109,15 @@ pub const OTHER: &str = "other";
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Work {
     /// Implicit dynamic: lumped nodal mass m_i built for the inertia term,
-    /// one per (sub-)step (P2G; DESIGN D15–D16). Quasi-static runs build none.
+    /// one per (sub-)step (P2G; theory D15–D16). Quasi-static runs build none.
     MassMatrix,
     /// Implicit dynamic: M/(βΔt²) diagonals added to a tangent assembly
-    /// (DESIGN D17), one per assembly.
+    /// (theory D17), one per assembly.
     MassDiagonals,
     /// Explicit: nodal mass m_i of the momentum update, one per step
-    /// (DESIGN §4 step 1; the stability check before the run is not counted).
+    /// (theory §4 step 1; the stability check before the run is not counted).
     ExplicitNodalMass,
-    /// Material-point stress updates, every material (DESIGN §5).
+    /// Material-point stress updates, every material (theory §5).
     StressUpdates,
     /// Stress updates of a material that can yield (`is_elastic()` false):
     /// each evaluates its yield function.
@@ -125,7 +125,7 @@ pub enum Work {
     /// Stress updates that returned to the yield surface (`yielded`).
     ReturnMappings,
     /// Nonlocal neighbour structures (cell-linked lists of
-    /// `NonlocalAverager::new`), one per nonlocal (sub-)step (DESIGN D34).
+    /// `NonlocalAverager::new`), one per nonlocal (sub-)step (theory D34).
     NeighbourLists,
     /// Nonlocal weight denominators Σ_s w V_s computed (the O(N n_nb) pass of
     /// D34); a step whose increments are all zero needs none.
@@ -136,12 +136,12 @@ pub enum Work {
     /// Applications of the averaging operator (`NonlocalAverager::average`,
     /// D35–D36).
     NonlocalAverages,
-    /// Double-mapping passes over the stresses (DESIGN D37–D39).
+    /// Double-mapping passes over the stresses (theory D37–D39).
     SmoothingPasses,
     /// Internal-force restorations after double mapping (GGᵀ assembled and
     /// factorised; `[smoothing] restore_forces`).
     ForceRestorations,
-    /// Implicit tangent assemblies (DESIGN D17, D19).
+    /// Implicit tangent assemblies (theory D17, D19).
     Assemblies,
     /// Numeric Cholesky factorisations of the implicit tangent (attempts:
     /// one that finds K not positive definite and falls back to LU counts).

@@ -94,7 +94,7 @@ pub struct FieldSnapshot {
     pub time: f64,
     /// Positions x_p, m.
     pub positions: Vec<[f64; 2]>,
-    /// Deviatoric Hencky strain εq per point (DESIGN D8).
+    /// Deviatoric Hencky strain εq per point (theory D8).
     pub eps_q: Vec<f64>,
     /// Current volume V_p, m³ per m.
     pub volumes: Vec<f64>,

@@ -1,4 +1,4 @@
-//! Seeding the material points of a scene's bodies (DESIGN §2): positions,
+//! Seeding the material points of a scene's bodies (theory §2): positions,
 //! volumes, masses, initial stresses and velocities.
 
 use crate::grid::Grid;
@@ -25,7 +25,7 @@ fn gauss_rule(n: usize) -> (Vec<f64>, Vec<f64>) {
     }
 }
 
-/// Fill every body with n×n points per grid cell (DESIGN §2): Gauss–Legendre
+/// Fill every body with n×n points per grid cell (theory §2): Gauss–Legendre
 /// positions with volumes h² w_i w_j / 4, or sub-cell centres with h²/n².
 /// A position belongs to the first body whose outline contains it.
 pub fn seed_particles(

@@ -1,4 +1,4 @@
-//! Bilinear shape functions of the 4-node square cell (DESIGN D9).
+//! Bilinear shape functions of the 4-node square cell (theory D9).
 //!
 //! Local node order (counter-clockwise from the lower-left corner):
 //! 0 = (−1,−1), 1 = (+1,−1), 2 = (+1,+1), 3 = (−1,+1).
@@ -6,7 +6,7 @@
 /// Local natural coordinates (ξ_a, η_a) of the four cell nodes.
 pub const NODE_SIGNS: [[f64; 2]; 4] = [[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]];
 
-/// Values N_a at natural coordinates (ξ, η) ∈ [−1, 1]² (DESIGN D9).
+/// Values N_a at natural coordinates (ξ, η) ∈ [−1, 1]² (theory D9).
 #[inline]
 pub fn values(xi: f64, eta: f64) -> [f64; 4] {
     let mut n = [0.0; 4];
@@ -16,7 +16,7 @@ pub fn values(xi: f64, eta: f64) -> [f64; 4] {
     n
 }
 
-/// Cartesian gradients ∇N_a = (2/h)·∂N_a/∂(ξ, η) for a square cell of side `h` (DESIGN D9).
+/// Cartesian gradients ∇N_a = (2/h)·∂N_a/∂(ξ, η) for a square cell of side `h` (theory D9).
 #[inline]
 pub fn gradients(xi: f64, eta: f64, h: f64) -> [[f64; 2]; 4] {
     let scale = 2.0 / h;

@@ -1,4 +1,4 @@
-//! Double mapping of stresses (DESIGN §7, paper §2.1: González Acosta et al.
+//! Double mapping of stresses (theory §7, paper §2.1: González Acosta et al.
 //! 2020): the converged stress increment of a step is mapped mass-weighted to
 //! the nodes and interpolated back, which reduces the cell-crossing stress
 //! oscillations of the MPM (on `validation/elastic/soft_column.toml` it halves
@@ -73,7 +73,7 @@ pub fn project_to_nodes(frame: &MappingFrame, value: impl Fn(usize) -> Voigt + S
 /// place), given the rotated start-of-step stresses `rotated` (σ^R(n)): the
 /// smoothed quantity (increment or total) is projected onto the nodes (D37)
 /// and interpolated back (D38); every smoothed stress that lies outside the
-/// yield surface is then returned to it at fixed p and θ (DESIGN D39) through
+/// yield surface is then returned to it at fixed p and θ (theory D39) through
 /// [`ConstitutiveModel::project_to_surface`]. With `equilibrium`, the internal
 /// forces of the unsmoothed stresses are restored before D39
 /// ([`restore_internal_forces`]).
@@ -145,11 +145,11 @@ pub fn double_map(
 const EQUILIBRIUM_REGULARISATION: f64 = 1e-10;
 
 /// Restore the internal forces of the unsmoothed stresses after smoothing, with
-/// the smallest change of the smoothed field (an option beyond DESIGN §7,
+/// the smallest change of the smoothed field (an option beyond theory §7,
 /// `[smoothing] restore_forces`; measured effects in `docs/scene.md`).
 ///
 /// The internal force at the free dofs is f = G σ with G σ = Σ_p V_p B_pᵀ σ_p
-/// (DESIGN D11). Smoothing σ → σ̂ changes f, so the converged step would no
+/// (theory D11). Smoothing σ → σ̂ changes f, so the converged step would no
 /// longer be in equilibrium and the next step's Newton iterations would add the
 /// strain that restores it — a ratchet that accumulates with the number of steps.
 /// The correction σ̃ = σ̂ + Gᵀλ, with (G Gᵀ) λ = G(σ − σ̂), is the least-squares

@@ -1,4 +1,4 @@
-//! Tangent stiffness blocks of the implicit system (DESIGN §3, D17, D19):
+//! Tangent stiffness blocks of the implicit system (theory §3, D17, D19):
 //! per material point V_p B_pᵀ D B_p, summed per active cell into node-patch
 //! blocks, plus the background stiffness of reached cells and the spin term
 //! of the Jaumann rotation. The P2G/G2P kernels they share with the explicit
@@ -13,7 +13,7 @@ use crate::volumetric::{self, CellMeanGradients};
 
 /// Stiffness contribution V_p B_pᵀ D B_p of one particle to its cell's patch
 /// block (row-major, `dofs` = 2 × patch nodes, dof `2·place + direction`),
-/// accumulated into `block` (DESIGN §3).
+/// accumulated into `block` (theory §3).
 #[inline]
 pub fn add_particle_stiffness(
     block: &mut [f64],
@@ -166,7 +166,7 @@ pub fn cell_stiffness_blocks_into(
 /// 8-dof element per reached cell carrying `cell_block` alone. `cell_block`
 /// is an 8×8 block over the cell's nodes in row-major order (lower-left,
 /// lower-right, upper-left, upper-right), e.g. the background stiffness of
-/// DESIGN D19; `None` adds nothing. Matches `DofMap::element_dofs`.
+/// theory D19; `None` adds nothing. Matches `DofMap::element_dofs`.
 pub fn system_blocks(
     grid: &Grid,
     bins: &ParticleBins,
@@ -201,7 +201,7 @@ pub fn add_own_cell_block(grid: &Grid, block: &mut [f64], cell_block: &[f64; 64]
 }
 
 /// Force `cell_block · Δu` of the GIMP-reached cells' elements (see
-/// [`system_blocks`]), added into `force`. The background stiffness of DESIGN
+/// [`system_blocks`]), added into `force`. The background stiffness of theory
 /// D19 enters the tangent only; on a reached cell it is kept consistent by
 /// this residual term: a node that a point's domain barely overlaps has a
 /// true stiffness of order (overlap/h)², far below ε_bg E, and a tangent-only
@@ -230,7 +230,7 @@ pub fn add_reached_cells_force(
     }
 }
 
-/// The linearisation of the stress rotation (DESIGN D13, [`crate::transfer::rotate_stress`])
+/// The linearisation of the stress rotation (theory D13, [`crate::transfer::rotate_stress`])
 /// through the stress update: σ_{n+1} depends on the spin ω = ½ Σ_b (u_bx ∂yN_b − u_by ∂xN_b)
 /// via σ^R, with dσ_{n+1}/dω = D_alg C g, g = dσ^R/dω
 /// ([`crate::transfer::rotate_stress_derivative`]; `[2σxy, −2σxy, 0, σyy − σxx]` at ω = 0)

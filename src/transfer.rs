@@ -1,4 +1,4 @@
-//! Particle ↔ grid transfer kernels (DESIGN D10–D14), shared by the implicit
+//! Particle ↔ grid transfer kernels (theory D10–D14), shared by the implicit
 //! and the explicit integrator.
 //!
 //! All nodal sums are formed in a fixed order (particles binned by cell with a
@@ -26,7 +26,7 @@ pub struct OutsideGrid {
 }
 
 /// Shape functions at every particle position (evaluated once per step at
-/// start-of-step positions, DESIGN §2).
+/// start-of-step positions, theory §2).
 ///
 /// GIMP domains are clipped, along each direction, to the cells that hold
 /// points: a domain reaches the neighbouring cell only if that cell holds
@@ -181,7 +181,7 @@ pub fn bilinear_shapes_into(
 /// Largest node patch of a cell (4 × 4 for GIMP).
 pub const MAX_PATCH: usize = 16;
 
-/// Particles binned by cell, the active cells and the active nodes (DESIGN §2:
+/// Particles binned by cell, the active cells and the active nodes (theory §2:
 /// a cell is active if it holds ≥ 1 point; a node is active if some point's
 /// shape functions reach it: the nodes of the active cells, and for GIMP also
 /// those of the cells that a point's domain overlaps across a cell edge).
@@ -710,7 +710,7 @@ impl<T> std::ops::Deref for NodalField<T> {
     }
 }
 
-/// Lumped nodal mass m_i = Σ_p N_ip m_p (DESIGN D10).
+/// Lumped nodal mass m_i = Σ_p N_ip m_p (theory D10).
 pub fn nodal_mass(grid: &Grid, bins: &ParticleBins, shapes: &[ShapeAt], mass: &[f64]) -> Vec<f64> {
     scatter::<1, _>(grid, bins, shapes, |p| {
         let s = &shapes[p];
@@ -726,7 +726,7 @@ pub fn nodal_mass(grid: &Grid, bins: &ParticleBins, shapes: &[ShapeAt], mass: &[
 }
 
 /// Mass-weighted nodal sum Σ_p N_ip m_p q_p of a particle vector field (momentum
-/// when `q = v`, DESIGN D10). Divide by the nodal mass to get the nodal field.
+/// when `q = v`, theory D10). Divide by the nodal mass to get the nodal field.
 pub fn nodal_mass_weighted(
     grid: &Grid,
     bins: &ParticleBins,
@@ -745,7 +745,7 @@ pub fn nodal_mass_weighted(
     })
 }
 
-/// Body force f_i = Σ_p N_ip m_p b (DESIGN D10), for a uniform acceleration `b` (m/s²).
+/// Body force f_i = Σ_p N_ip m_p b (theory D10), for a uniform acceleration `b` (m/s²).
 pub fn body_force(
     grid: &Grid,
     bins: &ParticleBins,
@@ -757,7 +757,7 @@ pub fn body_force(
     nodal_mass_weighted(grid, bins, shapes, mass, &uniform)
 }
 
-/// Internal force f_i^int = Σ_p V_p B_ipᵀ σ_p (DESIGN D11), kN per metre run.
+/// Internal force f_i^int = Σ_p V_p B_ipᵀ σ_p (theory D11), kN per metre run.
 pub fn internal_force(
     grid: &Grid,
     bins: &ParticleBins,
@@ -817,7 +817,7 @@ pub fn interpolate<S: Support>(shape: &S, nodal: &[[f64; 2]]) -> [f64; 2] {
 }
 
 /// Gradient of a nodal vector field at a particle, L = Σ_i g_i ⊗ ∇N_ip,
-/// row-major `[L11, L12, L21, L22]` with `L_ij = ∂g_i/∂x_j` (DESIGN D12).
+/// row-major `[L11, L12, L21, L22]` with `L_ij = ∂g_i/∂x_j` (theory D12).
 #[inline]
 pub fn gradient<S: Support>(shape: &S, nodal: &[[f64; 2]]) -> [f64; 4] {
     let mut l = [0.0; 4];
@@ -833,13 +833,13 @@ pub fn gradient<S: Support>(shape: &S, nodal: &[[f64; 2]]) -> [f64; 4] {
 }
 
 /// Small-strain increment Δε = [L11, L22, 0, L12 + L21] and incremental spin
-/// ω = ½(L12 − L21) of a displacement-increment gradient (DESIGN D12).
+/// ω = ½(L12 − L21) of a displacement-increment gradient (theory D12).
 #[inline]
 pub fn strain_and_spin(l: &[f64; 4]) -> (Voigt, f64) {
     ([l[0], l[3], 0.0, l[1] + l[2]], 0.5 * (l[1] - l[2]))
 }
 
-/// Objective rotation of the stored stress by the incremental spin ω (DESIGN D13, corrected):
+/// Objective rotation of the stored stress by the incremental spin ω (theory D13, corrected):
 /// `σ ← R σ Rᵀ`, with `R` the rotation of Hughes and Winget,
 /// `R = (I − ½Ω)⁻¹ (I + ½Ω)`, i.e. by the angle `θ = 2 atan(ω/2)`.
 ///
@@ -929,7 +929,7 @@ pub(crate) mod tests {
         (grid, pos, mass, vel)
     }
 
-    /// DESIGN D10: Σ_i m_i = Σ_p m_p and Σ_i p_i = Σ_p m_p v_p (partition of unity),
+    /// theory D10: Σ_i m_i = Σ_p m_p and Σ_i p_i = Σ_p m_p v_p (partition of unity),
     /// and G2P of the nodal velocity field conserves momentum when mapped back
     /// with the same weights (Σ_p m_p Σ_i N_ip v_i = Σ_i m_i v_i).
     #[test]

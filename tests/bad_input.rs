@@ -193,7 +193,7 @@ fn singular_system_stops_the_run_with_a_solver_error() {
 }
 
 /// A fixed explicit step that passes the wave-speed limit but not the limit
-/// with the platen's penalty springs (DESIGN §4) is refused by `check`, naming
+/// with the platen's penalty springs (theory §4) is refused by `check`, naming
 /// `scene.dt` (biaxial h = 1/300 m: wave limit 3.2e-5 s, combined 1.1e-5 s);
 /// 8e-6 s is accepted.
 #[test]

@@ -1,4 +1,4 @@
-//! Bar vibration (DESIGN §8.4): elastic column, fixed base, free top, ν = 0,
+//! Bar vibration (theory §8.4): elastic column, fixed base, free top, ν = 0,
 //! initial velocity v₀ sin(πy/2H). Exact period T = 4H/c, c = sqrt(E/ρ)
 //! (H = 1 m, E = 1e4 kPa, ρ = 1 t/m³: T = 0.04 s).
 //!

@@ -2,7 +2,7 @@
 //! issue 5 check 3), on the two coarsest meshes of the biaxial benchmark
 //! (h = 1/300 and 1/500 m, local, to δ = 2.0 mm): the finer mesh is more
 //! brittle — a lower load at the final displacement — and localises in a
-//! narrower band (M4 of DESIGN §9, measured on εq of D8 clipped at its 99th
+//! narrower band (M4 of theory §9, measured on εq of D8 clipped at its 99th
 //! percentile, see `metrics::clip_outliers`). Both are strict
 //! inequalities between the two runs; the measured values are printed.
 

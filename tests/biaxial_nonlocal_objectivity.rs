@@ -4,12 +4,12 @@
 //! cheapest pair that does (a coarser pair would need l_s ≥ 16.7 mm, which on
 //! this 30 mm wide specimen spreads κ̄ over the whole specimen and no longer
 //! sets a band width at all). Asserted: post-peak load curves within 5 % (M1,
-//! relative L2, DESIGN D42); shear-band widths (M4 on εq, DESIGN §9) within
+//! relative L2, theory D42); shear-band widths (M4 on εq, theory §9) within
 //! 15 % of each other and, as the paper reports, close to l_s (M4's range
 //! 0.7–1.5 l_s); the regularised softening zone (M4 on κ̄) within 15 %.
 //! Measured with the scenes as they are (GIMP, surface contact, over-nonlocal
 //! m = 1.1): M1 = 0.93 %, εq bands 10.2 and 10.9 mm, κ̄ zones 28.3 and
-//! 28.1 mm. With DESIGN's m = 1 the εq bands are 7.5 and 6.2 mm (22 % apart,
+//! 28.1 mm. With theory D35's m = 1 the εq bands are 7.5 and 6.2 mm (22 % apart,
 //! 0.75 and 0.62 l_s) while M1 (0.88 %) and the κ̄ zones still agree.
 
 mod common;

@@ -2,7 +2,7 @@
 //! nonlocal, h = 1/300 m, 40 steps, the paper's bilinear cells with Gauss
 //! points): every output is written, the combined curves hold one row per
 //! step and run, the metrics table has one row per run with the initial slope
-//! within 3 % of the rough-platen FE value of DESIGN §8.1 (12,632 kN/m per m;
+//! within 3 % of the rough-platen FE value of theory §8.1 (12,632 kN/m per m;
 //! the coarse mesh's measured value is 2.8 % above it), and the plots decode
 //! as PNG images.
 

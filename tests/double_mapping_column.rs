@@ -27,7 +27,7 @@ fn run(overrides: &[&str]) -> (f64, f64) {
     ((sum / p.len() as f64).sqrt(), settlement)
 }
 
-/// Check 2: smoothing the stress increment (DESIGN D37–D38) or the total
+/// Check 2: smoothing the stress increment (theory D37–D38) or the total
 /// stress at least halves the RMS deviation from the exact profile. Measured:
 /// 2.99 kPa off, 1.41 kPa increment (2.1×), 1.13 kPa total (2.7×).
 #[test]

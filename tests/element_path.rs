@@ -1,10 +1,10 @@
-//! Element path (DESIGN §8.4; issue 4 checks 5–6): one cell with four material
+//! Element path (theory §8.4; issue 4 checks 5–6): one cell with four material
 //! points of the Table 1 material, driven through the full MPM engine along the
 //! homogeneous plane-strain biaxial path.
 //!
 //! * The engine reproduces the material-point driver's σyy history, fed with the
 //!   engine's own strain history, within 0.5 % of the peak stress.
-//! * First yield at Δσyy = −552.26 kPa (DESIGN §5.6) within 0.1 %.
+//! * First yield at Δσyy = −552.26 kPa (theory §5.6) within 0.1 %.
 //! * The plastic dissipation accumulated by the engine (D43) equals the
 //!   driver's path integral within 0.5 %.
 //! * Newton with the consistent tangent converges quadratically on a softening
@@ -52,7 +52,7 @@ fn engine_reproduces_the_driver_and_first_yield() {
         worst / peak
     );
     assert!(worst <= 5e-3 * peak);
-    // M5 (DESIGN D43): the engine's dissipation equals the driver's path integral
+    // M5 (theory D43): the engine's dissipation equals the driver's path integral
     // Σ_n V(n) σ_{n+1}·(Δε − C Δσ) with the engine's volumes, within 0.5 %.
     let compliance = mpm_geo::constitutive::invert4(&LinearElastic::new(20000.0, 0.2).stiffness());
     let mut dissipation = 0.0;
@@ -72,7 +72,7 @@ fn engine_reproduces_the_driver_and_first_yield() {
     assert!(dissipation > 0.0);
     assert!((sim.model.dissipated_energy / dissipation - 1.0).abs() <= 5e-3);
     let first_yield = peak - 100.0;
-    println!("element path: first yield Δσyy = −{first_yield:.3} kPa (DESIGN −552.26)");
+    println!("element path: first yield Δσyy = −{first_yield:.3} kPa (theory −552.26)");
     assert!((first_yield / 552.26 - 1.0).abs() <= 1e-3);
 }
 

@@ -1,4 +1,4 @@
-//! Energy balance (DESIGN §9, M5) with an elastic soil, on the biaxial
+//! Energy balance (theory §9, M5) with an elastic soil, on the biaxial
 //! benchmark and on the vertical cut under gravity. Biaxial (cohesion raised
 //! so nothing yields): the work of the pressures and the
 //! platen on the soil (`external_work`), the work of the stresses on the

@@ -1,4 +1,4 @@
-//! Explicit MUSL with a penalty-driven rigid platen (DESIGN §4, D40–D41) on
+//! Explicit MUSL with a penalty-driven rigid platen (theory §4, D40–D41) on
 //! `validation/elastic/platen.toml` without gravity, loaded slowly (0.01 m/s,
 //! 25 P-wave transits of the block) with Cundall damping 0.7. At nodes tied
 //! to driven points the material and spring frequencies add, so the stable

@@ -1,6 +1,6 @@
-//! The strip footing without softening (DESIGN §8.4 `footing_nosoft`, issue
+//! The strip footing without softening (theory §8.4 `footing_nosoft`, issue
 //! 12 check 1, first half): on the §8.2 geometry at h = 0.25 m with bilinear
-//! cells and 2 × 2 Gauss points, the load–penetration curve follows DESIGN
+//! cells and 2 × 2 Gauss points, the load–penetration curve follows theory
 //! §8.2's reference FE curves (small-strain Q4 with 2 × 2 Gauss points, the
 //! MPM's first-step quadrature) within 10 % for δ ≤ 0.05 m, for the paper's
 //! p_t = 0 and for the sharp cone p_t = 0.999 c cot φ. Measured: −3.0 % to

@@ -1,17 +1,17 @@
-//! The strip footing with softening (issue 12 checks 1 and 2; DESIGN §8.2),
+//! The strip footing with softening (issue 12 checks 1 and 2; theory §8.2),
 //! from the scene files of `validation/footing/` on coarse meshes.
 //!
 //! Check 1 (second half): at h = 0.25 m the local run's peak lies below
-//! DESIGN §8.2's no-softening reference curve for p_t = 0 at the same
+//! theory §8.2's no-softening reference curve for p_t = 0 at the same
 //! penetration (measured: 2215 kN/m at δ = 0.0725 m against 2550, −13 %).
 //! Check 2: between h = 1/3 m and h = 1/4 m the local post-peak curves differ
 //! more than the nonlocal ones (l_s = 0.8 m), by the post-peak discrepancy M1
-//! [D42] of the coarser curve against the finer, at least twice (DESIGN §9
+//! [D42] of the coarser curve against the finer, at least twice (theory §9
 //! target; measured: local 0.245, nonlocal 0.113). The coarser pair h = 0.5
 //! and 1/3 m (h up to 0.63 l_s, the nonlocal band spans one or two cells)
 //! gives local 0.352 against nonlocal 0.222 without double mapping, and
 //! 0.33 against 0.12 with the increment mapping that the scenes had before
-//! they took the biaxial formulation (DESIGN decision 27). These meshes run a
+//! they took the biaxial formulation (theory decision 27). These meshes run a
 //! footing B = 2 m wide, footprint [6, 8] m: the scene's edges 6.25 and
 //! 7.75 m lie inside cells at h = 1/3 m (and 0.5 m), where the tied surface reaches the
 //! nodes of the partly covered cells and the effective width is rounded to
@@ -35,7 +35,7 @@ fn load_curve(file: &str, overrides: &[&str]) -> Vec<(f64, f64)> {
         .collect()
 }
 
-/// DESIGN §8.2's reference FE curve without softening, p_t = 0.
+/// theory §8.2's reference FE curve without softening, p_t = 0.
 const NO_SOFTENING: [(f64, f64); 6] = [
     (0.0, 0.0),
     (0.016, 803.0),
@@ -79,6 +79,6 @@ fn local_post_peak_curves_differ_more_between_meshes_than_nonlocal_ones() {
         (local.join().unwrap(), nonlocal)
     });
     println!("post-peak M1, h = 1/3 m against h = 1/4 m: local {local:.3}, nonlocal {nonlocal:.3}");
-    // DESIGN §9 target: the local S at least twice the nonlocal S
+    // theory §9 target: the local S at least twice the nonlocal S
     assert!(local > 2.0 * nonlocal);
 }

@@ -1,10 +1,10 @@
-//! The sharp-cone HMC strip footing (issue 13, check 5, second half; DESIGN
+//! The sharp-cone HMC strip footing (issue 13, check 5, second half; theory
 //! §8.2), `validation/prandtl/hmc_sharp_cone.toml`: GIMP, B-bar, h = 0.0625 m,
 //! associated flow, p_t = 0.999 c cot φ, softening off.
 //!
 //! - On one material point, the plane-strain biaxial path (εzz = 0, σxx held)
 //!   fails on a straight line in (σ3, σ1): Mohr–Coulomb with φ_ps = 22.90°
-//!   and c_ps = 116.0 kPa, as DESIGN §8.2 computed, so the Prandtl limit load
+//!   and c_ps = 116.0 kPa, as theory §8.2 computed, so the Prandtl limit load
 //!   c_ps Nc(φ_ps) B is 3120 kN/m (measured 3119.4).
 //! - The footing load levels off (it rises by less than 3 % between δ = 1.4
 //!   and 2.0 cm; measured +1.4 %) within 10 % of 3120 kN/m (measured mean
@@ -37,7 +37,7 @@ fn failure_stresses(model: &Hmc, confinement: f64) -> (f64, f64) {
     (-last.stress[0], -last.stress[1])
 }
 
-/// The scene's soil: the HMC material of DESIGN §8.2 with the sharp cone.
+/// The scene's soil: the HMC material of theory §8.2 with the sharp cone.
 fn soil() -> Hmc {
     match &common::scene(SCENE, &[]).materials["soil"] {
         MaterialSpec::Hmc(parameters) => Hmc::new(*parameters).unwrap(),

@@ -58,7 +58,7 @@ fn the_motion_predictor_is_the_exact_increment_of_uniform_motion() {
     }
 }
 
-/// DESIGN §3 motion limit h/2 = 0.025 m: one step of 0.03 s moves the block at
+/// theory §3 motion limit h/2 = 0.025 m: one step of 0.03 s moves the block at
 /// 1 m/s by 0.03 m. Without halvings the step fails, naming the point and its
 /// motion, and reports the residual history of the converged solve it rejected
 /// (one entry: the predictor is exact) instead of an empty one.

@@ -1,4 +1,4 @@
-//! Oedometric column under self-weight (DESIGN §8.4), quasi-static implicit.
+//! Oedometric column under self-weight (theory §8.4), quasi-static implicit.
 //!
 //! Exact answer (1D, confined): u_y(y) = −(ρg/M)(H y − y²/2), M = K + 4G/3,
 //! σyy(y) = −ρg(H − y). With material points at the 2×2 Gauss positions the

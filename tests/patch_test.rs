@@ -1,4 +1,4 @@
-//! Patch test (DESIGN §8.4): a homogeneous strain imposed through the boundary
+//! Patch test (theory §8.4): a homogeneous strain imposed through the boundary
 //! nodes is reproduced at every material point, σ = D ε, to 1e−10 relative
 //! (Newton tolerance 1e−13), for Gauss and for non-Gauss point layouts.
 

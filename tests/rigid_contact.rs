@@ -5,9 +5,9 @@
 //! specimen with 2 × 2 Gauss points, rollers on the symmetry lines and the top
 //! nodes fixed horizontally and pushed down together, on the same mesh.
 //! Reference values from an independent FE code (numpy, dense solve):
-//! 12,635.3 (h = 1/300 m) and 12,631.6 kN/m per m (h = 1/1000 m); DESIGN §8.1
+//! 12,635.3 (h = 1/300 m) and 12,631.6 kN/m per m (h = 1/1000 m); theory §8.1
 //! quotes 12,632–12,635. Tying the top row of material points instead
-//! (`contact = "top_points"`, DESIGN §8.0) carries the soil above that row
+//! (`contact = "top_points"`, theory §8.0) carries the soil above that row
 //! with the platen and stiffens the specimen: measured +2.6 % at h = 1/300 m.
 
 mod common;
@@ -46,7 +46,7 @@ fn surface_contact_matches_the_rough_top_fe_model() {
     assert!((gimp / 12_635.3 - 1.0).abs() < 5e-4, "GIMP {gimp}");
 }
 
-/// DESIGN §8.0's tie to the top point row is at least 1 % stiffer at h = 1/300 m.
+/// theory §8.0's tie to the top point row is at least 1 % stiffer at h = 1/300 m.
 #[test]
 fn top_point_contact_stiffens_the_coarse_mesh() {
     let surface = first_step_stiffness(300, &BILINEAR);

@@ -208,7 +208,7 @@ fn biaxial_platen_started_over_a_ramp_follows_the_quasi_static_curve() {
     }
 }
 
-/// The patch test (DESIGN §8.4) with every prescribed line started over
+/// The patch test (theory §8.4) with every prescribed line started over
 /// T = 4 pseudo-time units, quasi-static, dt = 1: after 3 steps the imposed
 /// strain is D(3) = T (τ³ − τ⁴/2), τ = 3/4, times the scene's, and the
 /// stress of every point is D(3) σ to 1e-10 relative (as the patch test).

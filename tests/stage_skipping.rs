@@ -217,7 +217,7 @@ fn double_mapping_off_does_no_smoothing() {
     assert_eq!(bar.json["scene"]["smoothing"]["double_mapping"], "auto");
     bar.assert_none(&["smoothing_passes", "force_restorations"]);
     // `auto` with a softening material: on with bilinear cells (the paper's
-    // use), off with GIMP (DESIGN decision 27)
+    // use), off with GIMP (theory decision 27)
     let auto = |shapes: &str| {
         let shapes = format!("grid.shape_functions=\"{shapes}\"");
         run(

@@ -1,10 +1,10 @@
 //! Tangent check (issue 3, check 4): the assembled stiffness, including the
-//! driven-point penalty (DESIGN D41) and the Newmark mass term (D17), equals
+//! driven-point penalty (theory D41) and the Newmark mass term (D17), equals
 //! a central finite-difference derivative of the residual, −∂R/∂Δu, to 1e−6
 //! relative (max entry error over max |K|). The background term of D19 is
 //! switched off here: by design it is in the tangent only, not in the residual.
 //! Initial stress is zero: the geometric (initial-stress) stiffness is
-//! neglected by design (DESIGN §2), so a prestressed state would differ by it.
+//! neglected by design (theory §2), so a prestressed state would differ by it.
 
 mod common;
 
@@ -81,7 +81,7 @@ fn b_bar_tangent_matches_finite_differences() {
 
 /// Softening plasticity with prestress and rotation: the biaxial specimen
 /// (h = 1/300 m, local) after 150 steps, past the peak with a band forming. The
-/// tangent — consistent algorithmic D_alg (DESIGN D32), the spin term of the
+/// tangent — consistent algorithmic D_alg (theory D32), the spin term of the
 /// Jaumann rotation, the penalty and the Newmark mass term — times a direction
 /// d equals the central difference of the residual along d to 1e−4 relative
 /// (measured 4–6e−5; without the spin term 1e−1; not exact because return mappings switch between elastic

@@ -1,8 +1,8 @@
-//! The vertical cut on coarse meshes (issue 12 checks 3 and 4; DESIGN §8.3):
+//! The vertical cut on coarse meshes (issue 12 checks 3 and 4; theory §8.3):
 //! the scene files of `validation/vertical_cut/` at h = 0.25 m.
 //!
 //! Check 3: the collapse of A (first |u_A| > 5 cm) starts between 0.03 and
-//! 0.12 s (DESIGN §8.3 expects 0.05–0.09 s from limit analysis with the
+//! 0.12 s (theory §8.3 expects 0.05–0.09 s from limit analysis with the
 //! p_t = 0 hyperbola and softening), A has moved more than 0.5 m by t = 1 s
 //! and the run completes (points thrown off the free surface that leave the
 //! grid are removed and counted; none leaves at this resolution).

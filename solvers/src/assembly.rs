@@ -1,4 +1,4 @@
-//! Pattern construction and deterministic scatter of per-element dense blocks (DESIGN §3
+//! Pattern construction and deterministic scatter of per-element dense blocks (theory §3
 //! "Linear system": constrained dofs eliminated, blocks summed into CSC). An element is any
 //! dof list: the 8 dofs of a bilinear cell, or the 32 dofs of the 4x4-node patch that the
 //! GIMP supports of a cell's points reach.

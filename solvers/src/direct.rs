@@ -1,4 +1,4 @@
-//! Sparse direct solver with symbolic-factorisation reuse (DESIGN §3 "Linear system").
+//! Sparse direct solver with symbolic-factorisation reuse (theory §3 "Linear system").
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -18,7 +18,7 @@ use faer::{Conj, MatMut, Par, Side};
 use crate::matrix::{Pattern, SparseMatrix};
 use crate::SolverError;
 
-/// Which factorisation [`DirectSolver`] tries (DESIGN §3 "Linear system": LU by default,
+/// Which factorisation [`DirectSolver`] tries (theory §3 "Linear system": LU by default,
 /// Cholesky only for elastic or associated perfectly plastic local scenes).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum SolverPolicy {
@@ -305,7 +305,7 @@ impl DirectSolver {
     /// same as last time (same [`Arc`] or equal `col_ptr`/`row_idx`), else recomputed.
     ///
     /// `symmetric` is the caller's knowledge that K is symmetric (elastic, or associated
-    /// perfectly plastic local: DESIGN §3 "Linear system"); with [`SolverPolicy::Auto`] it selects
+    /// perfectly plastic local: theory §3 "Linear system"); with [`SolverPolicy::Auto`] it selects
     /// Cholesky. If Cholesky fails because K is not positive definite, LU is used instead and
     /// [`SolverStats::cholesky_fallbacks`] is incremented (Cholesky is tried again next call).
     ///

@@ -1,4 +1,4 @@
-//! Sparse assembly and direct solves for mpm-geo (DESIGN §3 "Linear system", \[D17\], \[D19\]).
+//! Sparse assembly and direct solves for mpm-geo (theory §3 "Linear system", \[D17\], \[D19\]).
 //!
 //! Each Newton iteration the engine assembles the tangent `K_T (+ 4M/dt^2)` of \[D17\] (with the
 //! \[D19\] background stiffness already summed into the cell blocks) from per-cell 8x8 blocks,
@@ -50,7 +50,7 @@ pub use multifrontal::{MultifrontalLu, CORRECTION_LIMIT as MULTIFRONTAL_CORRECTI
 pub use pcg::{Pcg, PcgOptions, PcgOutcome, Preconditioner};
 
 /// Marker in an element dof list for an eliminated (constrained) dof: its rows and columns of
-/// the element block are skipped (DESIGN §3 "Linear system").
+/// the element block are skipped (theory §3 "Linear system").
 pub const NO_DOF: u32 = u32::MAX;
 
 #[cfg(test)]

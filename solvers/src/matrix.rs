@@ -55,7 +55,7 @@ impl Pattern {
 ///
 /// The pattern is shared through an [`Arc`] with the [`crate::Assembler`] that built it, so that
 /// [`crate::DirectSolver`] can recognise an unchanged pattern cheaply and reuse its symbolic
-/// factorisation (DESIGN §3 "Linear system", \[D17\]).
+/// factorisation (theory §3 "Linear system", \[D17\]).
 #[derive(Debug, Clone)]
 pub struct SparseMatrix {
     pub(crate) pattern: Arc<Pattern>,

@@ -1,4 +1,4 @@
-//! Footing-specific numbers of a campaign (paper Figs. 7–8, DESIGN §8.2):
+//! Footing-specific numbers of a campaign (paper Figs. 7–8, theory §8.2):
 //! the soil that ends up inside the footing's outline (the footing's 3 m
 //! height is not modelled, so nothing keeps soil from heaving over its base)
 //! and how deep the deviatoric strain reaches under each corner (the paper's

@@ -1,4 +1,4 @@
-//! Time-history campaigns (the vertical cut, paper Figs. 10–12, DESIGN §8.3
+//! Time-history campaigns (the vertical cut, paper Figs. 10–12, theory §8.3
 //! and §9 M1, M6): u_A(t), q_B(t) and the run-out read from each run's
 //! `curve.csv`, their metrics per run, the implicit/explicit comparison, and
 //! the combined CSVs, report and figures.
@@ -190,7 +190,7 @@ pub(crate) fn remainder_share(budget: &[(f64, [f64; 5])]) -> Vec<(f64, f64)> {
         .collect()
 }
 
-/// The metrics of one time-history run (DESIGN §9 M1 and M6, issue 12).
+/// The metrics of one time-history run (theory §9 M1 and M6, issue 12).
 #[derive(Clone, Debug, Default)]
 pub struct HistoryMetrics {
     /// First time |u_A| > `ONSET_DISPLACEMENT`, s.
@@ -486,7 +486,7 @@ fn spread(values: &[f64]) -> Option<f64> {
 
 fn report_md(runs: &[CampaignRun], m: &[HistoryMetrics], pairs: &[IntegratorPair]) -> String {
     let mut md = format!(
-        "# Vertical-cut campaign report\n\nPer run (DESIGN §9 M1, M6): collapse onset = first time |u_A| > {ONSET_DISPLACEMENT} m; u_A at t = {COMPARISON_TIME} s and at the end; run-out front x_front = max_p x_p at the end; q_B peak of the failure phase (up to {PEAK_WINDOW} s after the onset); fall roughness = total variation of q_B from that peak to {FALL_WINDOW} s after the onset / its net drop over that time (1 = monotone fall; later B rides in the run-out flow), of the single point B and of the group of points that started within one cell of B (`neighbourhood_stress`, when the scene monitors it); reversals of q_B after the onset with a hysteresis of {:.0} % of its peak (M6 noise index); M1 = relative L2 discrepancy of u_A(t) on [0, t_end] against the finest mesh of the same family (regularisation and integrator); R/W = the energy budget's remainder (docs/theory.md E1) as a share of the work put in, at the end.\n\n| run | h (m) | status | wall (s) | steps | Newton | halvings | onset (s) | u_A(0.3) (m) | u_A end (m) | x_front end (m) | q_B peak (kPa) | roughness | roughness (group) | reversals | M1 | R/W end |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "# Vertical-cut campaign report\n\nPer run (theory §9 M1, M6): collapse onset = first time |u_A| > {ONSET_DISPLACEMENT} m; u_A at t = {COMPARISON_TIME} s and at the end; run-out front x_front = max_p x_p at the end; q_B peak of the failure phase (up to {PEAK_WINDOW} s after the onset); fall roughness = total variation of q_B from that peak to {FALL_WINDOW} s after the onset / its net drop over that time (1 = monotone fall; later B rides in the run-out flow), of the single point B and of the group of points that started within one cell of B (`neighbourhood_stress`, when the scene monitors it); reversals of q_B after the onset with a hysteresis of {:.0} % of its peak (M6 noise index); M1 = relative L2 discrepancy of u_A(t) on [0, t_end] against the finest mesh of the same family (regularisation and integrator); R/W = the energy budget's remainder (docs/theory.md E1) as a share of the work put in, at the end.\n\n| run | h (m) | status | wall (s) | steps | Newton | halvings | onset (s) | u_A(0.3) (m) | u_A end (m) | x_front end (m) | q_B peak (kPa) | roughness | roughness (group) | reversals | M1 | R/W end |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
         100.0 * REVERSAL_THRESHOLD
     );
     for (r, mm) in runs.iter().zip(m) {

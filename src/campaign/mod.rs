@@ -1,9 +1,9 @@
 //! A mesh-objectivity campaign: every scene of a directory run side by side,
 //! a combined curve CSV, Fig. 3/4/5-style plots and the objectivity metrics of
-//! DESIGN §9 (M1–M4) in `metrics.csv` and `report.md`.
+//! theory §9 (M1–M4) in `metrics.csv` and `report.md`.
 //!
 //! Scenes are grouped into families by the presence of `[nonlocal]` (local vs
-//! nonlocal); within a family the finest mesh is the reference (DESIGN §9).
+//! nonlocal); within a family the finest mesh is the reference (theory §9).
 //! Curves are read from each run's `curve.csv`, in the columns of the scene's
 //! monitors ([`CurveColumns`]): the abscissa is δ = −(displacement monitor) (m,
 //! positive downward), the ordinate the force monitor (kN/m); a scene without
@@ -120,7 +120,7 @@ pub struct CampaignRun {
     pub curve_columns: Option<CurveColumns>,
     /// Final material-point positions, m.
     pub positions: Vec<[f64; 2]>,
-    /// Final deviatoric strain εq (DESIGN D8) per point.
+    /// Final deviatoric strain εq (theory D8) per point.
     pub eps_q: Vec<f64>,
     /// Final nonlocal equivalent plastic strain κ̄ (D35) per point (nonlocal
     /// runs only; empty otherwise).
@@ -170,7 +170,7 @@ pub struct Effort {
 }
 
 impl CampaignRun {
-    /// Family of the run: regularisation and integrator (DESIGN §9: the
+    /// Family of the run: regularisation and integrator (theory §9: the
     /// reference of a run is the finest mesh of its family).
     pub fn same_family(&self, other: &CampaignRun) -> bool {
         self.length_scale.is_some() == other.length_scale.is_some()

@@ -45,7 +45,7 @@ pub struct RunRecord {
     pub error: Option<String>,
     /// Final material-point positions, m.
     pub positions: Vec<[f64; 2]>,
-    /// Final deviatoric strain εq (DESIGN D8) per point.
+    /// Final deviatoric strain εq (theory D8) per point.
     pub eps_q: Vec<f64>,
     /// Final nonlocal κ̄ (D35) per point (nonlocal runs only).
     pub kappa_bar: Vec<f64>,

@@ -1,4 +1,4 @@
-//! Reporting a campaign: the runs' curves, the metrics of DESIGN §9 (M1–M5),
+//! Reporting a campaign: the runs' curves, the metrics of theory §9 (M1–M5),
 //! the time-step convergence, `curves.csv`, `metrics.csv`, `report.md` and the
 //! plots.
 
@@ -223,7 +223,7 @@ pub(super) fn write_step_convergence(
     Ok(())
 }
 
-/// Per-run metrics of DESIGN §9 against the family reference.
+/// Per-run metrics of theory §9 against the family reference.
 #[derive(Clone, Debug, Default)]
 pub struct RunMetrics {
     /// Initial slope dF/dδ, least-squares fit over the benchmark's elastic
@@ -439,7 +439,7 @@ pub(super) fn write_outputs(
     let m = compute_metrics(runs, benchmark);
     let metrics_path = out.join("metrics.csv");
     let mut csv = String::from("run,family,cell_size,length_scale,status,wall_seconds,initial_slope,peak_delta,peak_load,final_load,M1_discrepancy,M2_peak_spread,M3_brittleness,M4_band_width,M4_band_width_kappa_bar,load_curve_work,M5_dissipation,external_work,internal_work,kinetic_energy,energy_loss,soil_inside_footing,corner_band_reach_left,corner_band_reach_right\n");
-    let mut md = format!("# Mesh-objectivity report\n\nReference of each family: its finest completed mesh (DESIGN §9). h and δ in {unit}, loads in kN/m, band width w (M4 on εq) and w_κ̄ (M4 on the nonlocal variable κ̄) in {unit}.\n\n| run | h ({unit}) | status | wall (s) | slope (kN/m/m) | peak F | δ_peak | F_end | β (M3) | M1 e_h | M2 | w ({unit}) | w/l_s | w_κ̄ ({unit}) | D (kJ/m, M5) |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    let mut md = format!("# Mesh-objectivity report\n\nReference of each family: its finest completed mesh (theory §9). h and δ in {unit}, loads in kN/m, band width w (M4 on εq) and w_κ̄ (M4 on the nonlocal variable κ̄) in {unit}.\n\n| run | h ({unit}) | status | wall (s) | slope (kN/m/m) | peak F | δ_peak | F_end | β (M3) | M1 e_h | M2 | w ({unit}) | w/l_s | w_κ̄ ({unit}) | D (kJ/m, M5) |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     for (r, mm) in runs.iter().zip(&m) {
         let family = if r.length_scale.is_some() {
             "nonlocal"

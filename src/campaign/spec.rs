@@ -28,12 +28,12 @@ pub enum Benchmark {
     /// the last δ, fields over the whole grid).
     #[default]
     LoadCurve,
-    /// Biaxial compression (paper Figs. 3–5, DESIGN §8.1): δ in mm.
+    /// Biaxial compression (paper Figs. 3–5, theory §8.1): δ in mm.
     Biaxial,
-    /// Rigid strip footing (paper Figs. 7–8, DESIGN §8.2): load curves plus
+    /// Rigid strip footing (paper Figs. 7–8, theory §8.2): load curves plus
     /// the soil inside the footing's outline and the corner-band reach.
     Footing,
-    /// Vertical cut (paper Figs. 10–12, DESIGN §8.3): time histories of u_A,
+    /// Vertical cut (paper Figs. 10–12, theory §8.3): time histories of u_A,
     /// q_B and the run-out instead of a load curve.
     VerticalCut,
 }
@@ -125,7 +125,7 @@ impl Benchmark {
     pub fn slope_window(self, delta_end: f64) -> (f64, f64) {
         match self {
             Self::Biaxial => (1e-4, 5e-4),
-            // elastic to delta ~ 0.016 m (DESIGN §8.2 reference curves)
+            // elastic to delta ~ 0.016 m (theory §8.2 reference curves)
             Self::Footing => (2.5e-3, 1.0e-2),
             _ => (0.05 * delta_end, 0.2 * delta_end),
         }

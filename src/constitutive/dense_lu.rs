@@ -1,5 +1,5 @@
 //! LU factorisation with partial pivoting of a small dense `N × N` matrix, for the Newton
-//! systems of the return mappings (the 6 × 6 Jacobian of DESIGN D30 and its sensitivity solve
+//! systems of the return mappings (the 6 × 6 Jacobian of theory D30 and its sensitivity solve
 //! of D32).
 //!
 //! Fixed-size arrays and plain loops, so the compiler unrolls them: the return mapping of the

@@ -1,6 +1,6 @@
 //! Forward-mode dual numbers with `N` derivative directions, used to obtain the
 //! *exact* second derivatives m_σ, m_κ, f_κ, h_σ, h_κ of the return mapping
-//! (DESIGN D30–D31 allow central differences "or forward-mode hyper-dual
+//! (theory D30–D31 allow central differences "or forward-mode hyper-dual
 //! numbers as an exact alternative"; this is the exact alternative).
 //!
 //! The yield function, flow rule and softening laws are written once, generic

@@ -1,4 +1,4 @@
-//! Isotropic linear (hypo)elasticity in plane strain (DESIGN D22).
+//! Isotropic linear (hypo)elasticity in plane strain (theory D22).
 
 use super::{
     mat4_mul_vec, ConstitutiveError, ConstitutiveModel, Mat4, PointState, StrengthVariable,
@@ -13,7 +13,7 @@ pub struct LinearElastic {
     pub youngs_modulus: f64,
     /// Poisson's ratio ν, in (−1, 0.5).
     pub poisson_ratio: f64,
-    /// D of E and ν (DESIGN D22), formed once: every stress update uses it.
+    /// D of E and ν (theory D22), formed once: every stress update uses it.
     stiffness: Mat4,
 }
 
@@ -39,12 +39,12 @@ impl LinearElastic {
         self.youngs_modulus / (2.0 * (1.0 + self.poisson_ratio))
     }
 
-    /// The 4×4 plane-strain stiffness D of DESIGN D22 (zz row kept: σzz evolves).
+    /// The 4×4 plane-strain stiffness D of theory D22 (zz row kept: σzz evolves).
     pub fn stiffness(&self) -> Mat4 {
         self.stiffness
     }
 
-    /// D formed from E and ν (DESIGN D22).
+    /// D formed from E and ν (theory D22).
     fn stiffness_of_moduli(&self) -> Mat4 {
         let g = self.shear_modulus();
         let lambda = self.bulk_modulus() - 2.0 * g / 3.0;
@@ -57,7 +57,7 @@ impl LinearElastic {
         ]
     }
 
-    /// The compliance C = D⁻¹ (DESIGN D22).
+    /// The compliance C = D⁻¹ (theory D22).
     pub fn compliance(&self) -> Mat4 {
         let e = self.youngs_modulus;
         let nu = self.poisson_ratio;
@@ -136,7 +136,7 @@ impl ConstitutiveModel for LinearElastic {
 }
 
 impl LinearElastic {
-    /// σ^R + D Δε (DESIGN D22), refused when not finite.
+    /// σ^R + D Δε (theory D22), refused when not finite.
     #[inline]
     fn stress_after(
         &self,
@@ -176,7 +176,7 @@ mod tests {
     }
 
     /// The P-wave (constrained) modulus K + 4G/3 equals E(1−ν)/((1+ν)(1−2ν)),
-    /// and D11; for ν = 0 it is E (the bar of DESIGN §8.4).
+    /// and D11; for ν = 0 it is E (the bar of theory §8.4).
     #[test]
     fn p_wave_modulus_is_the_constrained_modulus() {
         for (e, nu) in [(1000.0, 0.0), (20_000.0, 0.2), (50_000.0, 0.45)] {

@@ -1,5 +1,5 @@
 //! Plastic potential of the hyperbolic Mohr–Coulomb family with the
-//! non-associativity constant ω (DESIGN D26).
+//! non-associativity constant ω (theory D26).
 //!
 //! G(σ) = sqrt(J²/fd(θ) + a²) − (c + ω p tanφ): the potential has the shape of
 //! the yield function with its pressure term scaled by ω, so its gradient is
@@ -10,7 +10,7 @@
 use super::dual::Real;
 use super::Voigt;
 
-/// Flow rule m = ∂G/∂σ of DESIGN D26 (Voigt, engineering-shear strain-like).
+/// Flow rule m = ∂G/∂σ of theory D26 (Voigt, engineering-shear strain-like).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PressureScaledFlow {
     /// Non-associativity constant ω ∈ [0, 1]: 1 associated, 0 no dilatancy on the asymptote.
@@ -18,7 +18,7 @@ pub struct PressureScaledFlow {
 }
 
 impl PressureScaledFlow {
-    /// m = f_σ + (1 − ω) tanφ ∂p/∂σ, ∂p/∂σ = −⅓·(1,1,1,0) (DESIGN D26, D31).
+    /// m = f_σ + (1 − ω) tanφ ∂p/∂σ, ∂p/∂σ = −⅓·(1,1,1,0) (theory D26, D31).
     #[inline]
     pub fn direction<T: Real>(&self, yield_gradient: &[T; 4], tan_friction: T) -> [T; 4] {
         let shift = tan_friction * ((1.0 - self.omega) / 3.0);
@@ -36,7 +36,7 @@ impl PressureScaledFlow {
     }
 }
 
-/// Tensor norm ‖a‖ε = sqrt(a1² + a2² + a3² + a4²/2) of a strain-like Voigt vector (DESIGN D3).
+/// Tensor norm ‖a‖ε = sqrt(a1² + a2² + a3² + a4²/2) of a strain-like Voigt vector (theory D3).
 #[inline]
 pub fn strain_norm<T: Real>(a: &[T; 4]) -> T {
     (a[0] * a[0] + a[1] * a[1] + a[2] * a[2] + a[3] * a[3] * 0.5).sqrt()

@@ -1,6 +1,6 @@
 //! Hyperbolic Mohr–Coulomb model with exponential strain softening (paper §2.2,
-//! eqs. 3–5; DESIGN §5): parameters, strength evolution and the return mapping
-//! with its consistent tangent (DESIGN D29–D32).
+//! eqs. 3–5; theory §5): parameters, strength evolution and the return mapping
+//! with its consistent tangent (theory D29–D32).
 //!
 //! The pieces are kept apart so a second model can reuse them:
 //! yield criterion [`HyperbolicMohrCoulomb`] (D23–D25), flow rule
@@ -21,27 +21,27 @@ use super::{
     PointState, StrengthVariable, StressUpdate, Voigt,
 };
 
-/// Newton iterations per (sub)step before sub-stepping (DESIGN §5.6 step 3).
+/// Newton iterations per (sub)step before sub-stepping (theory §5.6 step 3).
 const MAX_NEWTON_ITERATIONS: usize = 50;
-/// Maximum number of line-search halvings (DESIGN §5.6 step 2).
+/// Maximum number of line-search halvings (theory §5.6 step 2).
 const MAX_LINE_SEARCH_HALVINGS: usize = 10;
-/// Finest sub-stepping level: 2^6 = 64 sub-steps (DESIGN §5.6 step 3).
+/// Finest sub-stepping level: 2^6 = 64 sub-steps (theory §5.6 step 3).
 const MAX_SUBSTEP_LEVEL: u32 = 6;
-/// Elastic-check tolerance on f relative to c_ref (DESIGN §5.6 step 1).
+/// Elastic-check tolerance on f relative to c_ref (theory §5.6 step 1).
 const ELASTIC_TOLERANCE: f64 = 1e-10;
-/// Newton tolerance on ‖r_σ‖·E and |f| relative to c_ref (DESIGN §5.6 step 2 says 1e−9; tightened so
+/// Newton tolerance on ‖r_σ‖·E and |f| relative to c_ref (theory §5.6 step 2 says 1e−9; tightened so
 /// that the converged stress is accurate enough for finite-difference tangent checks at η = 1e−6).
 const NEWTON_TOLERANCE: f64 = 1e-11;
-/// Newton tolerance on |r_κ| (absolute, DESIGN §5.6 step 2).
+/// Newton tolerance on |r_κ| (absolute, theory §5.6 step 2).
 const KAPPA_TOLERANCE: f64 = 1e-12;
-/// Cohesion floor c_min = 1e−3 c_peak (DESIGN §5.5).
+/// Cohesion floor c_min = 1e−3 c_peak (theory §5.5).
 const COHESION_FLOOR_FRACTION: f64 = 1e-3;
-/// Below J = 1e−10 c_ref the Lode angle is undefined (DESIGN D6).
+/// Below J = 1e−10 c_ref the Lode angle is undefined (theory D6).
 const LODE_J_MIN_FRACTION: f64 = 1e-10;
-/// A converged state with J < 1e−8 c_ref is "at the tip" (DESIGN §5.6 step 4).
+/// A converged state with J < 1e−8 c_ref is "at the tip" (theory §5.6 step 4).
 const TIP_J_FRACTION: f64 = 1e-8;
 /// Largest admissible friction angle (degrees): the van Eekelen shape with Z = −0.229 is
-/// convex only for |Y| ≤ 0.79, i.e. φ ≲ 46° (DESIGN §5.3).
+/// convex only for |Y| ≤ 0.79, i.e. φ ≲ 46° (theory §5.3).
 pub const MAX_FRICTION_ANGLE_DEG: f64 = 46.0;
 
 fn default_density() -> f64 {
@@ -53,22 +53,22 @@ fn default_density() -> f64 {
 #[derive(Clone, Copy, Debug, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct HmcParameters {
-    /// `E`: Young's modulus, kPa (DESIGN D22).
+    /// `E`: Young's modulus, kPa (theory D22).
     #[serde(rename = "E")]
     pub youngs_modulus: f64,
-    /// `nu`: Poisson's ratio (DESIGN D22).
+    /// `nu`: Poisson's ratio (theory D22).
     #[serde(rename = "nu")]
     pub poisson_ratio: f64,
     /// `density`: mass density, t/m³ (default 2.0).
     #[serde(default = "default_density")]
     pub density: f64,
-    /// `phi_ini`: initial asymptotic friction angle φ*_ini, degrees (must equal φ_peak, DESIGN §5.5).
+    /// `phi_ini`: initial asymptotic friction angle φ*_ini, degrees (must equal φ_peak, theory §5.5).
     #[serde(rename = "phi_ini")]
     pub friction_angle_ini: f64,
-    /// `phi_peak`: peak asymptotic friction angle φ*_peak, degrees (DESIGN D28).
+    /// `phi_peak`: peak asymptotic friction angle φ*_peak, degrees (theory D28).
     #[serde(rename = "phi_peak")]
     pub friction_angle_peak: f64,
-    /// `phi_res`: residual friction angle φ*_res, degrees (DESIGN D28).
+    /// `phi_res`: residual friction angle φ*_res, degrees (theory D28).
     #[serde(rename = "phi_res")]
     pub friction_angle_res: f64,
     /// `c_ini`: initial (= peak) asymptotic cohesion c*_ini, kPa (paper eq. 4).
@@ -77,10 +77,10 @@ pub struct HmcParameters {
     /// `c_post`: post-rupture asymptotic cohesion c*_post, kPa (paper eq. 4).
     #[serde(rename = "c_post")]
     pub cohesion_post: f64,
-    /// `pt_ini`: initial tensile strength p_t,ini, kPa (DESIGN D23, D28).
+    /// `pt_ini`: initial tensile strength p_t,ini, kPa (theory D23, D28).
     #[serde(rename = "pt_ini")]
     pub tensile_strength_ini: f64,
-    /// `pt_post`: post-rupture tensile strength p_t,post, kPa (DESIGN D28).
+    /// `pt_post`: post-rupture tensile strength p_t,post, kPa (theory D28).
     #[serde(rename = "pt_post")]
     pub tensile_strength_post: f64,
     /// `b_post`: post-rupture softening rate (dimensionless, paper eq. 4).
@@ -89,11 +89,11 @@ pub struct HmcParameters {
     /// `b_res`: residual softening rate (dimensionless, paper eq. 4).
     #[serde(rename = "b_res")]
     pub softening_rate_res: f64,
-    /// `omega`: non-associativity constant ω (DESIGN D26).
+    /// `omega`: non-associativity constant ω (theory D26).
     pub omega: f64,
     /// `apex_start`: a (sub)step whose return mapping from the trial state fails beyond the
     /// apex is tried once more from the apex before it is sub-stepped ([`Hmc`]'s
-    /// `apex_start`; default `false`, DESIGN §5.6 as written). A numerical option, not a
+    /// `apex_start`; default `false`, theory §5.6 as written). A numerical option, not a
     /// material property: it leaves every update that converges from the trial state as it
     /// is and changes the few that sub-stepped.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
@@ -255,7 +255,7 @@ impl HmcParameters {
     }
 }
 
-/// Strength parameters at one κ (DESIGN D28 with floor and clamp), for output and tests.
+/// Strength parameters at one κ (theory D28 with floor and clamp), for output and tests.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct StrengthAtKappa {
     /// Asymptotic cohesion c*(κ), kPa, floored at 1e−3 c_peak.
@@ -266,7 +266,7 @@ pub struct StrengthAtKappa {
     pub tensile_strength: f64,
 }
 
-/// Hyperbolic Mohr–Coulomb softening model (paper §2.2; DESIGN §5), ready to use:
+/// Hyperbolic Mohr–Coulomb softening model (paper §2.2; theory §5), ready to use:
 /// elastic matrices and strength laws precomputed.
 #[derive(Clone, Debug)]
 pub struct Hmc {
@@ -307,7 +307,7 @@ fn kappa_lane_of_five(s: &SurfaceStrength<Dual<1>>) -> SurfaceStrength<Dual<5>> 
 /// for one stress update ([`StrengthVariable`]): local κ_s = κ; nonlocal
 /// κ_s = max(0, κ̄_nb + w (κ − κ_n)) with w = 1 − m the weight of the own
 /// increment (κ̄ is a non-negative average: the clamp guards round-off and
-/// m > 1). With w = 0 the κ row of D29 is dropped (DESIGN §5.6, nonlocal) and
+/// m > 1). With w = 0 the κ row of D29 is dropped (theory §5.6, nonlocal) and
 /// κ follows from Δλ afterwards.
 #[derive(Clone, Copy, Debug)]
 struct StrengthArg {
@@ -361,7 +361,7 @@ impl StrengthArg {
     }
 }
 
-/// Second-order information at one (σ, κ) of the return mapping (DESIGN D30–D31).
+/// Second-order information at one (σ, κ) of the return mapping (theory D30–D31).
 #[derive(Clone, Copy, Debug)]
 struct Linearisation {
     f: f64,
@@ -420,7 +420,7 @@ impl Hmc {
             rate_post: p.softening_rate_post,
             rate_res: p.softening_rate_res,
         };
-        // φ_post := φ_peak (DESIGN §5.5 choice), angles in radians.
+        // φ_post := φ_peak (theory §5.5 choice), angles in radians.
         let friction_law = ThreeLevelSoftening {
             peak: p.friction_angle_peak.to_radians(),
             post: p.friction_angle_peak.to_radians(),
@@ -465,28 +465,28 @@ impl Hmc {
         &self.parameters
     }
 
-    /// True when some strength parameter can soften with κ (DESIGN D28).
+    /// True when some strength parameter can soften with κ (theory D28).
     pub fn can_soften(&self) -> bool {
         self.softening
     }
 
-    /// Strength scale c_ref = c_peak (kPa) used for tolerances (DESIGN §5.6).
+    /// Strength scale c_ref = c_peak (kPa) used for tolerances (theory §5.6).
     pub fn strength_scale(&self) -> f64 {
         self.strength_scale
     }
 
-    /// The yield criterion (DESIGN D23–D25).
+    /// The yield criterion (theory D23–D25).
     pub fn yield_criterion(&self) -> &HyperbolicMohrCoulomb {
         &self.surface
     }
 
-    /// The flow rule (DESIGN D26).
+    /// The flow rule (theory D26).
     pub fn flow_rule(&self) -> &PressureScaledFlow {
         &self.flow
     }
 
     /// Surface strength at κ: D28 with the c floor c ≥ 1e−3 c_peak and the clamp
-    /// 0 ≤ p_t ≤ (c − c_min)/tanφ (DESIGN §5.2, §5.5); generic for exact κ-derivatives.
+    /// 0 ≤ p_t ≤ (c − c_min)/tanφ (theory §5.2, §5.5); generic for exact κ-derivatives.
     #[inline]
     fn strength<T: Real>(&self, kappa: T) -> SurfaceStrength<T> {
         if !self.softening {
@@ -508,7 +508,7 @@ impl Hmc {
         SurfaceStrength::from_sin_cos(cohesion, sin_phi, cos_phi, tensile)
     }
 
-    /// Strength parameters at equivalent plastic strain κ (DESIGN D28, floor and clamp included).
+    /// Strength parameters at equivalent plastic strain κ (theory D28, floor and clamp included).
     pub fn strength_at(&self, kappa: f64) -> StrengthAtKappa {
         let cohesion = self.cohesion_law.value(kappa).max(self.cohesion_min);
         let friction = self.friction_law.value(kappa);
@@ -524,12 +524,12 @@ impl Hmc {
         }
     }
 
-    /// Yield function f(σ, κ) of DESIGN D23 (kPa); f ≤ 0 admissible.
+    /// Yield function f(σ, κ) of theory D23 (kPa); f ≤ 0 admissible.
     pub fn yield_function(&self, stress: &Voigt, kappa: f64) -> f64 {
         self.surface.value(stress, &self.strength(kappa))
     }
 
-    /// Plastic flow direction m = ∂G/∂σ at (σ, κ) (DESIGN D26, D31).
+    /// Plastic flow direction m = ∂G/∂σ at (σ, κ) (theory D26, D31).
     pub fn flow_direction(&self, stress: &Voigt, kappa: f64) -> Voigt {
         let strength = self.strength(kappa);
         let (_, gradient) = self.surface.value_and_gradient(stress, &strength);
@@ -537,7 +537,7 @@ impl Hmc {
     }
 
     /// f, f_σ, m, m_σ, h = ‖m‖ε and their κ-derivatives by one dual-number evaluation
-    /// (exact; DESIGN D30–D31), with the strength at κ_s = `arg`(κ); the κ-derivatives
+    /// (exact; theory D30–D31), with the strength at κ_s = `arg`(κ); the κ-derivatives
     /// are zero when κ_s does not depend on κ (strength frozen, nonlocal m = 1).
     #[inline]
     fn linearise(&self, stress: &Voigt, kappa: f64, arg: StrengthArg) -> Linearisation {
@@ -634,7 +634,7 @@ impl Hmc {
         }
     }
 
-    /// Jacobian A of DESIGN D30 (nonlocal: κ row and column replaced by the identity).
+    /// Jacobian A of theory D30 (nonlocal: κ row and column replaced by the identity).
     #[inline]
     fn jacobian(&self, lin: &Linearisation, multiplier: f64, local: bool) -> Mat6 {
         let e = self.parameters.youngs_modulus;
@@ -662,7 +662,7 @@ impl Hmc {
 
     /// A second start for a (sub)step from `stress_start` by `increment` (trial stress
     /// `trial`) whose Newton iteration from the trial state failed, when the trial stress lies
-    /// on the tension side of the apex (p_trial < −p_t at κ): the tip return's state (DESIGN
+    /// on the tension side of the apex (p_trial < −p_t at κ): the tip return's state (theory
     /// §5.6 step 4, [`Self::tip_return`]), σ⁰ = p_t (1,1,1,0) and κ⁰ from the plastic strain
     /// Δε^p that carries the trial stress there, with Δλ⁰ = ‖Δε^p‖ε / ‖m‖ε for m at σ⁰.
     /// From the trial state, where the surface near the apex has a radius of curvature ~a and
@@ -697,7 +697,7 @@ impl Hmc {
         })
     }
 
-    /// Closest-point projection of one (sub)step of trial stress `trial` (DESIGN D29–D30), the
+    /// Closest-point projection of one (sub)step of trial stress `trial` (theory D29–D30), the
     /// Newton iteration started at `start`.
     fn plastic_step(
         &self,
@@ -749,7 +749,7 @@ impl Hmc {
             if step.iter().any(|x| !x.is_finite()) {
                 return Err("non-finite Newton step");
             }
-            // Backtracking line search on ‖r‖ (DESIGN §5.6 step 2). The full step is evaluated
+            // Backtracking line search on ‖r‖ (theory §5.6 step 2). The full step is evaluated
             // with the dual linearisation, which is reused by the next iteration when accepted.
             let norm0 = r.norm();
             let point = |alpha: f64| {
@@ -854,7 +854,7 @@ impl Hmc {
                 kappa,
                 multiplier: 0.0,
             };
-            // DESIGN §5.6 step 2 from y⁰ = (σ_trial, κ, 0); where that fails beyond the apex,
+            // theory §5.6 step 2 from y⁰ = (σ_trial, κ, 0); where that fails beyond the apex,
             // with the `apex_start` option once more from the apex before the sub-stepping of
             // step 3
             let step = match self.plastic_step(&trial, kappa, arg, tolerance, from_trial) {
@@ -909,7 +909,7 @@ impl Hmc {
         })
     }
 
-    /// Tip return σ = p_t (1,1,1,0), Δε^p = Δε − C(σ − σ_n), Δκ = ‖Δε^p‖ε, D_alg = 0 (DESIGN §5.6 step 4).
+    /// Tip return σ = p_t (1,1,1,0), Δε^p = Δε − C(σ − σ_n), Δκ = ‖Δε^p‖ε, D_alg = 0 (theory §5.6 step 4).
     fn tip_return(
         &self,
         stress_n: &Voigt,
@@ -1112,7 +1112,7 @@ impl ConstitutiveModel for Hmc {
         false
     }
 
-    /// Symmetric only for associated flow (ω = 1) without any softening (DESIGN D32); sub-stepped
+    /// Symmetric only for associated flow (ω = 1) without any softening (theory D32); sub-stepped
     /// updates of such a model return the symmetric part of their chained tangent.
     fn has_symmetric_tangent(&self) -> bool {
         self.flow.is_associated() && !self.softening
@@ -1122,7 +1122,7 @@ impl ConstitutiveModel for Hmc {
         self.softening
     }
 
-    /// DESIGN D39: a smoothed stress outside the surface is scaled back onto it at
+    /// theory D39: a smoothed stress outside the surface is scaled back onto it at
     /// fixed p and θ (deviator scaled), or set to the tip p_t·(1,1,1,0) when the
     /// pressure lies beyond the apex. The strength is taken at κ̄ (nonlocal) or κ.
     fn project_to_surface(
@@ -1155,7 +1155,7 @@ impl ConstitutiveModel for Hmc {
         ]
     }
 
-    /// Return mapping of DESIGN D29–D32 with sub-stepping and tip treatment.
+    /// Return mapping of theory D29–D32 with sub-stepping and tip treatment.
     fn update(
         &self,
         stress_rotated: &Voigt,

@@ -1,11 +1,11 @@
 //! Constitutive interface: the stress update, its algorithmic tangent and the
-//! state variables a material point carries (DESIGN §5).
+//! state variables a material point carries (theory §5).
 //!
 //! The engine calls [`ConstitutiveModel::update`] once per material point per
 //! Newton iteration (implicit) or per step (explicit). Models are stateless
 //! values; everything that evolves lives in [`PointState`] and the stress.
 //!
-//! Sign convention (DESIGN D1–D2): stress is tension-positive, Voigt order
+//! Sign convention (theory D1–D2): stress is tension-positive, Voigt order
 //! `[xx, yy, zz, xy]`; strains carry engineering shear `γxy = 2 εxy`.
 
 pub mod dense_lu;
@@ -23,7 +23,7 @@ pub use elastic::LinearElastic;
 pub use hmc::{Hmc, HmcParameters};
 pub use von_mises::{VonMises, VonMisesParameters};
 
-/// Voigt 4-vector `[xx, yy, zz, xy]` (DESIGN D2).
+/// Voigt 4-vector `[xx, yy, zz, xy]` (theory D2).
 pub type Voigt = [f64; 4];
 /// 4×4 matrix acting on Voigt vectors, row-major `m[row][col]`.
 pub type Mat4 = [[f64; 4]; 4];
@@ -31,12 +31,12 @@ pub type Mat4 = [[f64; 4]; 4];
 /// State variables carried by every material point.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct PointState {
-    /// Local equivalent plastic strain κ, accumulated by increments (DESIGN D27).
+    /// Local equivalent plastic strain κ, accumulated by increments (theory D27).
     pub plastic_strain_eq: f64,
-    /// Nonlocal equivalent plastic strain κ̄ (DESIGN D35); equals κ in local runs.
+    /// Nonlocal equivalent plastic strain κ̄ (theory D35); equals κ in local runs.
     pub plastic_strain_eq_nonlocal: f64,
     /// Accumulated plastic strain (Voigt, engineering shear), for output and
-    /// the dissipation metric (DESIGN D43).
+    /// the dissipation metric (theory D43).
     pub plastic_strain: Voigt,
 }
 
@@ -47,7 +47,7 @@ pub struct StressUpdate {
     pub stress: Voigt,
     /// Updated state variables.
     pub state: PointState,
-    /// Algorithmic tangent dσ_{n+1}/dΔε (DESIGN D32); the elastic D on the elastic branch.
+    /// Algorithmic tangent dσ_{n+1}/dΔε (theory D32); the elastic D on the elastic branch.
     pub tangent: Mat4,
     /// True when the return mapping was active (plastic flow in this update).
     pub yielded: bool,
@@ -88,10 +88,10 @@ pub trait ConstitutiveModel: Send + Sync + Debug {
     /// Short model name (`"linear_elastic"`, `"hmc"`, `"von_mises"`), written to `run.json`.
     fn name(&self) -> &'static str;
 
-    /// Elastic stiffness D (DESIGN D22), kPa.
+    /// Elastic stiffness D (theory D22), kPa.
     fn elastic_stiffness(&self) -> Mat4;
 
-    /// P-wave modulus K + 4G/3 (kPa), for the explicit stable time step (DESIGN D20).
+    /// P-wave modulus K + 4G/3 (kPa), for the explicit stable time step (theory D20).
     fn p_wave_modulus(&self) -> f64;
 
     /// True when the model never yields: the engine then skips the return
@@ -102,13 +102,13 @@ pub trait ConstitutiveModel: Send + Sync + Debug {
     /// associated perfectly plastic), so that sparse Cholesky may be used.
     fn has_symmetric_tangent(&self) -> bool;
 
-    /// Stress update (DESIGN §5.6).
+    /// Stress update (theory §5.6).
     ///
     /// * `stress_rotated` – σ_n^R, the committed stress rotated by the incremental spin (D13);
     /// * `strain_increment` – Δε of the step so far (D12);
     /// * `state_n` – committed state at the start of the step;
     /// * `strength` – the equivalent plastic strain the strength is evaluated at:
-    ///   the point's own κ (local runs) or the nonlocal κ̄ (DESIGN §6).
+    ///   the point's own κ (local runs) or the nonlocal κ̄ (theory §6).
     fn update(
         &self,
         stress_rotated: &Voigt,
@@ -155,13 +155,13 @@ pub trait ConstitutiveModel: Send + Sync + Debug {
     }
 
     /// True when the strength can decrease with plastic strain (softening):
-    /// double mapping is then on by default (DESIGN §7).
+    /// double mapping is then on by default (theory §7).
     fn can_soften(&self) -> bool {
         false
     }
 
     /// Return a stress that lies outside the yield surface to it at fixed mean
-    /// stress and Lode angle, without changing the state (DESIGN D39, used after
+    /// stress and Lode angle, without changing the state (theory D39, used after
     /// double mapping). Elastic models return the stress unchanged.
     fn project_to_surface(
         &self,
@@ -177,10 +177,10 @@ pub trait ConstitutiveModel: Send + Sync + Debug {
 /// during its stress update.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum StrengthVariable {
-    /// Local runs: the point's own κ = κ_n + Δκ (DESIGN §5.6; the return mapping
+    /// Local runs: the point's own κ = κ_n + Δκ (theory §5.6; the return mapping
     /// solves for Δκ).
     Local,
-    /// Nonlocal runs (DESIGN D36, with the over-nonlocal factor m):
+    /// Nonlocal runs (theory D36, with the over-nonlocal factor m):
     /// κ_s = `neighbours` + `own_weight`·Δκ, where `neighbours` = κ̄_n + m Σ_q W_pq Δκ_q
     /// is frozen during the update and `own_weight` = 1 − m. For m = 1 (D35)
     /// the strength is frozen at κ_s = `neighbours`; for m > 1 the point's own
@@ -195,7 +195,7 @@ pub enum StrengthVariable {
 }
 
 impl StrengthVariable {
-    /// The strength frozen at κ̄ (DESIGN D36, m = 1).
+    /// The strength frozen at κ̄ (theory D36, m = 1).
     pub fn frozen(kappa_bar: f64) -> Self {
         Self::Nonlocal {
             neighbours: kappa_bar,
@@ -233,19 +233,19 @@ pub fn invert4(m: &Mat4) -> Mat4 {
     out
 }
 
-/// Compression-positive mean stress p = −(σxx + σyy + σzz)/3 (DESIGN D1), kPa.
+/// Compression-positive mean stress p = −(σxx + σyy + σzz)/3 (theory D1), kPa.
 pub fn mean_stress(stress: &Voigt) -> f64 {
     -(stress[0] + stress[1] + stress[2]) / 3.0
 }
 
-/// Second deviatoric invariant J2 (DESIGN D4), kPa².
+/// Second deviatoric invariant J2 (theory D4), kPa².
 pub fn j2(stress: &Voigt) -> f64 {
     let p = mean_stress(stress);
     let (sx, sy, sz) = (stress[0] + p, stress[1] + p, stress[2] + p);
     0.5 * (sx * sx + sy * sy + sz * sz) + stress[3] * stress[3]
 }
 
-/// Deviatoric stress q = sqrt(3 J2) (DESIGN D5, paper eq. 7), kPa.
+/// Deviatoric stress q = sqrt(3 J2) (theory D5, paper eq. 7), kPa.
 pub fn deviatoric_stress(stress: &Voigt) -> f64 {
     (3.0 * j2(stress)).sqrt()
 }

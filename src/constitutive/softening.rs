@@ -1,4 +1,4 @@
-//! Three-level exponential softening law (DESIGN D27–D28, paper eq. 4).
+//! Three-level exponential softening law (theory D27–D28, paper eq. 4).
 //!
 //! One law per strength quantity (cohesion, friction angle, tensile strength):
 //! the law is independent of the yield criterion and can be reused by any
@@ -7,7 +7,7 @@
 use super::dual::Real;
 
 /// X(κ) = X_res + (X_post − X_res) e^{−b_res κ} + (X_peak − X_post) e^{−b_post κ}
-/// (DESIGN D28; paper eq. 4 when X_res = 0).
+/// (theory D28; paper eq. 4 when X_res = 0).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ThreeLevelSoftening {
     /// Value at κ = 0 (peak), in the quantity's unit.
@@ -34,7 +34,7 @@ impl ThreeLevelSoftening {
         }
     }
 
-    /// X(κ) of DESIGN D28, generic so that dX/dκ comes out of a dual evaluation.
+    /// X(κ) of theory D28, generic so that dX/dκ comes out of a dual evaluation.
     #[inline]
     pub fn value<T: Real>(&self, kappa: T) -> T {
         self.value_with_decays(self.decays(kappa))

@@ -1,21 +1,21 @@
 //! Von Mises elastic–perfectly plastic model with undrained strength c: yield
-//! when √J₂ > c (DESIGN D4), radial return at fixed mean stress and the
+//! when √J₂ > c (theory D4), radial return at fixed mean stress and the
 //! consistent (algorithmic) tangent of the radial return (Simo & Hughes 1998,
 //! *Computational Inelasticity*, §3.3, box 3.2, with no hardening).
 //!
 //! In plane strain the flow puts σzz at the mean of the in-plane principal
 //! stresses, so the limit state is Tresca's with undrained strength c: the
-//! material of the Prandtl (Tresca) validation scene of DESIGN §8.4, whose
+//! material of the Prandtl (Tresca) validation scene of theory §8.4, whose
 //! rough strip footing carries (2 + π) c.
 //!
-//! The elasticity is [`LinearElastic`]'s (DESIGN D22). The strength does not
+//! The elasticity is [`LinearElastic`]'s (theory D22). The strength does not
 //! depend on the equivalent plastic strain (no softening), so the
 //! [`StrengthVariable`] of an update is ignored; κ is still accumulated by
-//! DESIGN D27 for output and the dissipation metric.
+//! theory D27 for output and the dissipation metric.
 //!
-//! Notation: σ = σm·1 + s with σm = tr σ / 3 (tension positive, DESIGN D1),
+//! Notation: σ = σm·1 + s with σm = tr σ / 3 (tension positive, theory D1),
 //! 1 = (1, 1, 1, 0), s the deviator (Voigt `[xx, yy, zz, xy]`, stress-like
-//! shear component); strains carry engineering shear γxy = 2 εxy (DESIGN D2).
+//! shear component); strains carry engineering shear γxy = 2 εxy (theory D2).
 
 use serde::{Deserialize, Serialize};
 
@@ -29,7 +29,7 @@ use super::{
 const ELASTIC_TOLERANCE: f64 = 1e-10;
 
 /// The deviatoric projector I_dev mapping an engineering-shear strain to the
-/// deviatoric part of the tensor strain, so that D = K 1⊗1 + 2G I_dev (DESIGN D22):
+/// deviatoric part of the tensor strain, so that D = K 1⊗1 + 2G I_dev (theory D22):
 /// the xy entry is ½ because εxy = γxy/2.
 const DEVIATORIC_PROJECTOR: Mat4 = [
     [2.0 / 3.0, -1.0 / 3.0, -1.0 / 3.0, 0.0],
@@ -42,15 +42,15 @@ const DEVIATORIC_PROJECTOR: Mat4 = [
 #[derive(Clone, Copy, Debug, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct VonMisesParameters {
-    /// `E`: Young's modulus, kPa (DESIGN D22).
+    /// `E`: Young's modulus, kPa (theory D22).
     #[serde(rename = "E")]
     pub youngs_modulus: f64,
-    /// `nu`: Poisson's ratio, in (−1, 0.5) (DESIGN D22).
+    /// `nu`: Poisson's ratio, in (−1, 0.5) (theory D22).
     #[serde(rename = "nu")]
     pub poisson_ratio: f64,
     /// `density`: mass density, t/m³.
     pub density: f64,
-    /// `c`: undrained shear strength, kPa: yield when √J₂ > c (DESIGN D4).
+    /// `c`: undrained shear strength, kPa: yield when √J₂ > c (theory D4).
     #[serde(rename = "c")]
     pub undrained_strength: f64,
 }
@@ -129,7 +129,7 @@ fn split(stress: &Voigt) -> (f64, Voigt) {
     )
 }
 
-/// √J₂ of a deviator s (DESIGN D4): J₂ = ½(sx² + sy² + sz²) + sxy².
+/// √J₂ of a deviator s (theory D4): J₂ = ½(sx² + sy² + sz²) + sxy².
 fn deviator_radius(s: &Voigt) -> f64 {
     (0.5 * (s[0] * s[0] + s[1] * s[1] + s[2] * s[2]) + s[3] * s[3]).sqrt()
 }
@@ -160,7 +160,7 @@ impl VonMises {
         self.parameters.undrained_strength
     }
 
-    /// Yield function f(σ) = √J₂ − c (kPa, DESIGN D4); f ≤ 0 admissible.
+    /// Yield function f(σ) = √J₂ − c (kPa, theory D4); f ≤ 0 admissible.
     pub fn yield_function(&self, stress: &Voigt) -> f64 {
         deviator_radius(&split(stress).1) - self.parameters.undrained_strength
     }
@@ -215,12 +215,12 @@ impl ConstitutiveModel for VonMises {
         true
     }
 
-    /// Fixed strength (DESIGN D39 double mapping stays off under `auto`).
+    /// Fixed strength (theory D39 double mapping stays off under `auto`).
     fn can_soften(&self) -> bool {
         false
     }
 
-    /// DESIGN D39 for this surface: a stress outside it has its deviator scaled to √J₂ = c at
+    /// theory D39 for this surface: a stress outside it has its deviator scaled to √J₂ = c at
     /// fixed mean stress; a stress inside is returned unchanged.
     fn project_to_surface(
         &self,
@@ -244,7 +244,7 @@ impl ConstitutiveModel for VonMises {
     }
 
     /// Elastic trial σ_tr = σ_n^R + D Δε; if √J₂(σ_tr) > c, radial return s = s_tr c/√J₂(s_tr)
-    /// at unchanged mean stress, Δε^p = C (σ_tr − σ) (deviatoric), Δκ = ‖Δε^p‖ε (DESIGN D27).
+    /// at unchanged mean stress, Δε^p = C (σ_tr − σ) (deviatoric), Δκ = ‖Δε^p‖ε (theory D27).
     fn update(
         &self,
         stress_rotated: &Voigt,

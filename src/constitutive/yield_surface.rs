@@ -1,5 +1,5 @@
-//! Hyperbolic Mohr–Coulomb yield criterion (DESIGN D23, paper eq. 3) with the
-//! van Eekelen deviatoric shape (DESIGN D24–D25), invariants (D1–D6) and the
+//! Hyperbolic Mohr–Coulomb yield criterion (theory D23, paper eq. 3) with the
+//! van Eekelen deviatoric shape (theory D24–D25), invariants (D1–D6) and the
 //! analytic gradient f_σ (D31).
 //!
 //! Everything is generic over [`Real`] so that the same code gives f64 values
@@ -7,10 +7,10 @@
 
 use super::dual::Real;
 
-/// van Eekelen exponent Z of DESIGN D24 (chosen for convexity).
+/// van Eekelen exponent Z of theory D24 (chosen for convexity).
 pub const VAN_EEKELEN_EXPONENT: f64 = -0.229;
 
-/// 3√3/2, the factor of the Lode-angle definition (DESIGN D6).
+/// 3√3/2, the factor of the Lode-angle definition (theory D6).
 const LODE_FACTOR: f64 = 2.598_076_211_353_316;
 
 /// Strength of the hyperbolic Mohr–Coulomb surface at one value of κ.
@@ -22,22 +22,22 @@ pub struct SurfaceStrength<T> {
     pub tan_friction: T,
     /// Tensile strength p_t ≥ 0 (kPa, magnitude; the tip is at p = −p_t).
     pub tensile_strength: T,
-    /// Hyperbola parameter a = c − p_t tanφ (kPa, DESIGN D23).
+    /// Hyperbola parameter a = c − p_t tanφ (kPa, theory D23).
     pub hyperbola_a: T,
-    /// van Eekelen X (DESIGN D25).
+    /// van Eekelen X (theory D25).
     pub shape_x: T,
-    /// van Eekelen Y (DESIGN D25).
+    /// van Eekelen Y (theory D25).
     pub shape_y: T,
 }
 
 /// van Eekelen constants (X, Y) matching Mohr–Coulomb in triaxial compression and
-/// extension for friction angle `friction_angle` (radians) (DESIGN D25).
+/// extension for friction angle `friction_angle` (radians) (theory D25).
 #[inline]
 pub fn van_eekelen_shape<T: Real>(friction_angle: T) -> (T, T) {
     van_eekelen_shape_sin_cos(friction_angle.sin(), friction_angle.cos())
 }
 
-/// [`van_eekelen_shape`] from sin φ and cos φ (DESIGN D25).
+/// [`van_eekelen_shape`] from sin φ and cos φ (theory D25).
 #[inline]
 pub fn van_eekelen_shape_sin_cos<T: Real>(sin_phi: T, cos_phi: T) -> (T, T) {
     let three_minus = T::cst(3.0) - sin_phi;
@@ -49,7 +49,7 @@ pub fn van_eekelen_shape_sin_cos<T: Real>(sin_phi: T, cos_phi: T) -> (T, T) {
     (x, y)
 }
 
-/// Mohr–Coulomb radius r_MC(θ) = cosφ / (cosθ − sinθ sinφ/√3) (DESIGN D7), θ and φ in radians.
+/// Mohr–Coulomb radius r_MC(θ) = cosφ / (cosθ − sinθ sinφ/√3) (theory D7), θ and φ in radians.
 pub fn mohr_coulomb_radius(lode_angle: f64, friction_angle: f64) -> f64 {
     friction_angle.cos()
         / (lode_angle.cos() - lode_angle.sin() * friction_angle.sin() / 3f64.sqrt())
@@ -94,7 +94,7 @@ impl SurfaceStrength<f64> {
     }
 }
 
-/// Stress invariants of DESIGN D1–D6.
+/// Stress invariants of theory D1–D6.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Invariants {
     /// Compression-positive mean stress p (kPa, D1).
@@ -131,7 +131,7 @@ impl Invariants {
     }
 }
 
-/// The hyperbolic Mohr–Coulomb yield criterion (DESIGN D23–D25).
+/// The hyperbolic Mohr–Coulomb yield criterion (theory D23–D25).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct HyperbolicMohrCoulomb {
     /// Below this J (kPa) the Lode angle is undefined: sin3θ = 0 and the θ-term of f_σ is dropped (D6, D31).
@@ -139,13 +139,13 @@ pub struct HyperbolicMohrCoulomb {
 }
 
 impl HyperbolicMohrCoulomb {
-    /// Deviatoric radius r(θ) = X (1 + Y sin3θ)^Z (DESIGN D24).
+    /// Deviatoric radius r(θ) = X (1 + Y sin3θ)^Z (theory D24).
     #[inline]
     pub fn shape_radius<T: Real>(strength: &SurfaceStrength<T>, sin_3theta: T) -> T {
         strength.shape_x * (strength.shape_y * sin_3theta + 1.0).powf(VAN_EEKELEN_EXPONENT)
     }
 
-    /// f(σ) = sqrt(J²/fd(θ) + a²) − (c + p tanφ) (DESIGN D23), kPa.
+    /// f(σ) = sqrt(J²/fd(θ) + a²) − (c + p tanφ) (theory D23), kPa.
     #[inline]
     pub fn value<T: Real>(&self, stress: &[T; 4], strength: &SurfaceStrength<T>) -> T {
         let p = -(stress[0] + stress[1] + stress[2]) / 3.0;
@@ -168,7 +168,7 @@ impl HyperbolicMohrCoulomb {
         (j2 / (r * r) + a * a).sqrt() - (strength.cohesion + p * strength.tan_friction)
     }
 
-    /// f (kPa) and its analytic gradient f_σ = ∂f/∂σ (Voigt, DESIGN D31).
+    /// f (kPa) and its analytic gradient f_σ = ∂f/∂σ (Voigt, theory D31).
     #[inline]
     pub fn value_and_gradient<T: Real>(
         &self,
@@ -245,7 +245,7 @@ impl HyperbolicMohrCoulomb {
 }
 
 /// Principal (σxy = 0) tension-positive Voigt stress with compression-positive mean stress `p` (kPa),
-/// deviatoric radius `j` = sqrt(J2) (kPa) and Lode angle `theta` (radians, DESIGN D6); the most
+/// deviatoric radius `j` = sqrt(J2) (kPa) and Lode angle `theta` (radians, theory D6); the most
 /// compressive principal stress is σxx.
 pub fn stress_from_invariants(p: f64, j: f64, theta: f64) -> [f64; 4] {
     // Compression-positive principal deviators c_i = k cos(θ − π/6 − 2πi/3), k = 2J/√3:

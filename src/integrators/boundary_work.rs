@@ -3,9 +3,9 @@
 //!
 //! Both integrators map the points' momentum to the grid, p_i = Σ_p N_ip m_p
 //! v_p, and set the velocity of a fixed dof to zero: the explicit one zeroes
-//! its momentum in the update (DESIGN §4 step 2; G2P then subtracts the
+//! its momentum in the update (theory §4 step 2; G2P then subtracts the
 //! zeroed velocity from the points), the implicit one zeroes v_n and a_n
-//! at fixed dofs in P2G before the Newmark step (DESIGN §3). What the
+//! at fixed dofs in P2G before the Newmark step (theory §3). What the
 //! condition removes in the step is, per fixed dof d of node i,
 //!
 //! ΔB = Σ_(i, d fixed) ½ m_i (v_i,d)²,  v_i = p_i / m_i,     (B1)

@@ -1,5 +1,5 @@
 //! The commit stage, shared by both integrators: the converged step becomes
-//! the state of the material points (DESIGN D14: F, V, accumulated strain;
+//! the state of the material points (theory D14: F, V, accumulated strain;
 //! stresses and states), the boundary points follow the grid motion, and
 //! points that left the grid stop the run or are removed.
 
@@ -24,7 +24,7 @@ pub struct NodalResults<'a> {
     /// Nodal motion that moves the rigid bodies' surface contact points: the
     /// one that moved the material points.
     pub contact_motion: &'a [[f64; 2]],
-    /// Gravity of the step's external force (DESIGN D10), m/s² along −y.
+    /// Gravity of the step's external force (theory D10), m/s² along −y.
     pub gravity: f64,
     /// Time at the end of the step, s (the model's time is the start): a rigid
     /// body's surface point over no soil moves with the body over the step.
@@ -176,7 +176,7 @@ impl FirstFailures {
 }
 
 /// The one pass over the committed point state, in parallel: F, V and ε of
-/// every point from its increment gradient (DESIGN D14, V bounded by
+/// every point from its increment gradient (theory D14, V bounded by
 /// `volume_cap`, m², see `grid.max_point_volume`), then the point checked;
 /// returns the lowest-index points with a non-finite variable and outside
 /// the grid (the same whatever the number of threads).
@@ -299,7 +299,7 @@ fn check_finite_nodes(grid: &Grid, nodal: &NodalResults) -> Result<(), StepError
 }
 
 /// F ← (I + L) F; V ← min(det(I + L) V, `volume_cap`); ε += Δε of one
-/// point (DESIGN D14; the bound is `grid.max_point_volume`, infinite when
+/// point (theory D14; the bound is `grid.max_point_volume`, infinite when
 /// unset). F keeps the whole motion: only the volume that weights the
 /// point's force, stiffness, density and nonlocal weight is bounded.
 fn deform(

@@ -1,4 +1,4 @@
-//! Explicit integrator (DESIGN §4): MUSL central difference, matrix-free,
+//! Explicit integrator (theory §4): MUSL central difference, matrix-free,
 //! with the same transfer kernels and stages as the implicit one.
 //!
 //! The integrator owns every buffer of its step (its workspace): shape
@@ -44,7 +44,7 @@ pub struct ExplicitIntegrator {
     work: Box<Workspace>,
 }
 
-/// Nodal sums of the step's one P2G pass, per node (DESIGN §4 step 1):
+/// Nodal sums of the step's one P2G pass, per node (theory §4 step 1):
 /// m_i, p_i = Σ N m v (x, y), f_i^int (x, y) and the body force's y
 /// component Σ N m (−g) (its x component is zero).
 type P2gSums = [f64; 6];
@@ -95,7 +95,7 @@ struct Buffers {
     converged: ConvergedStresses,
 }
 
-/// The grid of a step: P2G results, then their momentum update (DESIGN §4
+/// The grid of a step: P2G results, then their momentum update (theory §4
 /// steps 1–2). Every field is zero at the nodes no point reaches, and the
 /// passes visit the active nodes only ([`NodalField`]).
 #[derive(Default)]
@@ -152,7 +152,7 @@ impl ExplicitIntegrator {
         Ok(Self::default())
     }
 
-    /// One MUSL step (DESIGN §4), in the order of paper Fig. 1.
+    /// One MUSL step (theory §4), in the order of paper Fig. 1.
     pub fn step(&mut self, model: &mut Model, profile: &Profile) -> Result<StepReport, StepError> {
         let t = model.time;
         let work = &mut *self.work;
@@ -259,7 +259,7 @@ impl Buffers {
     }
 }
 
-/// Δt of the step: α_CFL times the stable limit (DESIGN D20), or the
+/// Δt of the step: α_CFL times the stable limit (theory D20), or the
 /// scene's fixed `dt` if it is still below the limit; the last step ends
 /// at `end_time`. Recorded in `usage`.
 fn time_step(
@@ -295,7 +295,7 @@ fn time_step(
 
 impl Buffers {
     /// P2G: m_i, p_i = Σ N_ip m_p v_p, f_i = f_ext + f_pen − f_int at t
-    /// (DESIGN D10–D11), the point sums in one pass; the nodal mass is
+    /// (theory D10–D11), the point sums in one pass; the nodal mass is
     /// counted in `profile`.
     fn map_to_grid<S: Support>(
         &mut self,
@@ -388,7 +388,7 @@ impl Buffers {
         );
     }
 
-    /// MUSL re-map (DESIGN §4 step 4): p_i = Σ_p N_ip m_p v_p of the updated
+    /// MUSL re-map (theory §4 step 4): p_i = Σ_p N_ip m_p v_p of the updated
     /// point velocities, Dirichlet again (a frictional edge holds its normal
     /// dof against the approach only, theory eq. FR3); Δu_i = Δt p_i / m_i into
     /// `self.increment`.
@@ -441,7 +441,7 @@ impl Buffers {
         });
     }
 
-    /// Δε from the re-mapped increment and the stress update (DESIGN §4
+    /// Δε from the re-mapped increment and the stress update (theory §4
     /// step 5) into `self.trial`, strengths at κ̄(n); the updates are
     /// counted in `profile`. No tangent is formed.
     fn stress_update<S: Support>(
@@ -613,7 +613,7 @@ impl UpdatedGrid {
             )
     }
 
-    /// G2P of the updated grid (DESIGN §4 step 3): v_p += Δt Σ N a_i,
+    /// G2P of the updated grid (theory §4 step 3): v_p += Δt Σ N a_i,
     /// x_p += Δt Σ N p_i/m_i.
     fn motion(&self, dt: f64) -> GridMotion<'_> {
         GridMotion {

@@ -1,4 +1,4 @@
-//! The grid-to-particle kernel both integrators use (DESIGN D14, §3, §4):
+//! The grid-to-particle kernel both integrators use (theory D14, §3, §4):
 //! positions, velocities and accelerations of the material points from the
 //! step's nodal solution. Deformation gradients, volumes and stresses follow
 //! in the commit stage.
@@ -13,9 +13,9 @@ use crate::transfer::interpolate;
 /// How a point's velocity follows its new acceleration a_p(n+1) = Σ_i N_ip a_i.
 #[derive(Clone, Copy, Debug)]
 pub enum VelocityUpdate {
-    /// Explicit (symplectic Euler, DESIGN §4 step 3): v += Δt a(n+1).
+    /// Explicit (symplectic Euler, theory §4 step 3): v += Δt a(n+1).
     Forward,
-    /// Newmark (DESIGN §3): v += Δt ((1 − γ) a(n) + γ a(n+1)).
+    /// Newmark (theory §3): v += Δt ((1 − γ) a(n) + γ a(n+1)).
     Newmark {
         /// γ of the scheme.
         gamma: f64,

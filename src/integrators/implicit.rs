@@ -1,6 +1,6 @@
-//! Implicit integrator (DESIGN §3): full Newton–Raphson on the nodal
+//! Implicit integrator (theory §3): full Newton–Raphson on the nodal
 //! equilibrium of each step, quasi-static or dynamic with the Newmark
-//! rule (paper eq. 2, DESIGN D15–D17), consistent tangent assembled per cell
+//! rule (paper eq. 2, theory D15–D17), consistent tangent assembled per cell
 //! and factorised by the sparse direct solver; a step whose Newton loop
 //! fails is halved, up to `solver.max_halvings` times.
 
@@ -32,7 +32,7 @@ pub struct ImplicitIntegrator {
     newmark: Option<Newmark>,
     /// Tangent pattern, assembler and sparse direct solver.
     tangent: Tangent,
-    /// ε_bg · K_cell^el (DESIGN D19).
+    /// ε_bg · K_cell^el (theory D19).
     background_block: [f64; 64],
     /// The step setup, refreshed in place each (sub-)step (its shape
     /// functions and bins reuse the previous step's arrays).
@@ -40,7 +40,7 @@ pub struct ImplicitIntegrator {
     /// Factorisations, Newton iterations, halvings.
     pub usage: SolverUsage,
     /// ‖R‖ per Newton iteration of the last converged (sub-)step, kN/m, and the
-    /// reference force of DESIGN D18 it was compared with.
+    /// reference force of theory D18 it was compared with.
     pub last_residuals: (Vec<f64>, f64),
     /// The Newton iterates' buffers, kept from one (sub-)step to the next.
     newton_buffers: NewtonBuffers,
@@ -123,7 +123,7 @@ impl ImplicitIntegrator {
         self.tangent.systems_written()
     }
 
-    /// One implicit step: of Δt, halved on Newton failure (DESIGN §3), or with
+    /// One implicit step: of Δt, halved on Newton failure (theory §3), or with
     /// adaptive steps of the controller's choice.
     pub fn step(&mut self, model: &mut Model, profile: &Profile) -> Result<StepReport, StepError> {
         if let Some(control) = self.control {
@@ -392,7 +392,7 @@ impl ImplicitIntegrator {
     }
 
     /// P2G: nodal mass, v_n and a_n (dynamic only, in one pass; the mass
-    /// counted in `profile`) and the external force at `t1` (DESIGN D10).
+    /// counted in `profile`) and the external force at `t1` (theory D10).
     /// The constrained dofs are held by [`hold_fixed_dofs`].
     fn map_to_grid(
         &mut self,
@@ -416,7 +416,7 @@ impl ImplicitIntegrator {
     /// The next step's linearisation at a given free-dof displacement increment
     /// (verification access, e.g. finite-difference checks of the tangent):
     /// the residual R = f_ext + f_pen − f_int − M a at the free dofs and the
-    /// assembled tangent (DESIGN D16–D17, incl. the \[D19\] term), without
+    /// assembled tangent (theory D16–D17, incl. the \[D19\] term), without
     /// changing the model. `free_increment` has one entry per unknown (see
     /// [`Self::unknowns`]).
     pub fn linearize(
@@ -520,7 +520,7 @@ impl ConvergedGrid {
         }
     }
 
-    /// G2P (DESIGN §3): x_p += Σ N Δu_i; dynamic: a_p = Σ N a_i, Newmark v_p.
+    /// G2P (theory §3): x_p += Σ N Δu_i; dynamic: a_p = Σ N a_i, Newmark v_p.
     fn motion(&self, dt: f64, newmark: Option<Newmark>) -> GridMotion<'_> {
         let rule = newmark.map(|n| VelocityUpdate::Newmark { gamma: n.gamma });
         GridMotion {
@@ -547,7 +547,7 @@ const MAX_CONTACT_PASSES: usize = 4;
 /// leaves at 0.06 h per step.
 const LIFT_OFF: f64 = 1e-3;
 
-/// Dirichlet dofs neither move nor accelerate (DESIGN §3): v_n, a_n (and
+/// Dirichlet dofs neither move nor accelerate (theory §3): v_n, a_n (and
 /// generalised-α's q_n) are zeroed at the fixed dofs that `dofs` does not
 /// release, and what the zeroing removed is kept for G2P and the budget
 /// ([`super::boundary_work`] B1).

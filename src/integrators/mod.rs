@@ -105,10 +105,10 @@ pub struct SolverUsage {
 
 /// The integrator of a run, chosen by `scene.analysis`.
 pub enum Integrator {
-    /// Quasi-static or Newmark implicit (DESIGN §3); boxed, it holds the
+    /// Quasi-static or Newmark implicit (theory §3); boxed, it holds the
     /// solver's caches.
     Implicit(Box<ImplicitIntegrator>),
-    /// MUSL explicit (DESIGN §4).
+    /// MUSL explicit (theory §4).
     Explicit(ExplicitIntegrator),
 }
 

@@ -1,5 +1,5 @@
 //! Newton–Raphson on the nodal equilibrium of one implicit (sub-)step
-//! (DESIGN D16–D18): the step's nonlinear system R(Δu) = 0
+//! (theory D16–D18): the step's nonlinear system R(Δu) = 0
 //! ([`StepSystem`]), the convergence criteria and the line search
 //! ([`Convergence`]), and the loop that joins them ([`solve`]).
 
@@ -138,7 +138,7 @@ pub struct StepSystem<'a> {
     pub dt: f64,
     /// Newmark parameters; `None` in quasi-static runs (no inertia).
     pub newmark: Option<Newmark>,
-    /// ε_bg · K_cell^el (DESIGN D19): tangent of every active cell, and
+    /// ε_bg · K_cell^el (theory D19): tangent of every active cell, and
     /// residual term of the GIMP-reached cells.
     pub background_block: [f64; 64],
     /// Which frictional nodes are held in stick for the rest of the solve
@@ -173,7 +173,7 @@ pub struct Residual {
     pub residual: Vec<[f64; 2]>,
     /// ‖R‖ over free dofs.
     pub norm: f64,
-    /// Reference force of DESIGN D18.
+    /// Reference force of theory D18.
     pub reference: f64,
 }
 
@@ -285,7 +285,7 @@ impl StepSystem<'_> {
     /// The free dofs' starting increment of Newton (`solver.predictor`): in a dynamic run
     /// by default the nodal motion at the start of the step carried on,
     /// Δu⁰ = Δt v_n + ½ Δt² a_n (a Taylor step, i.e. a_{n+1} = a_n); zero in a
-    /// quasi-static run or with `predictor = "zero"` (DESIGN D17).
+    /// quasi-static run or with `predictor = "zero"` (theory D17).
     pub fn predictor(&self) -> Vec<f64> {
         let mut free = vec![0.0; self.dofs.n_free];
         if self.newmark.is_none() || self.model.scene.solver.predictor == PredictorChoice::Zero {
@@ -424,7 +424,7 @@ impl StepSystem<'_> {
         field
     }
 
-    /// Residual R = f_ext + f_pen − f_int − M a (DESIGN D16), with the
+    /// Residual R = f_ext + f_pen − f_int − M a (theory D16), with the
     /// frictional edges' tangential forces (their stiffnesses into
     /// `friction`), and its norms (D18), into `res`.
     fn residual(
@@ -633,7 +633,7 @@ impl StepSystem<'_> {
         }
     }
 
-    /// DESIGN §3 motion limit (dynamic): no point may move more than half a
+    /// theory §3 motion limit (dynamic): no point may move more than half a
     /// cell in one step.
     fn check_motion(&self, du: &[[f64; 2]]) -> Result<(), NewtonFailure> {
         if self.newmark.is_none() {
@@ -854,7 +854,7 @@ impl Convergence {
     }
 }
 
-/// Newton–Raphson for one (sub-)step (DESIGN D17): from Δu⁰ (prescribed
+/// Newton–Raphson for one (sub-)step (theory D17): from Δu⁰ (prescribed
 /// nodal increments), assemble and factorise the tangent, solve for the
 /// correction, line-search it, until the D18 criteria hold; then check the
 /// motion limit. κ̄ is lagged one iteration (D36) through `nonlocal`. The

@@ -1,4 +1,4 @@
-//! Particle-to-grid stage pieces both integrators use (DESIGN D10–D11): the
+//! Particle-to-grid stage pieces both integrators use (theory D10–D11): the
 //! external nodal forces, and the implicit dynamic step's nodal mass, momentum
 //! and m a in one pass. The kernels themselves are in [`crate::transfer`].
 
@@ -11,7 +11,7 @@ use crate::model::Model;
 use crate::transfer::{self, NodalField, NODES_PER_TASK};
 
 /// f_i^ext at time `t`: body force Σ_p N_ip m_p b(t) (when gravity is on) plus
-/// the follower pressures of the traction points, per grid node (DESIGN D10).
+/// the follower pressures of the traction points, per grid node (theory D10).
 pub fn external_force(model: &Model, setup: &StepSetup, t: f64) -> Vec<[f64; 2]> {
     let grid = &model.grid;
     let p = &model.particles;

@@ -1,4 +1,4 @@
-//! The nonlocal variable within a step (DESIGN §6, D35–D36), shared by both
+//! The nonlocal variable within a step (theory §6, D35–D36), shared by both
 //! integrators: weights from the start-of-step positions and volumes, the
 //! strength variable κ̄ each Newton iteration sees, its convergence (third
 //! criterion of D18), and the value committed at the end of the step.
@@ -52,7 +52,7 @@ impl NonlocalStep {
     /// local one, which does no averaging): weights (D34) from the
     /// start-of-step configuration, timed as the nonlocal stage and counted
     /// as a neighbour list. κ̄ is updated per the scene's `nonlocal.update`
-    /// (D36), or once per step when `step_update` (explicit runs, DESIGN §4).
+    /// (D36), or once per step when `step_update` (explicit runs, theory §4).
     pub fn start(
         model: &Model,
         step_update: bool,

@@ -1,5 +1,5 @@
 //! Step setup, shared by both integrators and by the checks before a run:
-//! shape functions at the start-of-step positions (DESIGN §2), the particles
+//! shape functions at the start-of-step positions (theory §2), the particles
 //! binned by cell, and the shape functions of the boundary points (traction
 //! points, rigid bodies' contact points).
 

@@ -1,5 +1,5 @@
 //! The stress-update stage shared by both integrators: for each material
-//! point, Δε and ω from the nodal displacement increment (DESIGN D12), Jaumann
+//! point, Δε and ω from the nodal displacement increment (theory D12), Jaumann
 //! rotation of the stored stress (D13), and the constitutive update (§5).
 
 use rayon::prelude::*;

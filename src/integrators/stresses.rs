@@ -1,6 +1,6 @@
 //! The stresses stage, shared by both integrators: what a converged step's
 //! trial stresses become at the material points — the step's energies (M5),
-//! the nonlocal variable κ̄(n+1) (DESIGN D35) and the double-mapped stresses
+//! the nonlocal variable κ̄(n+1) (theory D35) and the double-mapped stresses
 //! (D37–D39).
 
 use rayon::prelude::*;
@@ -24,7 +24,7 @@ pub struct ConvergedStresses {
     pub state: Vec<PointState>,
     /// Work of the stresses on the step's strain increments, kJ/m.
     pub internal_work: f64,
-    /// Plastic dissipation of the step (DESIGN D43), kJ/m.
+    /// Plastic dissipation of the step (theory D43), kJ/m.
     pub dissipation: f64,
     /// Internal work of each point, kJ/m (buffer of [`step_energies`]).
     point_work: Vec<f64>,
@@ -119,7 +119,7 @@ fn converge(
     Ok(())
 }
 
-/// Double mapping of the step's stresses (DESIGN D37–D39), with the
+/// Double mapping of the step's stresses (theory D37–D39), with the
 /// force-restoring correction when the scene asks for it; returns whether
 /// the forces were restored.
 fn smooth(
@@ -174,7 +174,7 @@ fn smooth(
 ///   the change of Σ_p V_p(n) ½ σ_p·Cσ_p plus the dissipation, whence
 ///   W_int = stored elastic energy + D up to the change of the points'
 ///   volumes;
-/// - plastic dissipation (DESIGN D43 with σ(n+1), see
+/// - plastic dissipation (theory D43 with σ(n+1), see
 ///   [`crate::metrics::dissipation_increment`]) Σ_p V_p(n) · σ_p(n+1) · Δε^p_p
 ///   with Δε^p = Δε − C(σ(n+1) − σ^R(n)); elastic materials contribute
 ///   nothing, and a sum that is not finite is NaN.

@@ -1,4 +1,4 @@
-//! The implicit tangent (DESIGN D17, D19, D41): its sparsity pattern, built
+//! The implicit tangent (theory D17, D19, D41): its sparsity pattern, built
 //! once per step, the assembly of K_T (+ M/(βΔt²) when dynamic) from the
 //! cell blocks, and the sparse direct factorisation and solve (faer
 //! Cholesky or LU).
@@ -121,7 +121,7 @@ impl Tangent {
         }
     }
 
-    /// Assemble K_T (+ M/(βΔt²) when dynamic) at `trial` (DESIGN D17, D19,
+    /// Assemble K_T (+ M/(βΔt²) when dynamic) at `trial` (theory D17, D19,
     /// D41), counted in `profile` (the mass diagonal separately).
     pub fn assemble(
         &mut self,
@@ -366,7 +366,7 @@ impl StepSystem<'_> {
 }
 
 /// ε_bg times the 2×2-Gauss bilinear elastic stiffness of a full cell with the
-/// stiffest material's E and its ν (DESIGN D19), over the cell's nodes in
+/// stiffest material's E and its ν (theory D19), over the cell's nodes in
 /// row-major order (see `stiffness::system_blocks`).
 pub fn background_block(scene: &Scene, grid: &Grid) -> [f64; 64] {
     let mut block = [0.0; 64];

@@ -1,4 +1,4 @@
-//! The explicit stable time step (DESIGN D20, §4), the one place it is
+//! The explicit stable time step (theory D20, §4), the one place it is
 //! computed: before the run for a fixed `scene.dt`, and every step.
 
 use rayon::prelude::*;
@@ -17,7 +17,7 @@ pub struct StableTimeStep {
 }
 
 impl StableTimeStep {
-    /// Δt = min_p h / (c_p + |v_p|) (DESIGN D20). At nodes tied to driven
+    /// Δt = min_p h / (c_p + |v_p|) (theory D20). At nodes tied to driven
     /// points the penalty limit 2·sqrt(m_i/((1 + α_d) k_i)) combines with it as
     /// 1/Δt² = 1/Δt_wave² + 1/Δt_pen². `moving = false` gives the limit of the
     /// material at rest (the check before the run; the velocity term is
@@ -57,7 +57,7 @@ impl StableTimeStep {
         step
     }
 
-    /// The step taken: α_CFL times the limit (DESIGN D20).
+    /// The step taken: α_CFL times the limit (theory D20).
     pub fn with_cfl(&self, cfl: f64) -> f64 {
         cfl * self.limit
     }

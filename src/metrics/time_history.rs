@@ -1,4 +1,4 @@
-//! Metrics of time histories (the vertical cut, DESIGN §9 M6): collapse
+//! Metrics of time histories (the vertical cut, theory §9 M6): collapse
 //! onset, reversals of a stress history after its peak and the smoothness of
 //! its fall. Histories are `(t, value)` pairs with non-decreasing t.
 

@@ -384,7 +384,7 @@ fn nonlocal_weight_properties() {
         let total_exact = std::f64::consts::PI.powf(1.5) * ls / 2.0;
         assert!(((inner + tail) - total_exact).abs() <= 1e-12 * total_exact);
         // Closed form of the tail fraction: [3 e^{−9}/2 + (√π/4) erfc(3)] / (√π/4), with
-        // erfc(3) = 2.209049699858544e−5 (tabulated) = 4.3986e−4; DESIGN §6 says 4.4e−4.
+        // erfc(3) = 2.209049699858544e−5 (tabulated) = 4.3986e−4; theory §6 says 4.4e−4.
         let erfc3 = 2.209_049_699_858_544e-5;
         let sqpi4 = std::f64::consts::PI.sqrt() / 4.0;
         let frac_exact = (1.5 * (-9f64).exp() + sqpi4 * erfc3) / sqpi4;
@@ -398,7 +398,7 @@ fn nonlocal_weight_properties() {
             "tail fraction {frac:e}"
         );
     }
-    // DESIGN §6: "beyond 2.97 l_s the weight is below 1e−3 of its maximum". Numerically the
+    // theory §6: "beyond 2.97 l_s the weight is below 1e−3 of its maximum". Numerically the
     // crossing of w/w_max = 1e−3 is at u ≈ 2.9747 (w(2.97 l_s)/w_max = 1.022e−3), so the
     // statement holds from 2.975 l_s on: a rounding slip, no consequence for R_c = 3 l_s.
     let ratio = |u: f64| weight(u, 1.0) / weight(1.0 / 2f64.sqrt(), 1.0);
@@ -464,7 +464,7 @@ fn nonlocal_isolated_point_keeps_own_value() {
     let den = nl.denominators();
     assert_eq!(den[3], 0.0);
     assert_eq!(den[4], 0.0);
-    // MP 0 has w(0) = 0 on itself: its own value never enters its average ([D33], DESIGN §6).
+    // MP 0 has w(0) = 0 on itself: its own value never enters its average ([D33], theory §6).
     assert_eq!(out[0], 0.0);
     // MP 1: W_10 = w(0.05)·1 / (w(0.05)·1 + w(√2·0.05)·3).
     let ls = 0.1;

@@ -143,7 +143,7 @@ impl Scene {
         })
     }
 
-    /// A `[[bc.rigid]]` entry drives the top of its body (DESIGN D40–D41); a
+    /// A `[[bc.rigid]]` entry drives the top of its body (theory D40–D41); a
     /// fixed or prescribed line there that gives a component the body moves
     /// (velocity ≠ 0) another motion contradicts it. Refused naming both
     /// entries: a line along the top compared at both ends of the driven

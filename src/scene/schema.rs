@@ -59,34 +59,34 @@ pub struct LimitsSpec {
     pub max_steps: Option<u64>,
 }
 
-/// When the nonlocal variable is updated (DESIGN §6).
+/// When the nonlocal variable is updated (theory §6).
 #[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, Eq)]
 #[serde(rename_all = "snake_case")]
 pub enum NonlocalUpdate {
-    /// Every Newton iteration, lagged by one (DESIGN D36).
+    /// Every Newton iteration, lagged by one (theory D36).
     #[default]
     Iteration,
     /// Once per step after convergence (strength frozen at κ̄(n)); explicit runs always.
     Step,
 }
 
-/// `[nonlocal]`: averaging of the equivalent plastic strain (paper eq. 6, DESIGN §6).
+/// `[nonlocal]`: averaging of the equivalent plastic strain (paper eq. 6, theory §6).
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct NonlocalSpec {
     /// Length scale l_s, m (> cell size; ≥ 5 cells recommended, the paper's 0.2 l_s rule).
     pub length_scale: f64,
-    /// Cutoff radius in units of l_s (DESIGN: 3).
+    /// Cutoff radius in units of l_s (theory §6: 3).
     #[serde(default = "default_cutoff")]
     pub cutoff_factor: f64,
     /// `iteration` (default) or `step`.
     #[serde(default)]
     pub update: NonlocalUpdate,
-    /// ε_κ of DESIGN D18 (third criterion).
+    /// ε_κ of theory D18 (third criterion).
     #[serde(default = "default_kappa_tolerance")]
     pub tolerance: f64,
     /// Over-nonlocal factor m in [1, 3] (Vermeer & Brinkgreve 1994): κ̄ = κ̄(n) +
-    /// m Σ_q W_pq Δκ_q + (1 − m) Δκ_p. The default 1 is DESIGN D35.
+    /// m Σ_q W_pq Δκ_q + (1 − m) Δκ_p. The default 1 is theory D35.
     #[serde(default = "default_over_nonlocal")]
     pub over_nonlocal: f64,
     /// Memory for the weights cached within a step (D36), MiB (default 512;
@@ -127,7 +127,7 @@ fn default_kappa_tolerance() -> f64 {
 #[serde(deny_unknown_fields)]
 pub struct SmoothingSpec {
     /// `auto` (on for softening materials with bilinear cells), `off`,
-    /// `increment` or `total` (DESIGN §7).
+    /// `increment` or `total` (theory §7).
     #[serde(default)]
     pub double_mapping: DoubleMapping,
     /// Restore the internal forces of the unsmoothed stresses after smoothing
@@ -137,17 +137,17 @@ pub struct SmoothingSpec {
     pub restore_forces: bool,
 }
 
-/// `[smoothing] double_mapping`: which stress is smoothed (DESIGN §7).
+/// `[smoothing] double_mapping`: which stress is smoothed (theory §7).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum DoubleMapping {
     /// `Increment` with bilinear cells when a material can soften (the
-    /// paper's use), `Off` otherwise (GIMP: DESIGN decision 27).
+    /// paper's use), `Off` otherwise (GIMP: theory decision 27).
     #[default]
     Auto,
     /// No smoothing.
     Off,
-    /// Smooth the step's stress increment σ(n+1) − σ^R(n) (DESIGN D37–D38).
+    /// Smooth the step's stress increment σ(n+1) − σ^R(n) (theory D37–D38).
     Increment,
     /// Smooth the total stress σ(n+1).
     Total,
@@ -157,11 +157,11 @@ pub enum DoubleMapping {
 #[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq)]
 #[serde(rename_all = "snake_case")]
 pub enum AnalysisKind {
-    /// Implicit, no inertia (no mass matrix is built; DESIGN §3 quasi-static variant).
+    /// Implicit, no inertia (no mass matrix is built; theory §3 quasi-static variant).
     QuasiStatic,
-    /// Implicit Newmark trapezoidal rule (paper eq. 2, DESIGN D15–D17).
+    /// Implicit Newmark trapezoidal rule (paper eq. 2, theory D15–D17).
     ImplicitDynamic,
-    /// Explicit MUSL central difference (DESIGN §4).
+    /// Explicit MUSL central difference (theory §4).
     Explicit,
 }
 
@@ -221,10 +221,10 @@ pub struct GridSpec {
     /// Material points per cell and direction (1–4; the paper uses 2).
     #[serde(default = "default_points_per_cell")]
     pub points_per_cell: usize,
-    /// `gauss` (Gauss–Legendre positions, DESIGN §2) or `uniform` (sub-cell centres).
+    /// `gauss` (Gauss–Legendre positions, theory §2) or `uniform` (sub-cell centres).
     #[serde(default)]
     pub point_layout: PointLayout,
-    /// `bilinear` (DESIGN D9, the paper's) or `gimp` (uGIMP: shape functions
+    /// `bilinear` (theory D9, the paper's) or `gimp` (uGIMP: shape functions
     /// averaged over each point's square domain of side h/points_per_cell;
     /// needs `point_layout = "uniform"`).
     #[serde(default)]
@@ -243,7 +243,7 @@ pub struct GridSpec {
     pub volumetric: VolumetricTreatment,
     /// Largest volume a material point may take, in cell areas h² (× 1 m):
     /// V ← min(det(I + L) V, max_point_volume · h²) at every commit
-    /// (DESIGN D14 with a bound). Unset: unbounded. A point fully softened
+    /// (theory D14 with a bound). Unset: unbounded. A point fully softened
     /// to the apex of the yield surface carries no tension, so the grid can
     /// stretch it without limit (measured on the vertical cut at h = 0.1 m:
     /// J = V/V₀ up to 2.6·10⁶ by t = 1 s); such a point would dominate the
@@ -282,7 +282,7 @@ pub enum LostPointPolicy {
 #[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, Eq)]
 #[serde(rename_all = "snake_case")]
 pub enum ShapeFunctionChoice {
-    /// Bilinear shape functions of the holding cell (DESIGN D9).
+    /// Bilinear shape functions of the holding cell (theory D9).
     #[default]
     Bilinear,
     /// Generalised interpolation material point (uGIMP): no cell-crossing error.
@@ -297,7 +297,7 @@ fn default_points_per_cell() -> usize {
 #[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, Eq)]
 #[serde(rename_all = "snake_case")]
 pub enum PointLayout {
-    /// Gauss–Legendre positions with Gauss-weight volumes (DESIGN §2 choice 14).
+    /// Gauss–Legendre positions with Gauss-weight volumes (theory §2 choice 14).
     #[default]
     Gauss,
     /// Centres of n×n equal sub-cells.
@@ -371,7 +371,7 @@ pub enum PredictorChoice {
     /// iterations, the same curve to 4e-7).
     #[default]
     Motion,
-    /// Zero at the free dofs (DESIGN D17: only the prescribed increments).
+    /// Zero at the free dofs (theory D17: only the prescribed increments).
     Zero,
 }
 
@@ -399,17 +399,17 @@ pub enum PreconditionerChoice {
     IncompleteCholesky,
 }
 
-/// `[solver]`: Newton, linear solver and explicit settings (defaults of DESIGN §3–4).
+/// `[solver]`: Newton, linear solver and explicit settings (defaults of theory §3–4).
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct SolverSpec {
-    /// ε_R of DESIGN D18 (relative residual force).
+    /// ε_R of theory D18 (relative residual force).
     pub tolerance_force: f64,
-    /// ε_E of DESIGN D18 (relative energy norm).
+    /// ε_E of theory D18 (relative energy norm).
     pub tolerance_energy: f64,
-    /// Newton iteration limit per step (default 25 local, 60 nonlocal, DESIGN §3).
+    /// Newton iteration limit per step (default 25 local, 60 nonlocal, theory §3).
     pub max_iterations: Option<usize>,
-    /// Number of step halvings allowed when Newton fails (DESIGN §3: 4, i.e. 1/16).
+    /// Number of step halvings allowed when Newton fails (theory §3: 4, i.e. 1/16).
     pub max_halvings: usize,
     /// `auto`, `cholesky`, `lu`, `pcg` or `ldl`.
     pub linear_solver: LinearSolverChoice,
@@ -423,15 +423,15 @@ pub struct SolverSpec {
     pub pcg_tolerance: f64,
     /// PCG iteration limit (LU is used for a system that does not converge, recorded).
     pub pcg_max_iterations: usize,
-    /// ε_bg of DESIGN D19 (background stiffness added to the tangent only).
+    /// ε_bg of theory D19 (background stiffness added to the tangent only).
     pub background_stiffness: f64,
     /// Implicit dynamic: Newton's starting increment, `motion` or `zero`.
     pub predictor: PredictorChoice,
-    /// Penalty factor β_pen of DESIGN D41 (k_p = β_pen E); default 1e3 implicit, 10 explicit.
+    /// Penalty factor β_pen of theory D41 (k_p = β_pen E); default 1e3 implicit, 10 explicit.
     pub penalty_factor: Option<f64>,
-    /// Explicit: CFL factor α_CFL of DESIGN D20, in (0, 1].
+    /// Explicit: CFL factor α_CFL of theory D20, in (0, 1].
     pub cfl: f64,
-    /// Explicit: local (Cundall) damping α_d of DESIGN D21, in [0, 1).
+    /// Explicit: local (Cundall) damping α_d of theory D21, in [0, 1).
     pub damping: f64,
     /// Implicit dynamic: Newmark γ in [0.5, 1], with β = (γ + ½)²/4. Unset
     /// (and no `rho_infinity`): ½, the trapezoidal rule of paper eq. 2 (D15,
@@ -518,13 +518,13 @@ impl Default for SolverSpec {
 #[derive(Debug, Clone, Serialize, PartialEq)]
 #[serde(tag = "model", rename_all = "snake_case")]
 pub enum MaterialSpec {
-    /// Isotropic linear elasticity (DESIGN D22).
+    /// Isotropic linear elasticity (theory D22).
     LinearElastic(ElasticSpec),
-    /// Hyperbolic Mohr–Coulomb with exponential softening (paper eq. 3–5, DESIGN §5),
+    /// Hyperbolic Mohr–Coulomb with exponential softening (paper eq. 3–5, theory §5),
     /// keys named as in the paper's Table 1.
     Hmc(crate::constitutive::hmc::HmcParameters),
     /// Von Mises elastic–perfectly plastic with undrained strength `c` (yield when
-    /// √J₂ > c; Tresca's limit loads in plane strain, DESIGN §8.4).
+    /// √J₂ > c; Tresca's limit loads in plane strain, theory §8.4).
     VonMises(VonMisesSpec),
 }
 
@@ -625,7 +625,7 @@ pub enum VelocityProfile {
     /// v = `velocity0` everywhere.
     #[default]
     Uniform,
-    /// v = `velocity0` · sin(π (y − y_min) / (2 H)), H the body height (the bar's first mode, DESIGN §8.4).
+    /// v = `velocity0` · sin(π (y − y_min) / (2 H)), H the body height (the bar's first mode, theory §8.4).
     QuarterSineY,
 }
 
@@ -855,7 +855,7 @@ pub enum Side {
 }
 
 /// `[[bc.pressure]]`: a follower pressure on a side of a rectangular body, or
-/// on edges of a polygon body (DESIGN §8.0 traction points).
+/// on edges of a polygon body (theory §8.0 traction points).
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct PressureSpec {
@@ -887,7 +887,7 @@ pub struct FrictionSpec {
 }
 
 /// `[[bc.rigid]]`: a rigid, perfectly rough platen or footing driving the top
-/// material points of a body (DESIGN D40–D41).
+/// material points of a body (theory D40–D41).
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct RigidSpec {
@@ -906,17 +906,17 @@ pub struct RigidSpec {
     #[serde(default, skip_serializing_if = "is_zero")]
     pub ramp_time: f64,
     /// Where the body is tied to the soil: `top_points` (the top row of
-    /// material points, DESIGN §8.0) or `surface` (points on the soil surface).
+    /// material points, theory §8.0) or `surface` (points on the soil surface).
     #[serde(default)]
     pub contact: ContactKind,
 }
 
-/// Where a rigid body's penalty springs hold the soil (DESIGN D40–D41).
+/// Where a rigid body's penalty springs hold the soil (theory D40–D41).
 #[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, Eq)]
 #[serde(rename_all = "snake_case")]
 pub enum ContactKind {
     /// The material points of the body's top point row inside the footprint
-    /// (DESIGN §8.0). The soil between that row and the surface moves with the
+    /// (theory §8.0). The soil between that row and the surface moves with the
     /// rigid body, which stiffens the response by O(h).
     #[default]
     TopPoints,
@@ -1003,7 +1003,7 @@ pub enum MonitorKind {
     NeighbourhoodStress,
     /// Reaction force on the constrained nodes of grid line `line` (kN/m).
     Reaction,
-    /// Force exerted by rigid body `rigid` on the soil (kN/m, DESIGN D40).
+    /// Force exerted by rigid body `rigid` on the soil (kN/m, theory D40).
     RigidForce,
     /// Mean displacement of the points tied to rigid body `rigid` (m): the
     /// displacement of the contact surface for `contact = "surface"`.
@@ -1020,7 +1020,7 @@ pub enum MonitorKind {
     InternalWork,
     /// Maximum equivalent plastic strain over all material points.
     MaxPlasticStrain,
-    /// Accumulated plastic dissipation (DESIGN D43, M5), kJ/m.
+    /// Accumulated plastic dissipation (theory D43, M5), kJ/m.
     DissipatedEnergy,
     /// Kinetic energy removed at the fixed dofs so far, kJ/m
     /// (`crate::integrators::boundary_work` B1).
@@ -1031,7 +1031,7 @@ pub enum MonitorKind {
     /// Current gravity, m/s².
     Gravity,
     /// Run-out front x_front = max_p x_p, m: the largest horizontal extent of
-    /// the material (DESIGN §8.3).
+    /// the material (theory §8.3).
     RunOut,
 }
 
@@ -1059,9 +1059,9 @@ pub enum StressQuantity {
     Szz,
     /// σxy, kPa.
     Sxy,
-    /// Mean stress p (compression positive, DESIGN D1), kPa.
+    /// Mean stress p (compression positive, theory D1), kPa.
     P,
-    /// Deviatoric stress q (paper eq. 7, DESIGN D5), kPa.
+    /// Deviatoric stress q (paper eq. 7, theory D5), kPa.
     Q,
     /// Equivalent plastic strain κ (local).
     Kappa,

@@ -154,7 +154,7 @@ impl Scene {
                 "nonlocal.over_nonlocal",
                 (1.0..=3.0).contains(&nl.over_nonlocal),
                 format!(
-                    "must lie in [1, 3] (got {}; 1 is the plain nonlocal model of DESIGN D35)",
+                    "must lie in [1, 3] (got {}; 1 is the plain nonlocal model of theory D35)",
                     nl.over_nonlocal
                 ),
             );
@@ -579,14 +579,14 @@ impl Scene {
                         e,
                         "scene.dt",
                         dt <= limit,
-                        format!("{dt} s exceeds the explicit stability limit h/c_p = {limit:.4e} s (DESIGN D20)"),
+                        format!("{dt} s exceeds the explicit stability limit h/c_p = {limit:.4e} s (theory D20)"),
                     );
                 }
             }
         }
     }
 
-    /// Smallest h / c_p over the materials in use (DESIGN D20 with α = 1, v = 0).
+    /// Smallest h / c_p over the materials in use (theory D20 with α = 1, v = 0).
     pub fn critical_time_step(&self) -> Option<f64> {
         self.materials
             .values()

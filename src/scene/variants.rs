@@ -12,18 +12,18 @@ use super::{
 pub enum Formulation {
     /// The scenes as written: uGIMP, 2 × 2 points on sub-cell centres,
     /// over-nonlocal m as written (1.1 in the benchmarks), no double mapping
-    /// (DESIGN §11 rows 23–29); B-bar where a scene asks for it.
+    /// (theory §11 rows 23–29); B-bar where a scene asks for it.
     #[default]
     AsWritten,
     /// The paper's literal method: bilinear cells, 2 × 2 Gauss points, m = 1
-    /// (DESIGN D35), double mapping of the stress increment (DESIGN §7) and
+    /// (theory D35), double mapping of the stress increment (theory §7) and
     /// the standard volumetric strain (no B-bar: the paper accepts locking,
-    /// DESIGN §2).
+    /// theory §2).
     Paper,
 }
 
 impl Scene {
-    /// The same problem integrated by explicit MUSL (DESIGN §4) to the same end
+    /// The same problem integrated by explicit MUSL (theory §4) to the same end
     /// time: an implicit dynamic scene of `steps` × `dt` becomes an explicit
     /// scene ending at `steps · dt` with the stable step of `[solver] cfl`.
     /// Monitors, loads, snapshots at times and everything else are kept;
@@ -74,7 +74,7 @@ impl Scene {
                 nonlocal.over_nonlocal = 1.0;
             }
             scene.smoothing.double_mapping = DoubleMapping::Increment;
-            // the paper accepts volumetric locking (DESIGN §2): standard B
+            // the paper accepts volumetric locking (theory §2): standard B
             scene.grid.volumetric = VolumetricTreatment::Standard;
         }
         scene.checked()

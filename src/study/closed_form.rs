@@ -14,7 +14,7 @@ use crate::scene::{
 #[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
 #[serde(rename_all = "snake_case")]
 pub enum ClosedFormName {
-    /// First mode of a fixed–free elastic bar (DESIGN §8.4).
+    /// First mode of a fixed–free elastic bar (theory §8.4).
     BarVibration,
     /// Large-strain settlement of an elastic column under its own (ramped)
     /// weight, quasi-static (`validation/elastic/soft_column.toml`).
@@ -22,7 +22,7 @@ pub enum ClosedFormName {
 }
 
 /// Parameters of the bar closed form: u_top(t) = (v0/ω) sin ωt, ω = π c / (2H),
-/// period T = 4H/c (initial velocity v0 sin(π y / 2H), DESIGN §8.4).
+/// period T = 4H/c (initial velocity v0 sin(π y / 2H), theory §8.4).
 #[derive(Clone, Copy, Debug, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct BarVibration {

@@ -523,7 +523,7 @@ fn consistent_tangent_matches_finite_differences() {
     assert!(plastic_cases >= 20, "only {plastic_cases} plastic cases");
 }
 
-/// DESIGN's alternative: second derivatives by central differences of the analytic m
+/// The theory's first proposal (§5.6): second derivatives by central differences of the analytic m
 /// (η = 1e−6 max(‖σ‖∞, c_ref)) and of f, m, h in κ (η_κ = 1e−7 max(κ, 1e−4)).
 fn linearise_fd(m: &Hmc, stress: &Voigt, kappa: f64) -> ([[f64; 4]; 4], Voigt, f64) {
     let eta = 1e-6
@@ -552,7 +552,7 @@ fn linearise_fd(m: &Hmc, stress: &Voigt, kappa: f64) -> ([[f64; 4]; 4], Voigt, f
     (m_sigma, m_kappa, f_kappa)
 }
 
-/// The exact dual-number second derivatives agree with DESIGN's central differences to 1e-5
+/// The exact dual-number second derivatives agree with the central differences of theory §5.6 to 1e-5
 /// (relative to the largest entry) at several states; also prints the cost of both.
 #[test]
 fn dual_second_derivatives_match_central_differences() {
@@ -748,7 +748,7 @@ fn elastic_branch_is_exact() {
     ));
 }
 
-/// DESIGN D39: a stress outside the surface is returned onto it (|f| ≤ 1e−9 of
+/// theory D39: a stress outside the surface is returned onto it (|f| ≤ 1e−9 of
 /// the strength scale) with its mean stress and Lode angle unchanged; a stress
 /// inside is untouched; beyond the apex it goes to the tip.
 #[test]
@@ -781,7 +781,7 @@ fn projection_after_double_mapping_keeps_p_and_theta() {
 
 /// A large tensile increment in a softened local point (a state met in the fragmenting band of
 /// `validation/biaxial/local_h500.toml`): from the trial state the Newton iteration creeps
-/// towards the apex and exhausts its iterations (DESIGN §5.6 then sub-steps); with the
+/// towards the apex and exhausts its iterations (theory §5.6 then sub-steps); with the
 /// `apex_start` option, started at the apex ([`Hmc::apex_start`]), it converges in the one
 /// step, to a closest-point projection (D29 holds at the result) whose consistent tangent
 /// matches finite differences.
@@ -819,7 +819,7 @@ fn apex_start_rescues_a_creeping_return() {
         .plastic_step(&trial, kappa_n, arg, tolerance, start)
         .is_ok());
 
-    // DESIGN §5.6 as written sub-steps this update; with the option it takes one step
+    // theory §5.6 as written sub-steps this update; with the option it takes one step
     let (_, substeps) = as_written
         .update_with_substeps(&stress_n, &increment, &state_n, StrengthVariable::Local)
         .expect("converges");

@@ -156,7 +156,7 @@ fn elastic_below_yield() {
 
 /// Test 2 — a plastic update lands on the surface (√J₂ = c to 1e−10 relative), keeps the mean
 /// stress (1e−12 relative to max(|σm|, c)), and its plastic strain increment is isochoric
-/// (|tr Δε^p| ≤ 1e−12 ‖Δε^p‖ε); κ grows by ‖Δε^p‖ε (DESIGN D27).
+/// (|tr Δε^p| ≤ 1e−12 ‖Δε^p‖ε); κ grows by ‖Δε^p‖ε (theory D27).
 #[test]
 fn plastic_return_is_radial_and_isochoric() {
     let model = model(0.3);
@@ -289,7 +289,7 @@ fn tangent_is_symmetric() {
 
 /// Test 5 — Tresca equivalence in plane strain. Simple shear (Δε = (0, 0, 0, Δγ)) from zero stress:
 /// σxy levels off at c (1e−8 relative) for any ν, the normal stresses stay 0, and κ grows by
-/// |Δγ^p|/√2 per plastic step (DESIGN D27). Pure shear (Δε = (δ, −δ, 0, 0), Δεzz = 0) from a
+/// |Δγ^p|/√2 per plastic step (theory D27). Pure shear (Δε = (δ, −δ, 0, 0), Δεzz = 0) from a
 /// stress with σzz away from the in-plane mean: the flow drives σzz to (σxx + σyy)/2, so the
 /// in-plane Tresca radius √(((σxx − σyy)/2)² + σxy²) levels off at c (1e−8 relative).
 #[test]
@@ -351,7 +351,7 @@ fn plane_strain_shear_reaches_tresca_strength() {
 }
 
 /// project_to_surface scales the deviator of an outside stress to √J₂ = c at fixed mean stress and
-/// leaves an inside stress alone (DESIGN D39).
+/// leaves an inside stress alone (theory D39).
 #[test]
 fn projection_scales_the_deviator() {
     let model = model(0.3);
