@@ -10,9 +10,9 @@ mod common;
 
 const BIN: &str = env!("CARGO_BIN_EXE_mpm-geo");
 
-/// Run the tossed block quietly for 30 steps with `extra` arguments;
-/// returns the output folder (kept alive) and its `run.json`.
-fn run(extra: &[&str]) -> (tempfile::TempDir, serde_json::Value) {
+/// Run the tossed block for 30 steps with `extra` arguments; returns the
+/// output folder (kept alive: `out` in it) and the process's output.
+fn run(extra: &[&str]) -> (tempfile::TempDir, std::process::Output) {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("out");
     let scene = common::validation("friction/tossed_block.toml");
@@ -23,14 +23,12 @@ fn run(extra: &[&str]) -> (tempfile::TempDir, serde_json::Value) {
             "--out",
             out.to_str().unwrap(),
         ])
-        .args(["--set", "scene.steps=30", "--quiet"])
+        .args(["--set", "scene.steps=30"])
         .args(extra)
         .output()
         .unwrap();
     assert!(output.status.success(), "{output:?}");
-    let json =
-        serde_json::from_str(&std::fs::read_to_string(out.join("run.json")).unwrap()).unwrap();
-    (dir, json)
+    (dir, output)
 }
 
 fn is_utc_second(s: &serde_json::Value) -> bool {
@@ -40,7 +38,9 @@ fn is_utc_second(s: &serde_json::Value) -> bool {
 
 #[test]
 fn run_json_holds_provenance_and_summary() {
-    let (dir, json) = run(&["--set", "loads.gravity=9.0"]);
+    let (dir, _) = run(&["--quiet", "--set", "loads.gravity=9.0"]);
+    let run_json = std::fs::read_to_string(dir.path().join("out/run.json")).unwrap();
+    let json: serde_json::Value = serde_json::from_str(&run_json).unwrap();
     let p = &json["provenance"];
     let command: Vec<&str> = p["command_line"]
         .as_array()
@@ -115,26 +115,10 @@ fn run_json_holds_provenance_and_summary() {
 #[test]
 fn run_prints_its_summary_and_the_profile_on_demand() {
     let plain = |extra: &[&str]| {
-        let mut args = vec!["--progress-every", "100"];
-        args.extend_from_slice(extra);
-        let dir = tempfile::tempdir().unwrap();
-        let out = dir.path().join("out");
-        let scene = common::validation("friction/tossed_block.toml");
-        let output = Command::new(BIN)
-            .args([
-                "run",
-                scene.to_str().unwrap(),
-                "--out",
-                out.to_str().unwrap(),
-            ])
-            .args(["--set", "scene.steps=30"])
-            .args(&args)
-            .output()
-            .unwrap();
-        assert!(output.status.success());
+        let (_dir, output) = run(extra);
         String::from_utf8_lossy(&output.stderr).into_owned()
     };
-    let summary = plain(&[]);
+    let summary = plain(&["--progress-every", "100"]);
     assert!(summary.contains("30 steps to t = "), "{summary}");
     assert!(
         summary.contains("kinetic_energy") && summary.contains("peak"),

@@ -73,24 +73,6 @@ fn wait(child: &mut Child, limit: Duration) -> std::process::ExitStatus {
     }
 }
 
-/// Wait until `curve.csv` of `dir` has more than `rows` lines.
-fn wait_for_rows(dir: &Path, rows: usize, child: &mut Child) {
-    let start = Instant::now();
-    loop {
-        let n = std::fs::read_to_string(dir.join("curve.csv"))
-            .map(|t| t.lines().count())
-            .unwrap_or(0);
-        if n > rows {
-            return;
-        }
-        if let Some(status) = child.try_wait().unwrap() {
-            panic!("ended early: {status}");
-        }
-        assert!(start.elapsed() < Duration::from_secs(60), "no rows");
-        std::thread::sleep(Duration::from_millis(5));
-    }
-}
-
 fn send(child: &Child, signal: i32) {
     let pid = libc::pid_t::try_from(child.id()).unwrap();
     // SAFETY: sends a signal to our own child process.
@@ -157,7 +139,7 @@ fn a_second_campaign_records_nothing_and_a_killed_run_is_run_again() {
     ];
     let run = out.join("bar");
     let mut first = spawn(&args, &tmp.path().join("a.log"));
-    wait_for_rows(&run, 20, &mut first);
+    common::wait_for_rows(&run, 20, &mut first);
 
     let second = mpm_geo(&args);
     let stderr = String::from_utf8_lossy(&second.stderr);
@@ -486,7 +468,7 @@ fn a_signal_to_a_campaign_interrupts_its_runs_and_releases_their_locks() {
             &log,
         );
         for run in ["bar_a", "bar_b"] {
-            wait_for_rows(&out.join(run), 5, &mut campaign);
+            common::wait_for_rows(&out.join(run), 5, &mut campaign);
         }
         send(&campaign, signal);
         let exit = wait(&mut campaign, Duration::from_secs(60));

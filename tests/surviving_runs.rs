@@ -149,24 +149,6 @@ fn send(child: &Child, signal: i32) {
     assert_eq!(unsafe { libc::kill(pid, signal) }, 0);
 }
 
-/// Wait until `curve.csv` of `out` has more than `rows` lines.
-fn wait_for_rows(out: &Path, rows: usize, child: &mut Child) {
-    let start = Instant::now();
-    loop {
-        let n = std::fs::read_to_string(out.join("curve.csv"))
-            .map(|t| t.lines().count())
-            .unwrap_or(0);
-        if n > rows {
-            return;
-        }
-        if let Some(status) = child.try_wait().unwrap() {
-            panic!("run ended early: {status}");
-        }
-        assert!(start.elapsed() < Duration::from_secs(60), "no rows");
-        std::thread::sleep(Duration::from_millis(5));
-    }
-}
-
 #[test]
 fn a_signal_ends_the_run_after_a_whole_step_and_a_second_run_is_refused() {
     let tmp = tempfile::tempdir().unwrap();
@@ -185,7 +167,7 @@ fn a_signal_ends_the_run_after_a_whole_step_and_a_second_run_is_refused() {
         .collect();
     for ((signal, name, code), (child, out)) in cases.iter().zip(&mut children) {
         // past the first snapshots: the run is in its time loop
-        wait_for_rows(out, 450, child);
+        common::wait_for_rows(out, 450, child);
         let running = json(&out.join("run.json"));
         assert_eq!(running["status"], "running", "{running}");
 
@@ -459,7 +441,7 @@ fn a_killed_run_leaves_no_cut_snapshot_and_overwrite_clears_its_leftovers() {
         "output.snapshot_every=1",
     ];
     let mut child = spawn_run(&scene, &out, &args, &tmp.path().join("log"));
-    wait_for_rows(&out, 40, &mut child);
+    common::wait_for_rows(&out, 40, &mut child);
     send(&child, libc::SIGKILL);
     wait(&mut child, Duration::from_secs(60));
     let mut names: Vec<String> = std::fs::read_dir(&out)

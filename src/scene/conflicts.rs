@@ -22,26 +22,26 @@ struct DrivenTop {
 /// A fixed or prescribed condition on one displacement component of a grid
 /// line: u = D(t) (rate + gradient · x), D of its start ramp (a fixed entry
 /// has rate 0 and no gradient).
-struct LineCondition {
+pub(super) struct LineCondition {
     /// The entry, e.g. `bc.fixed[2]`.
-    field: String,
+    pub(super) field: String,
     /// The line as written, e.g. `y=0.2`.
-    text: String,
+    pub(super) text: String,
     /// The parsed line.
-    line: GridLine,
+    pub(super) line: GridLine,
     /// The component held or driven.
-    component: Component,
+    pub(super) component: Component,
     /// Rate at the origin, m per unit time.
-    rate: f64,
+    pub(super) rate: f64,
     /// Spatial gradient of the rate, 1 per unit time.
-    gradient: [f64; 2],
+    pub(super) gradient: [f64; 2],
     /// Start ramp time (0 for a fixed entry).
-    ramp_time: f64,
+    pub(super) ramp_time: f64,
 }
 
 impl LineCondition {
     /// The rate the condition gives the node at `x`, m per unit time.
-    fn rate_at(&self, x: [f64; 2]) -> f64 {
+    pub(super) fn rate_at(&self, x: [f64; 2]) -> f64 {
         self.rate + self.gradient[0] * x[0] + self.gradient[1] * x[1]
     }
 
@@ -82,7 +82,7 @@ fn rates_differ(a: f64, ramp_a: f64, b: f64, ramp_b: f64) -> bool {
 impl Scene {
     /// Every fixed and prescribed entry, one per line and component (lines
     /// that do not parse are reported by the line checks).
-    fn line_conditions(&self) -> Vec<LineCondition> {
+    pub(super) fn line_conditions(&self) -> Vec<LineCondition> {
         let mut conditions = Vec::new();
         for (i, f) in self.bc.fixed.iter().enumerate() {
             let Ok(line) = GridLine::parse(&f.line) else {

@@ -1105,23 +1105,6 @@ fn check_ramp_time(e: &mut Vec<FieldError>, field: String, ramp_time: f64) {
     );
 }
 
-/// One Dirichlet entry on one displacement component: u = D(t) (rate + g · x)
-/// on a grid line, D of its start ramp (a fixed entry has rate = 0, g = 0).
-struct DofEntry {
-    field: String,
-    line: GridLine,
-    component: Component,
-    rate: f64,
-    gradient: [f64; 2],
-    ramp_time: f64,
-}
-
-impl DofEntry {
-    fn value_at(&self, x: [f64; 2]) -> f64 {
-        self.rate + self.gradient[0] * x[0] + self.gradient[1] * x[1]
-    }
-}
-
 impl Scene {
     /// Every material's wave speed c_p = sqrt((K + 4G/3)/ρ) must be a positive
     /// finite number (it sets the explicit step and the dynamic mass term):
@@ -1171,35 +1154,7 @@ impl Scene {
     /// both: on a shared line compared at both ends, on crossing lines at
     /// their node.
     fn validate_dof_conflicts(&self, e: &mut Vec<FieldError>) {
-        let mut entries = Vec::new();
-        for (i, f) in self.bc.fixed.iter().enumerate() {
-            let Ok(line) = GridLine::parse(&f.line) else {
-                continue;
-            };
-            for &component in &f.dofs {
-                entries.push(DofEntry {
-                    field: format!("bc.fixed[{i}]"),
-                    line,
-                    component,
-                    rate: 0.0,
-                    gradient: [0.0; 2],
-                    ramp_time: 0.0,
-                });
-            }
-        }
-        for (i, p) in self.bc.prescribed.iter().enumerate() {
-            let Ok(line) = GridLine::parse(&p.line) else {
-                continue;
-            };
-            entries.push(DofEntry {
-                field: format!("bc.prescribed[{i}]"),
-                line,
-                component: p.dof,
-                rate: p.rate,
-                gradient: p.gradient,
-                ramp_time: p.ramp_time,
-            });
-        }
+        let entries = self.line_conditions();
         let lo = self.grid.origin;
         let hi = [lo[0] + self.grid.size[0], lo[1] + self.grid.size[1]];
         let tol = 1e-9 * self.grid.cell_size;
@@ -1229,7 +1184,7 @@ impl Scene {
                     vec![node]
                 };
                 let conflict = shared.iter().find(|x| {
-                    let (va, vb) = (a.value_at(**x), b.value_at(**x));
+                    let (va, vb) = (a.rate_at(**x), b.rate_at(**x));
                     let moving = va != 0.0 || vb != 0.0;
                     (va - vb).abs() > 1e-9 * (va.abs() + vb.abs())
                         || !(va - vb).is_finite()
@@ -1251,8 +1206,8 @@ impl Scene {
                             a.field,
                             x[0],
                             x[1],
-                            a.value_at(*x),
-                            b.value_at(*x),
+                            a.rate_at(*x),
+                            b.rate_at(*x),
                             a.ramp_time,
                             b.ramp_time
                         ),

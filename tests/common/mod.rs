@@ -3,7 +3,9 @@
 
 #![allow(dead_code)]
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
+use std::process::Child;
+use std::time::{Duration, Instant};
 
 use mpm_geo::scene::Scene;
 use mpm_geo::simulation::Simulation;
@@ -42,4 +44,24 @@ pub fn column(sim: &Simulation, name: &str) -> usize {
         .iter()
         .position(|m| m.name == name)
         .unwrap_or_else(|| panic!("no monitor {name}"))
+}
+
+/// Wait until `curve.csv` of the run folder `dir` has more than `rows`
+/// lines, while `child` (the process writing it) runs; panics if it ends
+/// first or after a minute without them.
+pub fn wait_for_rows(dir: &Path, rows: usize, child: &mut Child) {
+    let start = Instant::now();
+    loop {
+        let n = std::fs::read_to_string(dir.join("curve.csv"))
+            .map(|t| t.lines().count())
+            .unwrap_or(0);
+        if n > rows {
+            return;
+        }
+        if let Some(status) = child.try_wait().unwrap() {
+            panic!("ended early: {status}");
+        }
+        assert!(start.elapsed() < Duration::from_secs(60), "no rows");
+        std::thread::sleep(Duration::from_millis(5));
+    }
 }
