@@ -1,7 +1,9 @@
 //! Plain progress lines of a run whose stderr is not a terminal (a pipe, a
 //! log file, a batch job), where the progress bar draws nothing: one line
 //! every few seconds with the step, the time reached, the first monitor,
-//! Newton's work and an estimate of the time left.
+//! Newton's work and an estimate of the time left. And the lines of a batch
+//! of runs (`campaign`, `study`): a start line, one line per run started and
+//! finished, with an estimate of the time left ([`BatchProgress`]).
 
 use std::time::{Duration, Instant};
 
@@ -95,6 +97,75 @@ fn share_done(sim: &Simulation) -> f64 {
     }
 }
 
+/// The progress of a batch of runs (a campaign's, a study's), printed to
+/// stderr whatever stderr is: the runs take minutes to hours, so a line per
+/// run is never too many. The time left is estimated from the relative cost
+/// of the runs (points × steps, or the caller's measure): the wall time so
+/// far times the cost left over the cost done.
+#[derive(Debug)]
+pub struct BatchProgress {
+    label: &'static str,
+    total: usize,
+    total_cost: f64,
+    done: usize,
+    done_cost: f64,
+    start: Instant,
+}
+
+impl BatchProgress {
+    /// Announce a batch of runs whose relative costs are `costs` (the runs
+    /// to do; `earlier` more were done before and are not run again), with
+    /// `jobs` at a time.
+    pub fn start(label: &'static str, costs: &[f64], earlier: usize, jobs: usize) -> Self {
+        let again = if earlier > 0 {
+            format!(" ({earlier} finished earlier)")
+        } else {
+            String::new()
+        };
+        eprintln!(
+            "{label}: {} runs to do{again}, {jobs} at a time",
+            costs.len()
+        );
+        Self {
+            label,
+            total: costs.len(),
+            total_cost: costs.iter().sum(),
+            done: 0,
+            done_cost: 0.0,
+            start: Instant::now(),
+        }
+    }
+
+    /// A run starts.
+    pub fn started(&self, name: &str) {
+        eprintln!("{}: {name} started", self.label);
+    }
+
+    /// A run of relative cost `cost` ended: the count and the estimate, to
+    /// follow the line that says how it ended.
+    pub fn finished(&mut self, cost: f64) -> String {
+        self.done += 1;
+        self.done_cost += cost;
+        let left = match self.estimate_left(self.start.elapsed().as_secs_f64()) {
+            Some(seconds) if self.done < self.total => {
+                format!(", about {} left (estimate)", clock(seconds))
+            }
+            _ => String::new(),
+        };
+        format!(
+            "{}: {} of {} runs done{left}",
+            self.label, self.done, self.total
+        )
+    }
+
+    /// The time left after `elapsed` seconds, s (`None` before any cost is
+    /// done).
+    fn estimate_left(&self, elapsed: f64) -> Option<f64> {
+        (self.done_cost > 0.0)
+            .then(|| elapsed * (self.total_cost - self.done_cost).max(0.0) / self.done_cost)
+    }
+}
+
 /// `seconds` as 1h02m, 3m05s or 12s.
 fn clock(seconds: f64) -> String {
     let s = seconds.round() as u64;
@@ -114,5 +185,17 @@ mod tests {
         assert_eq!(clock(12.4), "12s");
         assert_eq!(clock(185.0), "3m05s");
         assert_eq!(clock(3725.0), "1h02m");
+    }
+
+    /// A quarter of the cost done in 60 s leaves 180 s; nothing is
+    /// estimated before any cost is done.
+    #[test]
+    fn batch_estimate_scales_the_time_by_the_cost_left() {
+        let mut batch = BatchProgress::start("test", &[1.0, 3.0], 0, 1);
+        assert_eq!(batch.estimate_left(60.0), None);
+        let line = batch.finished(1.0);
+        assert!(line.starts_with("test: 1 of 2 runs done"), "{line}");
+        assert_eq!(batch.estimate_left(60.0), Some(180.0));
+        assert!(!batch.finished(3.0).contains("left"));
     }
 }

@@ -229,7 +229,17 @@ fn sharded_campaign_collects_to_the_same_report_and_a_rerun_runs_nothing() {
             .unwrap()
     };
     let single = dir.path().join("single");
-    assert!(campaign(&single, &[]).status.success());
+    let first = campaign(&single, &[]);
+    assert!(first.status.success());
+    // progress: a start line, each run started and counted with the time left
+    let stderr = String::from_utf8_lossy(&first.stderr);
+    assert!(
+        stderr.contains("campaign: 3 runs to do, 1 at a time"),
+        "{stderr}"
+    );
+    assert_eq!(stderr.matches(" started\n").count(), 3, "{stderr}");
+    assert!(stderr.contains("1 of 3 runs done, about "), "{stderr}");
+    assert!(stderr.contains("3 of 3 runs done\n"), "{stderr}");
     let sharded = dir.path().join("sharded");
     for k in 1..=3 {
         let shard = format!("{k}/3");
@@ -269,6 +279,10 @@ fn sharded_campaign_collects_to_the_same_report_and_a_rerun_runs_nothing() {
     assert!(rerun.status.success());
     let stderr = String::from_utf8_lossy(&rerun.stderr);
     assert_eq!(stderr.matches("not run again").count(), 3, "{stderr}");
+    assert!(
+        stderr.contains("0 runs to do (3 finished earlier)"),
+        "{stderr}"
+    );
     let after: Vec<_> = runs.iter().map(|r| modified(r)).collect();
     assert_eq!(before, after);
     assert_eq!(

@@ -1,6 +1,7 @@
 //! Running a campaign: finding the scenes, running them `jobs` at a time into
 //! `out/<scene>/`, and the time-step refinement of each scene.
 
+use crate::progress_lines::BatchProgress;
 use crate::provenance::Provenance;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
@@ -132,6 +133,16 @@ pub fn run_campaign(
         .filter(|&i| selected[i] && records[i].is_none())
         .collect();
     queue.sort_by(|&a, &b| costs[a].total_cmp(&costs[b]));
+    let earlier = (0..all.len())
+        .filter(|&i| selected[i] && records[i].is_some())
+        .count();
+    let queued_costs: Vec<f64> = queue.iter().map(|&i| costs[i]).collect();
+    let progress = Mutex::new(BatchProgress::start(
+        "campaign",
+        &queued_costs,
+        earlier,
+        options.jobs.max(1).min(queue.len().max(1)),
+    ));
     let queue = Mutex::new(queue);
     let results = Mutex::new(Vec::new());
     let run_queued = || loop {
@@ -144,8 +155,14 @@ pub fn run_campaign(
             break;
         };
         let planned = &all[index];
+        if let Ok(p) = progress.lock() {
+            p.started(&planned.name);
+        }
         let executed = execute(planned, &out.join(&planned.name), options.checkpoint_every);
         say(&planned.name, &executed);
+        if let Ok(mut p) = progress.lock() {
+            eprintln!("{}", p.finished(costs[index]));
+        }
         if let Ok(mut r) = results.lock() {
             r.push((index, executed));
         }

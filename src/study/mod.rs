@@ -30,6 +30,7 @@ mod report;
 mod spec;
 
 use crate::campaign::Part;
+use crate::progress_lines::BatchProgress;
 use crate::scene::Scene;
 use std::path::{Path, PathBuf};
 
@@ -166,11 +167,28 @@ pub fn run_spec(
     };
     let costs: Vec<f64> = all.iter().map(|p| execute::cost(&p.scene)).collect();
     let selected = options.part.selects(&costs);
+    let earlier: Vec<Option<Measured>> = all
+        .iter()
+        .enumerate()
+        .map(|(i, planned)| {
+            let dir = execute::run_dir(out, planned);
+            execute::load_measured(&dir, &execute::fingerprint(planned, repeats_of(i), timeout))
+        })
+        .collect();
+    let to_do: Vec<f64> = (0..all.len())
+        .filter(|&i| selected[i] && all[i].refused.is_none() && earlier[i].is_none())
+        .map(|i| costs[i] * repeats_of(i) as f64)
+        .collect();
+    let done_before = (0..all.len())
+        .filter(|&i| selected[i] && earlier[i].is_some())
+        .count();
+    let mut progress = options
+        .verbose
+        .then(|| BatchProgress::start("study", &to_do, done_before, 1));
     let mut measurements: Vec<Option<Measured>> = Vec::with_capacity(all.len());
-    for (i, planned) in all.iter().enumerate() {
+    for ((i, planned), earlier) in all.iter().enumerate().zip(earlier) {
         let dir = execute::run_dir(out, planned);
         let fingerprint = execute::fingerprint(planned, repeats_of(i), timeout);
-        let earlier = execute::load_measured(&dir, &fingerprint);
         let measured = match (&planned.refused, earlier) {
             (Some(why), _) => Some(Measured::refused(why)),
             (None, Some(measured)) => {
@@ -183,10 +201,16 @@ pub fn run_spec(
                 if let Some(signal) = crate::interrupt::requested() {
                     return Err(StudyError::Interrupted { signal, run: None });
                 }
+                if let Some(p) = &progress {
+                    p.started(&planned.name);
+                }
                 let measured =
                     execute::execute(&options.executable, planned, &dir, repeats_of(i), timeout)?;
                 execute::save_measured(&dir, &fingerprint, &measured)?;
                 say(&planned.name, &measured);
+                if let Some(p) = progress.as_mut() {
+                    eprintln!("{}", p.finished(costs[i] * repeats_of(i) as f64));
+                }
                 Some(measured)
             }
             (None, None) => None,
