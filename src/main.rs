@@ -610,6 +610,9 @@ fn print_warnings(sim: &mpm_geo::model::Model) {
     if let Some(w) = energy.warning(sim.scene.output.energy_remainder_warning) {
         eprintln!("warning: {w}");
     }
+    if let Some(w) = mpm_geo::run::volume_warning(sim) {
+        eprintln!("warning: {w}");
+    }
 }
 
 /// A number of seconds > 0 (`--progress-every`).

@@ -844,6 +844,7 @@ pub fn write_run_json(
         model.scene.warnings(),
         solver_warnings.clone(),
         energy_warning.into_iter().collect(),
+        volume_warning(model).into_iter().collect(),
     ]
     .concat();
     let newton_iterations = sim.integrator.usage().newton_iterations;
@@ -990,9 +991,81 @@ fn point_volume_summary(model: &crate::model::Model) -> serde_json::Value {
             .filter(|&&v| v >= bound * (1.0 - 1e-12))
             .count()
     });
+    let range = jacobian_range(model);
     json!({
         "largest_cells": largest,
         "bound_cells": model.scene.grid.max_point_volume,
         "at_bound": at_bound,
+        "jacobian_range": range.map(|r| [r.smallest, r.largest]),
+        "jacobian_out_of_range": range.map(|r| r.outside),
+    })
+}
+
+/// The range of the points' volume ratio J = V/V0 a run is trusted over
+/// without a word: a point squeezed below 1 % of its volume or stretched
+/// beyond 100 times it stands for a domain the transfers no longer resolve.
+pub const JACOBIAN_RANGE: [f64; 2] = [1e-2, 1e2];
+
+/// The points' volume ratios J = V/V0 (V0 = m / ρ0 of the point's
+/// material) at the end of a run.
+#[derive(Clone, Copy, Debug)]
+pub struct JacobianRange {
+    /// Smallest J.
+    pub smallest: f64,
+    /// Largest J.
+    pub largest: f64,
+    /// Points outside [`JACOBIAN_RANGE`], those held at the scene's
+    /// `grid.max_point_volume` bound left out (that stretch is the scene's
+    /// choice).
+    pub outside: usize,
+}
+
+/// J = V/V0 over the points of `model` (`None` without points).
+pub fn jacobian_range(model: &crate::model::Model) -> Option<JacobianRange> {
+    let p = &model.particles;
+    let density: Vec<f64> = model
+        .material_names
+        .iter()
+        .map(|name| model.scene.materials.get(name).map_or(0.0, |m| m.density()))
+        .collect();
+    let bound = model
+        .scene
+        .grid
+        .max_point_volume
+        .map(|cells| cells * model.grid.cell_size.powi(2) * (1.0 - 1e-12));
+    let mut range: Option<JacobianRange> = None;
+    for i in 0..p.len() {
+        let rho0 = density.get(p.material[i] as usize).copied().unwrap_or(0.0);
+        if p.mass[i] <= 0.0 || rho0 <= 0.0 {
+            continue;
+        }
+        let j = p.volume[i] * rho0 / p.mass[i];
+        let at_bound = bound.is_some_and(|b| p.volume[i] >= b);
+        let outside =
+            usize::from(!at_bound && !(JACOBIAN_RANGE[0]..=JACOBIAN_RANGE[1]).contains(&j));
+        range = Some(match range {
+            None => JacobianRange {
+                smallest: j,
+                largest: j,
+                outside,
+            },
+            Some(r) => JacobianRange {
+                smallest: r.smallest.min(j),
+                largest: r.largest.max(j),
+                outside: r.outside + outside,
+            },
+        });
+    }
+    range
+}
+
+/// The warning of a run whose points left [`JACOBIAN_RANGE`].
+pub fn volume_warning(model: &crate::model::Model) -> Option<String> {
+    let r = jacobian_range(model)?;
+    (r.outside > 0).then(|| {
+        format!(
+            "{} material point(s) end with a volume ratio V/V0 outside [{:e}, {:e}] (from {:.2e} to {:.2e}): the body was crushed or torn beyond what the grid resolves; check the loads, the time step and `grid.max_point_volume`",
+            r.outside, JACOBIAN_RANGE[0], JACOBIAN_RANGE[1], r.smallest, r.largest
+        )
     })
 }

@@ -2,7 +2,9 @@
 //! items 8–9): the provenance (build, command line, overrides, scene and its
 //! fingerprint, start and end, host, CPU, threads) and the summary (status,
 //! steps, each monitor's last and peak value, where the files are); `run`
-//! prints that summary, and the stage profile only with `--profile`.
+//! prints that summary, and the stage profile only with `--profile`. A run
+//! that crushes its body says so (item 5): a warning and the points outside
+//! the trusted range of V/V0 in `run.json` → `point_volumes`.
 
 use std::process::Command;
 
@@ -130,4 +132,54 @@ fn run_prints_its_summary_and_the_profile_on_demand() {
         profiled.contains("wall") && profiled.contains("work:"),
         "{profiled}"
     );
+}
+
+/// The elastic bar under 1e4 g completes with its points crushed to
+/// V/V0 ~ 1e-20 (measured 1.7e-20 to 2.3e-12): every point is counted
+/// outside [1e-2, 1e2] and the run warns; under its own 1 g it is not.
+#[test]
+fn a_crushed_body_is_flagged() {
+    let bar = |gravity: &str| {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("out");
+        let scene = common::validation("elastic/bar_explicit.toml");
+        let output = Command::new(BIN)
+            .args([
+                "run",
+                scene.to_str().unwrap(),
+                "--out",
+                out.to_str().unwrap(),
+            ])
+            .args(["--set", &format!("loads.gravity={gravity}")])
+            .output()
+            .unwrap();
+        assert!(output.status.success(), "{output:?}");
+        let json: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("run.json")).unwrap()).unwrap();
+        (json, String::from_utf8_lossy(&output.stderr).into_owned())
+    };
+    let (crushed, stderr) = bar("98100");
+    let volumes = &crushed["point_volumes"];
+    let particles = crushed["particles"].as_u64().unwrap();
+    assert_eq!(
+        volumes["jacobian_out_of_range"].as_u64(),
+        Some(particles),
+        "{volumes}"
+    );
+    assert!(
+        volumes["jacobian_range"][1].as_f64().unwrap() < 1e-2,
+        "{volumes}"
+    );
+    assert!(stderr.contains("volume ratio V/V0 outside"), "{stderr}");
+    assert!(crushed["warnings"].to_string().contains("volume ratio"));
+    let (resting, stderr) = bar("9.81");
+    let volumes = &resting["point_volumes"];
+    assert_eq!(
+        volumes["jacobian_out_of_range"].as_u64(),
+        Some(0),
+        "{volumes}"
+    );
+    let [lo, hi] = [0, 1].map(|i| volumes["jacobian_range"][i].as_f64().unwrap());
+    assert!(lo > 0.99 && hi < 1.01, "{volumes}");
+    assert!(!stderr.contains("volume ratio"), "{stderr}");
 }
