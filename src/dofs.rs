@@ -7,7 +7,7 @@ use crate::grid::Grid;
 use crate::transfer::{ParticleBins, NONE};
 
 /// Numbering of the free dofs of the active nodes for one step.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Default)]
 pub struct DofMap {
     /// For every grid dof, its index in the system, or [`NONE`].
     pub index: Vec<u32>,

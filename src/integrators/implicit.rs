@@ -283,21 +283,19 @@ impl ImplicitIntegrator {
         report: &mut StepReport,
         setup: &mut StepSetup,
     ) -> Result<Attempt, NewtonError> {
-        let free_dofs = profile.time(Stage::Setup, || refresh_setup(model, setup))?;
+        let mut free_dofs = profile.time(Stage::Setup, || refresh_setup(model, setup))?;
         let setup = &*setup;
-        let mapped = profile.time(Stage::P2G, || {
+        let mut mapped = profile.time(Stage::P2G, || {
             self.map_to_grid(model, setup, t + dt, profile)
         });
-        let mut mapped = mapped;
         let mut open = open_at_start(model, setup, &mapped, dt);
         let mut pass = 1;
         let (mut system, solution, mut nonlocal) = loop {
-            let dofs = released(free_dofs.clone(), model, &open);
-            // without frictional edges there is one pass
-            let mut nodal = if model.friction.is_empty() {
-                std::mem::take(&mut mapped)
+            // without frictional edges there is one pass: nothing to copy
+            let (dofs, mut nodal) = if model.friction.is_empty() {
+                (std::mem::take(&mut free_dofs), std::mem::take(&mut mapped))
             } else {
-                mapped.clone()
+                (released(free_dofs.clone(), model, &open), mapped.clone())
             };
             hold_fixed_dofs(&mut nodal, model, setup, &dofs, self.newmark);
             let mut nonlocal =
