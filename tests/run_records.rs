@@ -58,21 +58,6 @@ fn spawn(args: &[&str], log: &Path) -> Child {
         .expect("mpm-geo runs")
 }
 
-/// Wait for `child`, killing it (and failing) after `limit`.
-fn wait(child: &mut Child, limit: Duration) -> std::process::ExitStatus {
-    let start = Instant::now();
-    loop {
-        if let Some(status) = child.try_wait().unwrap() {
-            return status;
-        }
-        if start.elapsed() > limit {
-            let _ = child.kill();
-            panic!("process did not end within {limit:?}");
-        }
-        std::thread::sleep(Duration::from_millis(10));
-    }
-}
-
 fn send(child: &Child, signal: i32) {
     let pid = libc::pid_t::try_from(child.id()).unwrap();
     // SAFETY: sends a signal to our own child process.
@@ -156,7 +141,7 @@ fn a_second_campaign_records_nothing_and_a_killed_run_is_run_again() {
     assert!(!out.join("report.md").exists());
 
     send(&first, libc::SIGKILL);
-    wait(&mut first, Duration::from_secs(30));
+    common::wait(&mut first, Duration::from_secs(30));
     assert_eq!(status(&run), "running");
     let cut = text(&run.join("curve.csv")).lines().count();
     assert!(
@@ -340,7 +325,7 @@ fn stopped_bar(out: &Path, log: &Path) -> u32 {
         log,
     );
     assert!(
-        wait(&mut child, Duration::from_secs(60)).success(),
+        common::wait(&mut child, Duration::from_secs(60)).success(),
         "{}",
         text(log)
     );
@@ -471,7 +456,7 @@ fn a_signal_to_a_campaign_interrupts_its_runs_and_releases_their_locks() {
             common::wait_for_rows(&out.join(run), 5, &mut campaign);
         }
         send(&campaign, signal);
-        let exit = wait(&mut campaign, Duration::from_secs(60));
+        let exit = common::wait(&mut campaign, Duration::from_secs(60));
         let stderr = text(&log);
         assert_eq!(exit.code(), Some(code), "{stderr}");
         assert!(
@@ -564,7 +549,7 @@ values = [0.5, 0.25]
         std::thread::sleep(Duration::from_millis(10));
     };
     send(&study, libc::SIGTERM);
-    let exit = wait(&mut study, Duration::from_secs(60));
+    let exit = common::wait(&mut study, Duration::from_secs(60));
     let stderr = text(&log);
     assert_eq!(exit.code(), Some(143), "{stderr}");
     assert!(stderr.contains("study interrupted by SIGTERM"), "{stderr}");

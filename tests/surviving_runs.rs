@@ -12,7 +12,7 @@ mod common;
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 const BIN: &str = env!("CARGO_BIN_EXE_mpm-geo");
 
@@ -50,22 +50,6 @@ fn run(scene: &str, out: &Path, args: &[&str]) -> (i32, String) {
         o.status.code().unwrap_or(-1),
         String::from_utf8_lossy(&o.stderr).into_owned(),
     )
-}
-
-/// Wait for `child`, killing it (and failing) if it has not ended after
-/// `limit` (a guard against a hang, not a timing assertion).
-fn wait(child: &mut Child, limit: Duration) -> std::process::ExitStatus {
-    let start = Instant::now();
-    loop {
-        if let Some(status) = child.try_wait().unwrap() {
-            return status;
-        }
-        if start.elapsed() > limit {
-            let _ = child.kill();
-            panic!("process did not end within {limit:?}");
-        }
-        std::thread::sleep(Duration::from_millis(10));
-    }
 }
 
 fn json(path: &Path) -> serde_json::Value {
@@ -185,7 +169,7 @@ fn a_signal_ends_the_run_after_a_whole_step_and_a_second_run_is_refused() {
         );
 
         send(child, *signal);
-        let status = wait(child, Duration::from_secs(60));
+        let status = common::wait(child, Duration::from_secs(60));
         let log = std::fs::read_to_string(tmp.path().join(format!("{name}.log"))).unwrap();
         assert_eq!(status.code(), Some(*code), "{log}");
         let report = json(&out.join("run.json"));
@@ -443,7 +427,7 @@ fn a_killed_run_leaves_no_cut_snapshot_and_overwrite_clears_its_leftovers() {
     let mut child = spawn_run(&scene, &out, &args, &tmp.path().join("log"));
     common::wait_for_rows(&out, 40, &mut child);
     send(&child, libc::SIGKILL);
-    wait(&mut child, Duration::from_secs(60));
+    common::wait(&mut child, Duration::from_secs(60));
     let mut names: Vec<String> = std::fs::read_dir(&out)
         .unwrap()
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())

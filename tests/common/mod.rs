@@ -65,3 +65,19 @@ pub fn wait_for_rows(dir: &Path, rows: usize, child: &mut Child) {
         std::thread::sleep(Duration::from_millis(5));
     }
 }
+
+/// Wait for `child`, killing it (and failing) if it has not ended after
+/// `limit` (a guard against a hang, not a timing assertion).
+pub fn wait(child: &mut Child, limit: Duration) -> std::process::ExitStatus {
+    let start = Instant::now();
+    loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            return status;
+        }
+        if start.elapsed() > limit {
+            let _ = child.kill();
+            panic!("process did not end within {limit:?}");
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
