@@ -274,9 +274,9 @@ impl FrictionEdges {
     /// the soil there. (Opening single nodes on the filtered reaction let a
     /// bending wave of the sliding block peel the base open and shut, and
     /// the nodes reclosed found no normal force of the last step to bound
-    /// their friction: the slide grew by 5 %.) An open node whose normal
-    /// increment `inward_motion` (along the inward normal) is below
-    /// −`tolerance` closes: the step moved it into the edge.
+    /// their friction: at h = 0.0625 m the slide grew by 8 %.) An open node
+    /// whose normal increment `inward_motion` (along the inward normal) is
+    /// below −`tolerance` closes: the step moved it into the edge.
     pub fn contact_changes(
         &self,
         active: impl Fn(usize) -> bool,
