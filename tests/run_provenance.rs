@@ -15,9 +15,16 @@ const BIN: &str = env!("CARGO_BIN_EXE_mpm-geo");
 /// Run the tossed block for 30 steps with `extra` arguments; returns the
 /// output folder (kept alive: `out` in it) and the process's output.
 fn run(extra: &[&str]) -> (tempfile::TempDir, std::process::Output) {
+    let mut args = vec!["--set", "scene.steps=30"];
+    args.extend_from_slice(extra);
+    run_scene("friction/tossed_block.toml", &args)
+}
+
+/// Run the validation scene `scene` with `args` into a new folder's `out`.
+fn run_scene(scene: &str, args: &[&str]) -> (tempfile::TempDir, std::process::Output) {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("out");
-    let scene = common::validation("friction/tossed_block.toml");
+    let scene = common::validation(scene);
     let output = Command::new(BIN)
         .args([
             "run",
@@ -25,8 +32,7 @@ fn run(extra: &[&str]) -> (tempfile::TempDir, std::process::Output) {
             "--out",
             out.to_str().unwrap(),
         ])
-        .args(["--set", "scene.steps=30"])
-        .args(extra)
+        .args(args)
         .output()
         .unwrap();
     assert!(output.status.success(), "{output:?}");
@@ -140,22 +146,10 @@ fn run_prints_its_summary_and_the_profile_on_demand() {
 #[test]
 fn a_crushed_body_is_flagged() {
     let bar = |gravity: &str| {
-        let dir = tempfile::tempdir().unwrap();
-        let out = dir.path().join("out");
-        let scene = common::validation("elastic/bar_explicit.toml");
-        let output = Command::new(BIN)
-            .args([
-                "run",
-                scene.to_str().unwrap(),
-                "--out",
-                out.to_str().unwrap(),
-            ])
-            .args(["--set", &format!("loads.gravity={gravity}")])
-            .output()
-            .unwrap();
-        assert!(output.status.success(), "{output:?}");
-        let json: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(out.join("run.json")).unwrap()).unwrap();
+        let gravity = format!("loads.gravity={gravity}");
+        let (dir, output) = run_scene("elastic/bar_explicit.toml", &["--set", &gravity]);
+        let run_json = std::fs::read_to_string(dir.path().join("out/run.json")).unwrap();
+        let json: serde_json::Value = serde_json::from_str(&run_json).unwrap();
         (json, String::from_utf8_lossy(&output.stderr).into_owned())
     };
     let (crushed, stderr) = bar("98100");
