@@ -347,6 +347,18 @@ pub struct DrivenPoints {
     pub bearing: Vec<bool>,
 }
 
+/// Derivatives of the driven points' forces with respect to the anchors' time
+/// parameter τ and of the driven load F (theory PF3), over a system's unknowns.
+#[derive(Clone, Debug, Default)]
+pub struct TravelDerivatives {
+    /// ∂f_pen/∂τ = Σ_k k N_k v, per unknown, kN/m per unit time.
+    pub force_rate: Vec<f64>,
+    /// ∂F/∂Δu = −Σ_k k N_k v̂, per unknown, kN/m per m.
+    pub load_gradient: Vec<f64>,
+    /// ∂F/∂τ = Σ_k k v·v̂, kN/m per unit time.
+    pub load_rate: f64,
+}
+
 /// Outward normal of the contact surface (the body's top).
 const CONTACT_NORMAL: [f64; 2] = [0.0, 1.0];
 
@@ -658,6 +670,17 @@ impl DrivenPoints {
         f
     }
 
+    /// The driven load along the motion at the committed positions and time
+    /// `t`: Σ_r R_r·v̂_r over the rigid bodies (theory PF1), kN/m.
+    pub fn committed_load(&self, particles: &Particles, t: f64) -> f64 {
+        (0..self.velocity.len())
+            .map(|r| {
+                let (f, e) = (self.force_on_soil(r, particles, t), self.direction(r));
+                f[0] * e[0] + f[1] * e[1]
+            })
+            .sum()
+    }
+
     /// Mean displacement x − x(0) of the points tied to rigid body `r` that
     /// bear on soil (all of them if none does), m: a point over an emptied
     /// cell is not pulled along and would lag.
@@ -673,6 +696,79 @@ impl DrivenPoints {
         }
         let n = count.max(1) as f64;
         [sum[0] / n, sum[1] / n]
+    }
+
+    /// Unit vector of rigid body `r`'s motion, v̂ = v/|v| (zero for a body
+    /// at rest).
+    fn direction(&self, r: usize) -> [f64; 2] {
+        let v = self.velocity[r];
+        let speed = (v[0] * v[0] + v[1] * v[1]).sqrt();
+        if speed > 0.0 {
+            [v[0] / speed, v[1] / speed]
+        } else {
+            [0.0; 2]
+        }
+    }
+
+    /// The driven load along the motion, F = Σ_k k (X̄_k(t) − x_k − N_k·Δu)·v̂
+    /// over the points that bear on soil (theory PF1): the force the rigid
+    /// bodies exert on the soil in the direction they move, kN/m, at the
+    /// nodal increment `du` and time `t`.
+    pub fn load_along_motion(
+        &self,
+        particles: &Particles,
+        shapes: &[ShapeAt],
+        bins: &ParticleBins,
+        du: &[[f64; 2]],
+        t: f64,
+    ) -> f64 {
+        shapes
+            .iter()
+            .enumerate()
+            .filter(|(_, s)| Self::bears_on_soil(s, bins))
+            .map(|(k, s)| {
+                let gap = self.gap(k, particles, s, du, t);
+                let e = self.direction(self.rigid[k]);
+                self.stiffness[k] * (gap[0] * e[0] + gap[1] * e[1])
+            })
+            .sum()
+    }
+
+    /// How the penalty forces and the driven load change with the time
+    /// parameter τ of the anchors (theory PF3), over the unknowns numbered by
+    /// `index` (grid dof → unknown, [`NONE`] for the others) of a system of
+    /// `unknowns` unknowns.
+    pub fn travel_derivatives(
+        &self,
+        shapes: &[ShapeAt],
+        bins: &ParticleBins,
+        index: &[u32],
+        unknowns: usize,
+    ) -> TravelDerivatives {
+        let mut d = TravelDerivatives {
+            force_rate: vec![0.0; unknowns],
+            load_gradient: vec![0.0; unknowns],
+            load_rate: 0.0,
+        };
+        for (k, s) in shapes.iter().enumerate() {
+            if !Self::bears_on_soil(s, bins) {
+                continue;
+            }
+            let (r, stiffness) = (self.rigid[k], self.stiffness[k]);
+            let (v, e) = (self.velocity[r], self.direction(r));
+            d.load_rate += stiffness * (v[0] * e[0] + v[1] * e[1]);
+            for a in s.support() {
+                let node = s.nodes[a] as usize;
+                for c in 0..2 {
+                    let unknown = index[2 * node + c];
+                    if unknown != NONE {
+                        d.force_rate[unknown as usize] += stiffness * s.n[a] * v[c];
+                        d.load_gradient[unknown as usize] -= stiffness * s.n[a] * e[c];
+                    }
+                }
+            }
+        }
+        d
     }
 
     /// Largest gap |X̄ − x| over all tied points at time `t`, m.

@@ -103,6 +103,8 @@ pub enum Criterion {
     Energy,
     /// κ̄ lagged one iteration has settled (nonlocal runs).
     NonlocalKappa,
+    /// The path-following constraint holds (theory PF2).
+    PathConstraint,
 }
 
 impl fmt::Display for Criterion {
@@ -111,6 +113,7 @@ impl fmt::Display for Criterion {
             Criterion::Force => "force",
             Criterion::Energy => "energy",
             Criterion::NonlocalKappa => "nonlocal κ̄",
+            Criterion::PathConstraint => "path constraint",
         })
     }
 }
@@ -202,6 +205,26 @@ pub enum StepError {
         cause: NewtonFailure,
         /// ‖R‖ per iteration of the last attempt, kN/m.
         history: Vec<f64>,
+    },
+    /// Path following (theory §3.7) took its step budget without reaching
+    /// the end travel.
+    #[error("path following took its {steps} steps (solver.path_max_steps) and reached travel time {reached:.6e} of {end:.6e}")]
+    PathBudget {
+        /// Steps taken.
+        steps: usize,
+        /// The rigid bodies' time parameter reached.
+        reached: f64,
+        /// The end of the path.
+        end: f64,
+    },
+    /// Every attempt at a path-following step jumped off the path (theory
+    /// PF5).
+    #[error("path following lost its path at travel time {travel:.6e}: the step jumped off the path at every one of {cuts} halvings")]
+    PathJump {
+        /// The rigid bodies' time parameter at the start of the step.
+        travel: f64,
+        /// Halvings tried.
+        cuts: usize,
     },
     /// The stress update failed at a material point.
     #[error("stress update failed at material point {particle}: {source}")]

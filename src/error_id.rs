@@ -115,6 +115,12 @@ error_ids! {
     RunNewtonFailed => "RUN_NEWTON_FAILED":
         "Newton did not converge after every allowed step halving (the residual history is given)";
         "use smaller steps (`scene.steps`, `scene.dt`), more halvings (`solver.max_halvings`), or check the boundary conditions";
+    RunPathBudget => "RUN_PATH_BUDGET":
+        "a path-following run used its `solver.path_max_steps` before its rigid bodies reached the end travel (where it stood is given)";
+        "raise `solver.path_max_steps`, or take larger nominal steps (`scene.dt`); a path that keeps turning back shows in `curve.csv`";
+    RunPathLost => "RUN_PATH_LOST":
+        "a path-following step jumped off its path (far longer than predicted) at every allowed halving";
+        "more halvings (`solver.max_halvings`) or smaller nominal steps (`scene.dt`)";
     RunStressUpdate => "RUN_STRESS_UPDATE":
         "the stress update (return mapping) failed at a material point";
         "use smaller steps; check the material parameters near the named point";
@@ -258,6 +264,8 @@ impl Identified for StepError {
             StepError::ParticleLeftGrid { .. } => ErrorId::RunPointLeftGrid,
             StepError::BoundaryPointLeftGrid { .. } => ErrorId::RunBoundaryPointLeftGrid,
             StepError::NewtonFailed { .. } => ErrorId::RunNewtonFailed,
+            StepError::PathBudget { .. } => ErrorId::RunPathBudget,
+            StepError::PathJump { .. } => ErrorId::RunPathLost,
             StepError::Constitutive { .. } => ErrorId::RunStressUpdate,
             StepError::NonFiniteStress { .. }
             | StepError::NonFinitePoint { .. }

@@ -260,6 +260,11 @@ impl Model {
             AnalysisKind::ImplicitDynamic if self.scene.solver.adaptive() => {
                 self.time >= self.scene.scene.end_time_or_steps() * (1.0 - 1e-12)
             }
+            // the last path step is displacement controlled to the end (PF5)
+            AnalysisKind::QuasiStatic if self.scene.solver.follows_path() => {
+                let dt = self.scene.scene.dt.unwrap_or(1.0);
+                self.time >= self.scene.scene.end_time_or_steps() - 1e-6 * dt
+            }
             _ => self.step >= self.scene.scene.steps.unwrap_or(0),
         }
     }

@@ -165,6 +165,67 @@ impl SparseMatrix {
         SparseColMatRef::new(self.pattern.symbolic.as_ref(), &self.values)
     }
 
+    /// The (n + 1) × (n + 1) bordered matrix [K c; rᵀ d]: this matrix with the
+    /// column `column` and the row `row` (sparse, `(index, value)` pairs
+    /// with indices below n, increasing) and the corner `corner` appended,
+    /// e.g. the system of a Newton step with one extra unknown and one
+    /// extra equation (arc-length and path-following methods). The pattern
+    /// depends only on K's pattern and the border's indices.
+    ///
+    /// Errors: [`SolverError::IndexOutOfRange`] for a border index not below
+    /// n or not increasing.
+    pub fn bordered(
+        &self,
+        column: &[(usize, f64)],
+        row: &[(usize, f64)],
+        corner: f64,
+    ) -> Result<SparseMatrix, SolverError> {
+        let n = self.n();
+        for border in [column, row] {
+            let increasing = border.windows(2).all(|w| w[0].0 < w[1].0);
+            if let Some(&(i, _)) = border
+                .iter()
+                .find(|&&(i, _)| i >= n)
+                .or(border.first().filter(|_| !increasing))
+            {
+                return Err(SolverError::IndexOutOfRange {
+                    row: i,
+                    col: n,
+                    n: n + 1,
+                });
+            }
+        }
+        let (cp, ri) = (self.col_ptr(), self.row_idx());
+        let nnz = self.nnz() + column.len() + row.len() + 1;
+        let (mut col_ptr, mut row_idx, mut values) = (
+            Vec::with_capacity(n + 2),
+            Vec::with_capacity(nnz),
+            Vec::with_capacity(nnz),
+        );
+        col_ptr.push(0);
+        let mut next_row = row.iter().peekable();
+        for j in 0..n {
+            row_idx.extend_from_slice(&ri[cp[j]..cp[j + 1]]);
+            values.extend_from_slice(&self.values[cp[j]..cp[j + 1]]);
+            if let Some(&(_, value)) = next_row.next_if(|&&(i, _)| i == j) {
+                row_idx.push(n);
+                values.push(value);
+            }
+            col_ptr.push(row_idx.len());
+        }
+        for &(i, value) in column {
+            row_idx.push(i);
+            values.push(value);
+        }
+        row_idx.push(n);
+        values.push(corner);
+        col_ptr.push(row_idx.len());
+        Ok(Self::from_parts(
+            Arc::new(Pattern::new(n + 1, col_ptr, row_idx)),
+            values,
+        ))
+    }
+
     /// `true` if both matrices share the same pattern object (not just an equal one).
     pub fn shares_pattern_with(&self, other: &SparseMatrix) -> bool {
         Arc::ptr_eq(&self.pattern, &other.pattern)

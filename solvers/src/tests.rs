@@ -251,6 +251,48 @@ fn from_triplets_sums_duplicates_and_checks_range() {
     );
 }
 
+/// A bordered matrix holds K and its border where they belong, and a
+/// border that controls K's zero-energy mode makes a singular K regular:
+/// the floating elastic strip (rigid translation along x free) pinned by
+/// the border row "mean x displacement = value" is solved by LU to round-off.
+#[test]
+fn bordered_matrix_places_the_border_and_regularises_a_mechanism() {
+    // the strip on vertical springs along its base: free to slide along x
+    let (nx, ny) = (8, 3);
+    let (n, elems) = grid_dofs(nx, ny, false);
+    let k = Assembler::new(n, &elems)
+        .unwrap()
+        .assemble(&vec![q4_stiffness(3e4, 0.25, 0.5); elems.len()])
+        .unwrap();
+    let mut t = Vec::new();
+    for j in 0..n {
+        for p in k.col_ptr()[j]..k.col_ptr()[j + 1] {
+            t.push((k.row_idx()[p], j, k.values()[p]));
+        }
+    }
+    t.extend((0..=nx).map(|i| (2 * i + 1, 2 * i + 1, 3e4)));
+    let free_strip = SparseMatrix::from_triplets(n, &t).unwrap();
+    let x_dofs: Vec<usize> = (0..n).step_by(2).collect();
+    let row: Vec<(usize, f64)> = x_dofs.iter().map(|&i| (i, 1.0)).collect();
+    let column: Vec<(usize, f64)> = x_dofs.iter().map(|&i| (i, -1e-3)).collect();
+    let a = free_strip.bordered(&column, &row, 0.5).unwrap();
+    assert_eq!(a.n(), n + 1);
+    assert_eq!(a.nnz(), free_strip.nnz() + 2 * x_dofs.len() + 1);
+    assert_eq!(a.get(5, 7), free_strip.get(5, 7));
+    assert_eq!((a.get(n, 2), a.get(2, n), a.get(n, n)), (1.0, -1e-3, 0.5));
+    assert_eq!((a.get(n, 1), a.get(1, n)), (0.0, 0.0));
+    let b = random_rhs(n + 1, 11);
+    let mut lu = DirectSolver::new(SolverPolicy::Lu);
+    lu.factorize(&a, false).unwrap();
+    let mut x = b.clone();
+    lu.solve_in_place(&mut x).unwrap();
+    let r = rel_residual(&a, &x, &b);
+    assert!(r <= 1e-10, "bordered LU residual {r:e}");
+    let unsorted = [(3, 1.0), (1, 1.0)];
+    assert!(free_strip.bordered(&unsorted, &row, 0.0).is_err());
+    assert!(free_strip.bordered(&[(n, 1.0)], &row, 0.0).is_err());
+}
+
 #[test]
 fn spd_cholesky_and_lu_agree() {
     // small grid (simplicial path likely) and a larger one (supernodal path likely)

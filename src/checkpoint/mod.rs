@@ -50,7 +50,7 @@ use crate::simulation::Simulation;
 use codec::{fnv1a64, Reader, Writer};
 
 /// Version of the checkpoint layout this build writes and reads.
-pub const FORMAT_VERSION: u32 = 3;
+pub const FORMAT_VERSION: u32 = 4;
 /// First bytes of every checkpoint.
 pub const MAGIC: [u8; 8] = *b"MPMGEOCK";
 /// The checkpoint file in a run directory.

@@ -13,6 +13,7 @@
 use crate::bc::{DrivenPoints, TractionPoints};
 use crate::constitutive::PointState;
 use crate::error::TimeStepLimit;
+use crate::integrators::path::PathRecord;
 use crate::integrators::step_control::StepControlRecord;
 use crate::integrators::{Integrator, SolverUsage};
 use crate::model::LostPoint;
@@ -460,6 +461,7 @@ impl Codec for SolverUsage {
         w.put(&self.explicit_time_step);
         w.put(&self.time_step_limited_by);
         w.put(&self.step_control);
+        w.put(&self.path);
     }
     fn decode(r: &mut Reader) -> Result<Self, DecodeError> {
         Ok(Self {
@@ -475,6 +477,31 @@ impl Codec for SolverUsage {
             explicit_time_step: r.get()?,
             time_step_limited_by: r.get()?,
             step_control: r.get()?,
+            path: r.get()?,
+        })
+    }
+}
+
+impl Codec for PathRecord {
+    const MIN_SIZE: usize = 8 * 8;
+    fn encode(&self, w: &mut Writer) {
+        w.put(&self.last_step);
+        w.put(&self.plastic_travel);
+        w.put(&self.load_scale);
+        w.put(&self.plastic_steps);
+        w.put(&self.cuts);
+        w.put(&self.jumps);
+        w.put(&self.reversals);
+    }
+    fn decode(r: &mut Reader) -> Result<Self, DecodeError> {
+        Ok(Self {
+            last_step: r.get()?,
+            plastic_travel: r.get()?,
+            load_scale: r.get()?,
+            plastic_steps: r.get()?,
+            cuts: r.get()?,
+            jumps: r.get()?,
+            reversals: r.get()?,
         })
     }
 }

@@ -13,6 +13,7 @@ use super::newton::{
     self, Newmark, NewtonBuffers, NewtonError, NodalKinematics, Solution, StepSystem,
 };
 use super::p2g::{external_force, nodal_kinematics, KinematicsBuffers};
+use super::path::{PathConstraint, PathRecord};
 use super::step_control::{LocalError, StepControlRecord, StepController};
 use super::stresses::converged_stresses;
 use super::tangent::{background_block, Tangent};
@@ -61,6 +62,17 @@ struct ErrorControl {
     keep_any: bool,
 }
 
+/// What controls an attempt at a (sub-)step.
+#[derive(Clone, Copy)]
+enum Control {
+    /// A step of the given `dt`.
+    Fixed,
+    /// Adaptive steps: the attempt's error is judged.
+    Error(ErrorControl),
+    /// Path following (theory §3.7): the constraint fixes the anchors' travel.
+    Path(PathConstraint),
+}
+
 /// How an attempt at a (sub-)step ended.
 enum Attempt {
     /// Converged and committed to the model, in this many Newton iterations;
@@ -93,6 +105,9 @@ impl ImplicitIntegrator {
                     next_dt: integrator.dt,
                     ..Default::default()
                 });
+            }
+            if model.scene.solver.follows_path() {
+                integrator.usage.path = Some(PathRecord::default());
             }
             integrator
         })
@@ -128,6 +143,9 @@ impl ImplicitIntegrator {
     pub fn step(&mut self, model: &mut Model, profile: &Profile) -> Result<StepReport, StepError> {
         if let Some(control) = self.control {
             return self.adaptive_step(model, profile, control);
+        }
+        if model.scene.solver.follows_path() {
+            return self.path_step(model, profile);
         }
         let (t0, dt) = (model.time, self.dt);
         let mut report = StepReport {
@@ -170,7 +188,7 @@ impl ImplicitIntegrator {
                 velocity_scale: record.velocity_scale,
                 keep_any: model.step == 0 || dt <= control.dt_min * (1.0 + 1e-9),
             };
-            match self.substep(model, profile, t0, dt, Some(judge), &mut report) {
+            match self.substep(model, profile, t0, dt, Control::Error(judge), &mut report) {
                 Ok(Attempt::Committed(iterations, local)) => {
                     report.iterations += iterations;
                     report.substeps += 1;
@@ -211,6 +229,75 @@ impl ImplicitIntegrator {
         Ok(report)
     }
 
+    /// One path-following step (theory §3.7, PF5): the path record's
+    /// constraint fixes the anchors' travel; an attempt whose Newton
+    /// iteration fails is redone with half the arc, up to
+    /// `solver.max_halvings` times. The run stops with its step budget
+    /// (`solver.path_max_steps`) spent.
+    fn path_step(&mut self, model: &mut Model, profile: &Profile) -> Result<StepReport, StepError> {
+        let scene = &model.scene;
+        let end = scene.scene.end_time_or_steps();
+        let budget =
+            (scene.solver.path_max_steps).unwrap_or(10 * scene.scene.steps.unwrap_or(0).max(1));
+        if model.step >= budget {
+            return Err(StepError::PathBudget {
+                steps: model.step,
+                reached: model.time,
+                end,
+            });
+        }
+        let max_cuts = scene.solver.max_halvings;
+        let (t, dt) = (model.time, self.dt);
+        let mut record = self.usage.path.take().unwrap_or_default();
+        let load_before = model.driven.committed_load(&model.particles, t);
+        let mut report = StepReport {
+            step: model.step + 1,
+            ..Default::default()
+        };
+        let mut shrink = 1.0;
+        let mut cuts = 0;
+        let result = loop {
+            let constraint = record.constraint(t, dt, end, shrink);
+            match self.substep(
+                model,
+                profile,
+                t,
+                dt,
+                Control::Path(constraint),
+                &mut report,
+            ) {
+                Ok(Attempt::Committed(iterations, _)) => {
+                    report.iterations += iterations;
+                    report.substeps += 1;
+                    self.usage.newton_iterations += iterations;
+                    let load = model.driven.committed_load(&model.particles, model.time);
+                    record.advance(dt, model.time - t, load - load_before, iterations);
+                    break Ok(());
+                }
+                Ok(Attempt::Rejected(_)) if cuts < max_cuts => {
+                    cuts += 1;
+                    shrink *= 0.5;
+                    record.cuts += 1;
+                    record.jumps += 1;
+                }
+                Ok(Attempt::Rejected(_)) => break Err(StepError::PathJump { travel: t, cuts }),
+                Err(e) if e.retry() && cuts < max_cuts => {
+                    cuts += 1;
+                    shrink *= 0.5;
+                    record.cuts += 1;
+                    self.usage.halvings += 1;
+                }
+                Err(e) => break Err(e.into_step_error(cuts)),
+            }
+        };
+        self.usage.path = Some(record);
+        result?;
+        model.step += 1;
+        report.dt = model.time - t;
+        report.time = model.time;
+        Ok(report)
+    }
+
     /// The step `proposal` cut to end at the next jump of the stepped gravity
     /// and at the end time.
     fn step_within_loads(&self, model: &Model, t: f64, proposal: f64) -> f64 {
@@ -233,8 +320,8 @@ impl ImplicitIntegrator {
         depth: usize,
         report: &mut StepReport,
     ) -> Result<(), StepError> {
-        match self.substep(model, profile, t, dt, None, report) {
-            // without error control (`None`) no attempt is rejected
+        match self.substep(model, profile, t, dt, Control::Fixed, report) {
+            // a fixed step is not judged for its error
             Ok(Attempt::Rejected(_)) => Err(StepError::NotAvailable(
                 "a fixed step was rejected for its error",
             )),
@@ -254,17 +341,18 @@ impl ImplicitIntegrator {
     }
 
     /// One (sub-)step from `t` to `t + dt`, in the order of paper Fig. 1.
-    /// With `control` (adaptive steps: whether to keep the step whatever its
-    /// error) the converged step's error is estimated, and a step that fails
-    /// the tolerance is rejected before anything is committed. The step
-    /// setup is the integrator's, refreshed in place.
+    /// With error control (adaptive steps: whether to keep the step whatever
+    /// its error) the converged step's error is estimated, and a step that
+    /// fails the tolerance is rejected before anything is committed; with a
+    /// path constraint the step ends at `t + Δτ`, Δτ chosen by the
+    /// constraint. The step setup is the integrator's, refreshed in place.
     fn substep(
         &mut self,
         model: &mut Model,
         profile: &Profile,
         t: f64,
         dt: f64,
-        control: Option<ErrorControl>,
+        control: Control,
         report: &mut StepReport,
     ) -> Result<Attempt, NewtonError> {
         let mut setup = std::mem::take(&mut self.setup);
@@ -279,7 +367,7 @@ impl ImplicitIntegrator {
         model: &mut Model,
         profile: &Profile,
         (t, dt): (f64, f64),
-        control: Option<ErrorControl>,
+        control: Control,
         report: &mut StepReport,
         setup: &mut StepSetup,
     ) -> Result<Attempt, NewtonError> {
@@ -300,7 +388,10 @@ impl ImplicitIntegrator {
             hold_fixed_dofs(&mut nodal, model, setup, &dofs, self.newmark);
             let mut nonlocal =
                 NonlocalStep::start(model, false, profile).map_err(StepError::from)?;
-            let system = self.system(model, setup, dofs, nodal, t, dt);
+            let mut system = self.system(model, setup, dofs, nodal, t, dt);
+            if let Control::Path(constraint) = control {
+                system.path = Some(constraint.starting_from(&system));
+            }
             let solution = profile.time(Stage::Newton, || {
                 newton::solve(
                     &system,
@@ -322,12 +413,22 @@ impl ImplicitIntegrator {
             }
             self.newton_buffers.recycle(solution.trial);
         };
+        // path following: the step ends where the constraint put the anchors,
+        // unless it jumped off the path (PF5)
+        let dt = solution.travel;
+        if let Some(path) = system.path {
+            let load_change = system.driven_load(&solution.du, dt) - path.start_load;
+            if !path.accepts(system.dt, dt, load_change) {
+                self.newton_buffers.recycle(solution.trial);
+                return Ok(Attempt::Rejected(f64::INFINITY));
+            }
+        }
         let removed_velocity = std::mem::take(&mut system.nodal.removed_velocity);
         let boundary_work = system.nodal.removed_energy;
         let grid = ConvergedGrid::new(&system, solution);
         let boundary_work = boundary_work + system.friction_work(&grid.du);
         let mut local = None;
-        if let (Some(control), Some(newmark), Some(a)) =
+        if let (Control::Error(control), Some(newmark), Some(a)) =
             (control, self.newmark, grid.acceleration.as_deref())
         {
             let error = LocalError::of(&system, &newmark, &grid.du, a);
@@ -386,6 +487,7 @@ impl ImplicitIntegrator {
             newmark: self.newmark,
             background_block: self.background_block,
             held_sticks: Default::default(),
+            path: None,
         }
     }
 
@@ -497,6 +599,7 @@ impl ConvergedGrid {
             residual,
             iterations,
             history,
+            ..
         } = solution;
         let mut reaction: Vec<[f64; 2]> =
             residual.residual.iter().map(|r| [-r[0], -r[1]]).collect();

@@ -23,6 +23,7 @@ pub mod g2p;
 pub mod implicit;
 pub mod newton;
 pub mod p2g;
+pub mod path;
 mod regularisation;
 pub mod setup;
 pub mod step_control;
@@ -101,6 +102,8 @@ pub struct SolverUsage {
     pub time_step_limited_by: Option<TimeStepLimit>,
     /// Implicit runs with adaptive steps: what the step control did.
     pub step_control: Option<step_control::StepControlRecord>,
+    /// Path-following runs: where the path stands and what it did.
+    pub path: Option<path::PathRecord>,
 }
 
 /// The integrator of a run, chosen by `scene.analysis`.
@@ -108,8 +111,8 @@ pub enum Integrator {
     /// Quasi-static or Newmark implicit (theory §3); boxed, it holds the
     /// solver's caches.
     Implicit(Box<ImplicitIntegrator>),
-    /// MUSL explicit (theory §4).
-    Explicit(ExplicitIntegrator),
+    /// MUSL explicit (theory §4); boxed, it holds its node-sized buffers.
+    Explicit(Box<ExplicitIntegrator>),
 }
 
 impl Integrator {
@@ -119,7 +122,9 @@ impl Integrator {
             AnalysisKind::QuasiStatic | AnalysisKind::ImplicitDynamic => {
                 Integrator::Implicit(Box::new(ImplicitIntegrator::new(model)?))
             }
-            AnalysisKind::Explicit => Integrator::Explicit(ExplicitIntegrator::new(model)?),
+            AnalysisKind::Explicit => {
+                Integrator::Explicit(Box::new(ExplicitIntegrator::new(model)?))
+            }
         })
     }
 

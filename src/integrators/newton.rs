@@ -8,14 +8,15 @@ use std::sync::Mutex;
 use mpm_solvers::SolverError;
 use rayon::prelude::*;
 
+use super::path::PathConstraint;
 use super::tangent::Tangent;
 use super::{
     evaluate_stresses, evaluate_stresses_without_tangent, NonlocalStep, SolverUsage, StepSetup,
     TrialStresses, POINTS_PER_TASK,
 };
-use crate::bc::DofConstraint;
+use crate::bc::{DofConstraint, TravelDerivatives};
 use crate::constitutive::ConstitutiveError;
-use crate::dofs::{gather_free_into, DofMap};
+use crate::dofs::{gather_free, gather_free_into, DofMap};
 use crate::error::{Criterion, NewtonFailure, StepError};
 use crate::friction::ContactState;
 use crate::model::Model;
@@ -144,6 +145,9 @@ pub struct StepSystem<'a> {
     /// Which frictional nodes are held in stick for the rest of the solve
     /// (FR6).
     pub held_sticks: Mutex<HeldSticks>,
+    /// Path following (theory §3.7): the constraint that makes the anchors'
+    /// step Δτ an unknown; `None`: the anchors move over `dt`.
+    pub path: Option<PathConstraint>,
 }
 
 /// The frictional nodes held in stick (FR6) and the states of the last
@@ -253,6 +257,9 @@ impl From<StepError> for NewtonError {
 pub struct Solution {
     /// Nodal displacement increment Δu, per grid node.
     pub du: Vec<[f64; 2]>,
+    /// The step of the anchors' time parameter: `dt`, or under path
+    /// following the Δτ the constraint chose.
+    pub travel: f64,
     /// Stresses, states and tangents at Δu.
     pub trial: TrialStresses,
     /// Residual at Δu (its negative is the support reaction).
@@ -312,22 +319,25 @@ impl StepSystem<'_> {
     ) -> Result<Residual, NewtonError> {
         let mut res = Residual::default();
         let mut scratch = ResidualScratch::default();
-        self.evaluate_into(du, nonlocal, trial, &mut scratch, &mut res, profile)?;
+        let at = (du, self.dt);
+        self.evaluate_into(at, nonlocal, trial, &mut scratch, &mut res, profile)?;
         Ok(res)
     }
 
-    /// [`Self::evaluate`] into `res`, with the buffers of `scratch` (the
-    /// Newton loop's form: no allocation once the buffers have grown).
+    /// [`Self::evaluate`] into `res` at the increment `du` with the anchors
+    /// moved over `travel` (`dt`, or the iterate's Δτ under path following),
+    /// with the buffers of `scratch` (the Newton loop's form: no allocation
+    /// once the buffers have grown).
     pub fn evaluate_into(
         &self,
-        du: &[[f64; 2]],
+        (du, travel): (&[[f64; 2]], f64),
         nonlocal: Option<&NonlocalStep>,
         trial: &mut TrialStresses,
         scratch: &mut ResidualScratch,
         res: &mut Residual,
         profile: &Profile,
     ) -> Result<(), NewtonError> {
-        self.evaluate_with(du, nonlocal, trial, (scratch, res), profile, true)
+        self.evaluate_with((du, travel), nonlocal, trial, (scratch, res), profile, true)
     }
 
     /// The stress update and the residual; with `tangents` false (a residual
@@ -336,7 +346,7 @@ impl StepSystem<'_> {
     /// no sensitivity solves in the return mappings.
     fn evaluate_with(
         &self,
-        du: &[[f64; 2]],
+        (du, travel): (&[[f64; 2]], f64),
         nonlocal: Option<&NonlocalStep>,
         trial: &mut TrialStresses,
         (scratch, res): (&mut ResidualScratch, &mut Residual),
@@ -364,8 +374,16 @@ impl StepSystem<'_> {
             })
             .map_err(|(p, e)| NewtonError::Constitutive(p, e))?;
         let mut friction = std::mem::take(&mut trial.friction_stiffness);
-        self.residual(trial, du, scratch, res, &mut friction, profile);
+        self.residual(trial, (du, travel), scratch, res, &mut friction, profile);
         trial.friction_stiffness = friction;
+        // path following: the norm is that of the bordered system's
+        // residual [R; g F_ref] (PF4), so that the line search weighs the
+        // constraint too (from a converged start R ≈ 0, and every step along
+        // the path would otherwise count as a growth of ‖R‖)
+        if let Some(c) = self.path {
+            let g = c.value(travel, self.driven_load(du, travel));
+            res.norm = res.norm.hypot(g * res.reference);
+        }
         Ok(())
     }
 
@@ -424,13 +442,13 @@ impl StepSystem<'_> {
         field
     }
 
-    /// Residual R = f_ext + f_pen − f_int − M a (theory D16), with the
-    /// frictional edges' tangential forces (their stiffnesses into
-    /// `friction`), and its norms (D18), into `res`.
+    /// Residual R = f_ext + f_pen − f_int − M a (theory D16), the anchors
+    /// moved over `travel`, with the frictional edges' tangential forces
+    /// (their stiffnesses into `friction`), and its norms (D18), into `res`.
     fn residual(
         &self,
         trial: &TrialStresses,
-        du: &[[f64; 2]],
+        (du, travel): (&[[f64; 2]], f64),
         scratch: &mut ResidualScratch,
         res: &mut Residual,
         friction: &mut Vec<f64>,
@@ -469,7 +487,7 @@ impl StepSystem<'_> {
             &self.setup.driven_shapes,
             bins,
             du,
-            self.t + self.dt,
+            self.t + travel,
             penalty,
         );
         let residual = &mut res.residual;
@@ -633,6 +651,39 @@ impl StepSystem<'_> {
         }
     }
 
+    /// The free dofs' part of the model's last nodal increment times `factor`
+    /// (path following's start, PF4).
+    fn scaled_last_increment(&self, factor: f64) -> Vec<f64> {
+        let mut free = gather_free(&self.dofs, &self.model.last_increment);
+        free.iter_mut().for_each(|x| *x *= factor);
+        free
+    }
+
+    /// The driven load F of the rigid bodies at the increment `du` with the
+    /// anchors moved over `travel` (theory PF1), kN/m.
+    pub fn driven_load(&self, du: &[[f64; 2]], travel: f64) -> f64 {
+        let model = self.model;
+        model.driven.load_along_motion(
+            &model.particles,
+            &self.setup.driven_shapes,
+            &self.setup.bins,
+            du,
+            self.t + travel,
+        )
+    }
+
+    /// ∂f_pen/∂τ and the derivatives of the driven load over the unknowns
+    /// (theory PF3).
+    fn travel_derivatives(&self) -> TravelDerivatives {
+        let setup = self.setup;
+        self.model.driven.travel_derivatives(
+            &setup.driven_shapes,
+            &setup.bins,
+            &self.dofs.index,
+            self.dofs.n_free,
+        )
+    }
+
     /// theory §3 motion limit (dynamic): no point may move more than half a
     /// cell in one step.
     fn check_motion(&self, du: &[[f64; 2]]) -> Result<(), NewtonFailure> {
@@ -681,6 +732,8 @@ enum Verdict {
 #[derive(Default)]
 struct Candidate {
     du: Vec<[f64; 2]>,
+    /// The anchors' step (`dt`, or Δτ under path following).
+    travel: f64,
     trial: TrialStresses,
     residual: Residual,
     alpha: f64,
@@ -747,6 +800,7 @@ impl Convergence {
         iteration: usize,
         res: &Residual,
         free_residual: &[f64],
+        constraint_met: bool,
         kappa_settled: impl FnOnce() -> Result<bool, StepError>,
     ) -> Result<Verdict, NewtonError> {
         if !res.norm.is_finite() {
@@ -772,7 +826,7 @@ impl Convergence {
         let stagnated = !energy_converged && force_ok && stagnating(&self.history);
         let energy_ok = energy_converged || stagnated;
         let kappa_ok = kappa_settled()?;
-        if force_ok && energy_ok && kappa_ok {
+        if force_ok && energy_ok && kappa_ok && constraint_met {
             return Ok(Verdict::Converged { stagnated });
         }
         if iteration == self.max_iterations {
@@ -780,6 +834,7 @@ impl Convergence {
                 (!force_ok).then_some(Criterion::Force),
                 (!energy_ok).then_some(Criterion::Energy),
                 (!kappa_ok).then_some(Criterion::NonlocalKappa),
+                (!constraint_met).then_some(Criterion::PathConstraint),
             ];
             let cause = NewtonFailure::IterationLimit {
                 iterations: self.max_iterations,
@@ -877,14 +932,25 @@ pub fn solve(
         spare,
         scratch,
     } = buffers;
-    current.du = system.initial_increment(&system.predictor());
+    current.travel = system.dt;
+    current.du = match system.path {
+        // path following starts from the last step scaled (PF4)
+        Some(c) => {
+            current.travel = c.start_travel;
+            system.initial_increment(&system.scaled_last_increment(c.predictor))
+        }
+        None => system.initial_increment(&system.predictor()),
+    };
+    let path = system.path.map(|c| (c, system.travel_derivatives()));
     let Candidate {
         du,
         trial,
         residual,
+        travel,
         ..
     } = &mut *current;
-    system.evaluate_into(du, nonlocal.as_deref(), trial, scratch, residual, profile)?;
+    let at = (&du[..], *travel);
+    system.evaluate_into(at, nonlocal.as_deref(), trial, scratch, residual, profile)?;
     let mut free_residual = Vec::new();
     // `judge` ends the loop: at convergence, or with an error at the iteration limit
     let mut iteration = 0;
@@ -893,9 +959,14 @@ pub fn solve(
             du,
             trial,
             residual: res,
+            travel,
             ..
         } = &*current;
+        let travel = *travel;
         gather_free_into(&system.dofs, &res.residual, &mut free_residual);
+        let constraint = path
+            .as_ref()
+            .map(|(c, _)| c.value(travel, system.driven_load(du, travel)));
         let kappa_settled = || match nonlocal.as_deref_mut() {
             Some(nl) => Ok(profile.time(Stage::Nonlocal, || {
                 nl.iterate(
@@ -906,9 +977,17 @@ pub fn solve(
             })?),
             None => Ok(true),
         };
-        if let Verdict::Converged { stagnated } =
-            convergence.judge(iteration, res, &free_residual, kappa_settled)?
-        {
+        let constraint_met = path
+            .as_ref()
+            .zip(constraint)
+            .is_none_or(|((c, _), g)| c.met(g));
+        if let Verdict::Converged { stagnated } = convergence.judge(
+            iteration,
+            res,
+            &free_residual,
+            constraint_met,
+            kappa_settled,
+        )? {
             usage.stagnated_steps += usize::from(stagnated);
             let history = convergence.history;
             system
@@ -916,6 +995,7 @@ pub fn solve(
                 .map_err(|cause| NewtonError::failed(cause, &history))?;
             return Ok(Solution {
                 du: std::mem::take(&mut current.du),
+                travel,
                 trial: std::mem::take(&mut current.trial),
                 residual: std::mem::take(&mut current.residual),
                 iterations: iteration,
@@ -925,12 +1005,33 @@ pub fn solve(
         if iteration >= CONTACT_HOLD_ITERATION && !system.model.friction.is_empty() {
             system.hold_sticks(du);
         }
-        let correction = tangent.solve(system, trial, &free_residual, usage, profile)?;
-        if correction.iter().any(|v| !v.is_finite()) {
+        // path following solves the bordered system (PF4); the energy
+        // norm's reference is then the work of the load R + (∂f_pen/∂τ) δτ
+        let (correction, travel_correction) = match path.as_ref().zip(constraint) {
+            Some(((c, derivatives), g)) => tangent.solve_bordered(
+                system,
+                trial,
+                (&free_residual, &c.border(derivatives, g)),
+                usage,
+                profile,
+            )?,
+            None => (
+                tangent.solve(system, trial, &free_residual, usage, profile)?,
+                0.0,
+            ),
+        };
+        let loaded: std::borrow::Cow<[f64]> = match &path {
+            Some((_, derivatives)) => (free_residual.iter())
+                .zip(&derivatives.force_rate)
+                .map(|(r, q)| r + q * travel_correction)
+                .collect(),
+            None => (&free_residual[..]).into(),
+        };
+        if correction.iter().any(|v| !v.is_finite()) || !travel_correction.is_finite() {
             let cause = NewtonFailure::NonFinite("solution of the linear system");
             return Err(NewtonError::failed(cause, &convergence.history));
         }
-        convergence.first_correction(iteration, &correction, &free_residual);
+        convergence.first_correction(iteration, &correction, &loaded);
         // κ̄ changed since `res` was evaluated: the line search compares against
         // the residual at the current κ̄, so re-evaluate the reference first.
         let reference_norm = match nonlocal.as_deref() {
@@ -942,7 +1043,7 @@ pub fn solve(
                 // no tangent is assembled from this residual: none is formed
                 let tangents = false;
                 system.evaluate_with(
-                    du,
+                    (du, travel),
                     Some(nl),
                     trial,
                     (scratch, residual),
@@ -956,6 +1057,7 @@ pub fn solve(
         let slots = (&mut *best, &mut *spare);
         convergence.line_search(&correction, reference_norm, slots, |alpha, slot| {
             slot.alpha = alpha;
+            slot.travel = travel + alpha * travel_correction;
             slot.du.clear();
             slot.du.extend_from_slice(du);
             for (d, &index) in system.dofs.index.iter().enumerate() {
@@ -967,10 +1069,11 @@ pub fn solve(
                 du,
                 trial,
                 residual,
+                travel,
                 ..
             } = slot;
             let nl = nonlocal.as_deref();
-            match system.evaluate_into(du, nl, trial, scratch, residual, profile) {
+            match system.evaluate_into((du, *travel), nl, trial, scratch, residual, profile) {
                 Ok(()) => Ok(residual.norm.is_finite()),
                 // a failed stress update at a too-long step: shorten it
                 Err(NewtonError::Constitutive(..)) => Ok(false),

@@ -184,22 +184,47 @@ impl Tangent {
     ) -> Result<Vec<f64>, StepError> {
         self.assemble_reusing(system, trial, profile)?;
         let matrix = self.matrix.take().expect("assembled above");
-        let result = self.factorise_and_solve(system, &matrix, residual, usage, profile);
+        let symmetric = self.symmetric;
+        let result = self.factorise_and_solve(system, &matrix, residual, symmetric, usage, profile);
         self.matrix = Some(matrix);
         result
     }
 
-    /// Factorise the assembled `matrix` and solve for the correction
-    /// ([`Self::solve`]).
+    /// Assemble the tangent, border it (theory PF4) and solve
+    /// [K −∂f/∂τ; ∂gᵀ/∂Δu ∂g/∂τ] [δu; δτ] = [R; −g] by LU: the correction δu
+    /// and the travel correction δτ. The border keeps the system regular
+    /// where K is singular, at a limit point or along a mechanism of the
+    /// softened soil that the path constraint controls.
+    pub fn solve_bordered(
+        &mut self,
+        system: &StepSystem,
+        trial: &TrialStresses,
+        (residual, border): (&[f64], &Border),
+        usage: &mut SolverUsage,
+        profile: &Profile,
+    ) -> Result<(Vec<f64>, f64), StepError> {
+        let matrix = self.assemble_reusing(system, trial, profile)?;
+        let bordered = matrix.bordered(&border.column, &border.row, border.corner)?;
+        let mut rhs = residual.to_vec();
+        rhs.push(border.rhs);
+        let unsymmetric = false;
+        let mut x =
+            self.factorise_and_solve(system, &bordered, &rhs, unsymmetric, usage, profile)?;
+        let travel = x.pop().unwrap_or(0.0);
+        Ok((x, travel))
+    }
+
+    /// Factorise the assembled `matrix` (Cholesky allowed where
+    /// `symmetric`) and solve for the correction ([`Self::solve`]).
     fn factorise_and_solve(
         &mut self,
         system: &StepSystem,
         matrix: &SparseMatrix,
         residual: &[f64],
+        symmetric: bool,
         usage: &mut SolverUsage,
         profile: &Profile,
     ) -> Result<Vec<f64>, StepError> {
-        let symmetric = self.symmetric;
         let before = self.solver.stats();
         let kind = profile.time(Stage::Factorisation, || {
             self.solver.factorize(matrix, symmetric)
@@ -255,6 +280,20 @@ impl Tangent {
         self.pattern_current = true;
         Ok(())
     }
+}
+
+/// The border of path following's Newton system (theory PF4), over the
+/// unknowns: sparse `(unknown, value)` pairs in increasing order.
+#[derive(Clone, Debug, Default)]
+pub struct Border {
+    /// −∂R/∂τ = −∂f_pen/∂τ.
+    pub column: Vec<(usize, f64)>,
+    /// ∂g/∂Δu.
+    pub row: Vec<(usize, f64)>,
+    /// ∂g/∂τ.
+    pub corner: f64,
+    /// −g at the iterate.
+    pub rhs: f64,
 }
 
 /// What a step's elements and their system dofs are made of

@@ -167,7 +167,7 @@ pub fn explain(message: &str, keys: Option<&str>) -> (String, Option<String>) {
 }
 
 /// An error of deserialising a `toml::Value` (a parameter table, say) in
-/// plain words, naming its key: [`message_and_keys`] then [`explain`].
+/// plain words, naming its key: `message_and_keys` then `explain`.
 pub fn plain_toml_error(error: &toml::de::Error) -> String {
     let (message, keys) = message_and_keys(error);
     explain(&message, keys.as_deref()).0

@@ -388,6 +388,23 @@ pub enum TimeStepControl {
     Adaptive,
 }
 
+/// `[solver] path_following`: how a quasi-static run driven by rigid bodies
+/// chooses its steps.
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum PathFollowing {
+    /// Each step moves the rigid bodies by `velocity · scene.dt`
+    /// (displacement control; halved where Newton fails).
+    #[default]
+    Off,
+    /// The rigid bodies' travel is an unknown of each step: the travel is
+    /// prescribed in the elastic range, the plastic travel (whose product
+    /// with the load is the dissipated energy) once the steps are mostly
+    /// plastic (theory §3.7, PF1–PF5): the run follows a load–displacement
+    /// path through its peak and where it snaps back.
+    Dissipation,
+}
+
 /// `[solver] pcg_preconditioner`.
 #[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, Eq)]
 #[serde(rename_all = "snake_case")]
@@ -453,9 +470,19 @@ pub struct SolverSpec {
     pub dt_min: Option<f64>,
     /// Adaptive steps: the largest step, s (default 100 `scene.dt`).
     pub dt_max: Option<f64>,
+    /// Quasi-static runs driven by rigid bodies: `off` or `dissipation`.
+    pub path_following: PathFollowing,
+    /// Path following: the most steps the run may take to reach its end
+    /// travel (default 10 × `scene.steps`).
+    pub path_max_steps: Option<usize>,
 }
 
 impl SolverSpec {
+    /// Whether a quasi-static run follows its path (dissipation control).
+    pub fn follows_path(&self) -> bool {
+        self.path_following == PathFollowing::Dissipation
+    }
+
     /// Whether an implicit dynamic run chooses its own steps.
     pub fn adaptive(&self) -> bool {
         self.time_step == TimeStepControl::Adaptive
@@ -508,6 +535,8 @@ impl Default for SolverSpec {
             error_tolerance: 1e-3,
             dt_min: None,
             dt_max: None,
+            path_following: PathFollowing::Off,
+            path_max_steps: None,
         }
     }
 }

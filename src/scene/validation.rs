@@ -340,6 +340,68 @@ impl Scene {
         }
     }
 
+    /// `[solver] path_following = "dissipation"` (theory §3.7): a quasi-static
+    /// run whose only loading that moves is its rigid bodies, each starting
+    /// at full velocity (the travel, not the time, is the unknown).
+    fn validate_path_following(&self, e: &mut Vec<FieldError>) {
+        let s = &self.solver;
+        if let Some(n) = s.path_max_steps {
+            check(e, "solver.path_max_steps", n >= 1, "must be >= 1");
+        }
+        if !s.follows_path() {
+            return;
+        }
+        let field = "solver.path_following";
+        check(
+            e,
+            field,
+            self.scene.analysis == AnalysisKind::QuasiStatic,
+            format!(
+                "\"dissipation\" needs scene.analysis = \"quasi_static\" (got \"{}\"; a dynamic run has time as its parameter)",
+                self.scene.analysis.key()
+            ),
+        );
+        check(
+            e,
+            field,
+            !self.bc.rigid.is_empty(),
+            "\"dissipation\" follows the travel of rigid bodies, and the scene has no [[bc.rigid]]",
+        );
+        let moving = [
+            ("bc.prescribed", !self.bc.prescribed.is_empty()),
+            ("bc.friction", !self.bc.friction.is_empty()),
+            ("loads.gravity_ramp", self.loads.gravity_ramp.is_some()),
+        ];
+        for (key, present) in moving {
+            check(
+                e,
+                key,
+                !present,
+                "cannot be combined with solver.path_following = \"dissipation\", whose only moving load is the rigid bodies' travel",
+            );
+        }
+        check(
+            e,
+            "solver.linear_solver",
+            matches!(s.linear_solver, LinearSolverChoice::Auto | LinearSolverChoice::Lu),
+            format!("must be \"auto\" or \"lu\" with solver.path_following = \"dissipation\" (got {:?}): its bordered system is unsymmetric", s.linear_solver),
+        );
+        for (i, r) in self.bc.rigid.iter().enumerate() {
+            check(
+                e,
+                format!("bc.rigid[{i}].velocity"),
+                r.velocity != [0.0, 0.0],
+                "must not be zero with solver.path_following = \"dissipation\": the path is the rigid bodies' travel",
+            );
+            check(
+                e,
+                format!("bc.rigid[{i}].ramp_time"),
+                r.ramp_time == 0.0,
+                format!("must be 0 with solver.path_following = \"dissipation\" (got {}; a quasi-static path has no inertia to start smoothly)", r.ramp_time),
+            );
+        }
+    }
+
     fn validate_analysis(&self, e: &mut Vec<FieldError>) {
         let a = &self.scene;
         if let Some(dt) = a.dt {
@@ -557,6 +619,7 @@ impl Scene {
             );
         }
         self.validate_step_control(e);
+        self.validate_path_following(e);
         if let Some(rho) = s.rho_infinity {
             check(
                 e,
