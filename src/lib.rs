@@ -22,7 +22,8 @@
 //!   [`provenance`] (where a run came from, what it found),
 //!   [`checkpoint`] (saving and resuming a run), [`scene`]
 //!   (TOML input and its validation), [`campaign`] and [`metrics`] (mesh
-//!   studies), [`study`] (error against run time), [`error`];
+//!   studies), [`paper`] (the three campaigns in one command), [`study`]
+//!   (error against run time), [`error`];
 //! - runs that survive: [`atomic_file`] (outputs whole or absent),
 //!   [`output_dir`] (the output directory's lock and reuse), [`manifest`]
 //!   (the files a run records it wrote), [`interrupt`]
@@ -53,6 +54,7 @@ pub mod monitor;
 pub mod nonlocal;
 pub mod output;
 pub mod output_dir;
+pub mod paper;
 pub mod parallel;
 pub mod particles;
 pub mod plot;

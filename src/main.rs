@@ -127,6 +127,38 @@ enum Command {
         #[arg(long, value_name = "N", value_parser = cli_values::positive_u64)]
         checkpoint_every: Option<u64>,
     },
+    /// The whole paper: the biaxial, footing and vertical-cut campaigns one
+    /// after the other into OUT/campaign-<name>/, and OUT/README.md putting
+    /// each report beside the paper's figures and claim. Resumes like a
+    /// campaign (finished runs are not run again). Measured at full size on
+    /// 2 cores: hours (the cut's 16 runs alone ~2 h); `--set` or `--from`
+    /// with coarse copies for a quick look.
+    Paper {
+        /// Output directory (default: out/paper).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// The folder holding biaxial/, footing/ and vertical_cut/.
+        #[arg(long = "from", value_name = "DIR", default_value = "validation")]
+        root: PathBuf,
+        /// Scenes run at the same time.
+        #[arg(long, default_value_t = 2, value_parser = cli_values::count)]
+        jobs: usize,
+        /// Override a value in every scene; an empty value removes the key (repeatable).
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        overrides: Vec<String>,
+        /// `ours` or `paper` (as for `campaign`).
+        #[arg(long, value_enum, default_value_t = FormulationArg::Ours)]
+        formulation: FormulationArg,
+        /// Run only the K-th of N disjoint parts of every campaign; no reports.
+        #[arg(long, value_name = "K/N", conflicts_with = "collect")]
+        shard: Option<String>,
+        /// Run nothing: build the reports and the index from the shards' runs.
+        #[arg(long)]
+        collect: bool,
+        /// Checkpoint every run every N steps (a killed run resumes from it).
+        #[arg(long, value_name = "N", value_parser = cli_values::positive_u64)]
+        checkpoint_every: Option<u64>,
+    },
     /// Error against run time: run a study spec's sweep (each run a whole
     /// process, timed `repeats` times) and write study.csv,
     /// work_precision.png and report.md.
@@ -250,6 +282,60 @@ fn main() -> ExitCode {
                         );
                     }
                     if stopped == 0 {
+                        ExitCode::SUCCESS
+                    } else {
+                        ExitCode::from(1)
+                    }
+                }
+                Err(e @ mpm_geo::campaign::CampaignError::Interrupted { signal, .. }) => {
+                    eprintln!("{e}");
+                    ExitCode::from(signal.exit_code())
+                }
+                Err(e) => fail_with(2, &e),
+            }
+        }
+        Command::Paper {
+            out,
+            root,
+            jobs,
+            overrides,
+            formulation,
+            shard,
+            collect,
+            checkpoint_every,
+        } => {
+            let part = match parse_part(shard, collect) {
+                Ok(part) => part,
+                Err(e) => return fail(2, ErrorId::CliArgument, &e),
+            };
+            let formulation = match formulation {
+                FormulationArg::Ours => Formulation::AsWritten,
+                FormulationArg::Paper => Formulation::Paper,
+            };
+            let out = out.unwrap_or_else(|| PathBuf::from("out").join("paper"));
+            let options = CampaignOptions {
+                jobs,
+                overrides,
+                step_refinement: None,
+                formulation,
+                part,
+                checkpoint_every: checkpoint_every.map(|n| n as usize),
+            };
+            install_interrupt();
+            match mpm_geo::paper::run_paper(&root, &out, &options) {
+                Ok(outcomes) => {
+                    for o in &outcomes {
+                        let what = match &o.error {
+                            Some(e) => format!("not reported: {e}"),
+                            None => format!("{} runs ({} stopped early)", o.runs, o.stopped),
+                        };
+                        eprintln!("paper: {}: {what} in {:.0} s", o.benchmark.name, o.seconds);
+                    }
+                    if !matches!(part, Part::Shard { .. }) {
+                        eprintln!("paper: index in {}", out.join("README.md").display());
+                    }
+                    let whole = outcomes.iter().all(|o| o.error.is_none() && o.stopped == 0);
+                    if whole {
                         ExitCode::SUCCESS
                     } else {
                         ExitCode::from(1)

@@ -84,7 +84,7 @@ fn every_guide_command_runs() {
         }
         assert_eq!(words[0], "mpm-geo", "{line}");
         let mut args: Vec<String> = words[1..].to_vec();
-        if ["run", "campaign", "study"].contains(&args[0].as_str()) {
+        if ["run", "campaign", "study", "paper"].contains(&args[0].as_str()) {
             if args[0] == "run" {
                 let scene = std::fs::read_to_string(scratch.path().join(&args[1])).unwrap();
                 assert!(

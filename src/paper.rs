@@ -1,0 +1,146 @@
+//! `mpm-geo paper`: the paper's three benchmarks in one command. The
+//! biaxial, footing and vertical-cut campaigns (the directories of that name
+//! under the root, `validation/` by default) run one after the other, each
+//! into its own folder of the output (`campaign-<name>/`, as `mpm-geo
+//! campaign` writes it), and `README.md` there puts every campaign's report
+//! beside the paper's figures and the claim they test. Like a campaign it
+//! resumes (a finished run is not run again) and shards (`--shard K/N`
+//! shards every campaign; `--collect` then builds the reports and the index).
+
+use std::path::Path;
+use std::time::Instant;
+
+use crate::campaign::{run_campaign, CampaignError, CampaignOptions, Part};
+
+/// One benchmark of the paper: its campaign directory and what it tests.
+#[derive(Clone, Copy, Debug)]
+pub struct PaperBenchmark {
+    /// Directory under the root, and the campaign's folder `campaign-<name>`.
+    pub name: &'static str,
+    /// The paper's figures the campaign draws.
+    pub figures: &'static str,
+    /// The claim of the paper they test.
+    pub claim: &'static str,
+}
+
+/// The paper's benchmarks, in its order (paper §3).
+pub const BENCHMARKS: [PaperBenchmark; 3] = [
+    PaperBenchmark {
+        name: "biaxial",
+        figures: "Figs. 3–5",
+        claim: "local runs grow more brittle and their band narrower as the mesh is refined; nonlocal runs keep one curve and a band of width ≈ l_s",
+    },
+    PaperBenchmark {
+        name: "footing",
+        figures: "Figs. 7–8",
+        claim: "similar peak loads on every mesh; after the peak the local runs soften more, and more with finer meshes, with a secondary band under the corner; nonlocal runs do not",
+    },
+    PaperBenchmark {
+        name: "vertical_cut",
+        figures: "Figs. 10–12",
+        claim: "the nonlocal column fails alike on every mesh (q at B, u_A); local final displacements depend strongly on the mesh",
+    },
+];
+
+/// What one benchmark's campaign did.
+#[derive(Clone, Debug)]
+pub struct PaperOutcome {
+    /// The benchmark.
+    pub benchmark: PaperBenchmark,
+    /// Runs of the campaign (this shard's with `--shard`).
+    pub runs: usize,
+    /// Runs that stopped early.
+    pub stopped: usize,
+    /// Wall time of the campaign in this command, s.
+    pub seconds: f64,
+    /// Why the campaign could not run or report (`None`: it did).
+    pub error: Option<String>,
+}
+
+/// Run the campaign of every benchmark found under `root` into
+/// `out/campaign-<name>`, then write `out/README.md` (not for a shard). A
+/// campaign that cannot run or report is recorded in its outcome and the
+/// next one runs; an interrupt stops the command at once.
+pub fn run_paper(
+    root: &Path,
+    out: &Path,
+    options: &CampaignOptions,
+) -> Result<Vec<PaperOutcome>, CampaignError> {
+    let mut outcomes = Vec::new();
+    for benchmark in BENCHMARKS {
+        let start = Instant::now();
+        let dir = root.join(benchmark.name);
+        let result = run_campaign(&dir, &campaign_dir(out, benchmark), options);
+        let (runs, stopped, error) = match result {
+            Err(e @ CampaignError::Interrupted { .. }) => return Err(e),
+            Err(e) => (0, 0, Some(e.to_string())),
+            Ok(runs) => {
+                let stopped = runs.iter().filter(|r| r.error.is_some()).count();
+                (runs.len(), stopped, None)
+            }
+        };
+        outcomes.push(PaperOutcome {
+            benchmark,
+            runs,
+            stopped,
+            seconds: start.elapsed().as_secs_f64(),
+            error,
+        });
+    }
+    if !matches!(options.part, Part::Shard { .. }) {
+        crate::atomic_file::write_atomic(&out.join("README.md"), index(&outcomes)).map_err(
+            |e| CampaignError::Output(out.join("README.md").display().to_string(), e.to_string()),
+        )?;
+    }
+    Ok(outcomes)
+}
+
+/// The folder of `benchmark`'s campaign under `out`.
+pub fn campaign_dir(out: &Path, benchmark: PaperBenchmark) -> std::path::PathBuf {
+    out.join(format!("campaign-{}", benchmark.name))
+}
+
+/// The index page: one row per benchmark, its report beside the claim.
+fn index(outcomes: &[PaperOutcome]) -> String {
+    let mut text = String::from(
+        "# The paper's benchmarks\n\nWritten by `mpm-geo paper`. Each campaign's `report.md` holds its curves, metrics and figures.\n\n| benchmark | paper | claim tested | runs | stopped early | wall time, s | report |\n|---|---|---|---|---|---|---|\n",
+    );
+    for o in outcomes {
+        let b = o.benchmark;
+        let report = match &o.error {
+            None => format!("[report](campaign-{}/report.md)", b.name),
+            Some(e) => format!("not written: {}", e.replace('|', "\\|").replace('\n', " ")),
+        };
+        text.push_str(&format!(
+            "| {} | {} | {} | {} | {} | {:.0} | {} |\n",
+            b.name, b.figures, b.claim, o.runs, o.stopped, o.seconds, report
+        ));
+    }
+    text
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The index links each report that was written and says why another was
+    /// not, one row per benchmark, with a table cell that stays one cell.
+    #[test]
+    fn index_links_reports_and_names_failures() {
+        let outcome = |i: usize, error: Option<&str>| PaperOutcome {
+            benchmark: BENCHMARKS[i],
+            runs: 4,
+            stopped: 1,
+            seconds: 12.0,
+            error: error.map(String::from),
+        };
+        let text = index(&[
+            outcome(0, None),
+            outcome(1, Some("campaign directory x: no scene | none")),
+            outcome(2, None),
+        ]);
+        assert!(text.contains("[report](campaign-biaxial/report.md)"));
+        assert!(text.contains("not written: campaign directory x: no scene \\| none"));
+        assert_eq!(text.lines().filter(|l| l.starts_with("| ")).count(), 4);
+    }
+}

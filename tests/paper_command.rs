@@ -1,0 +1,84 @@
+//! The `paper` command end to end on one short scene per benchmark (copies
+//! of the coarsest validation scenes with their campaign specs, 4 steps):
+//! the three campaigns write their reports, the index links each beside its
+//! figures, and a second command resumes: no finished run is run again.
+
+mod common;
+
+use std::path::Path;
+use std::process::Command;
+
+/// A root folder like `validation/` holding, per benchmark, one scene and
+/// the benchmark's `campaign.toml`.
+fn short_root(dir: &Path) {
+    for (benchmark, scene) in [
+        ("biaxial", "local_h300.toml"),
+        ("footing", "local_h250.toml"),
+        ("vertical_cut", "local_h100.toml"),
+    ] {
+        let to = dir.join(benchmark);
+        std::fs::create_dir_all(&to).unwrap();
+        for file in [scene, "campaign.toml"] {
+            let from = common::validation(&format!("{benchmark}/{file}"));
+            std::fs::copy(from, to.join(file)).unwrap();
+        }
+    }
+}
+
+/// `mpm-geo paper` from `root` into `out`, 4 steps a run.
+fn paper(root: &Path, out: &Path) -> std::process::ExitStatus {
+    Command::new(env!("CARGO_BIN_EXE_mpm-geo"))
+        .args(["paper", "--from", root.to_str().unwrap(), "--out"])
+        .arg(out)
+        .args(["--set", "scene.steps=4", "--set", "output.snapshots=[]"])
+        .status()
+        .unwrap()
+}
+
+#[test]
+fn paper_runs_three_campaigns_indexes_them_and_resumes() {
+    let dir = tempfile::tempdir().unwrap();
+    let (root, out) = (dir.path().join("root"), dir.path().join("out"));
+    short_root(&root);
+    assert!(paper(&root, &out).success());
+    let index = std::fs::read_to_string(out.join("README.md")).unwrap();
+    for (name, figures) in [
+        ("biaxial", "Figs. 3–5"),
+        ("footing", "Figs. 7–8"),
+        ("vertical_cut", "Figs. 10–12"),
+    ] {
+        let row = index
+            .lines()
+            .find(|l| l.starts_with(&format!("| {name} |")))
+            .unwrap_or_else(|| panic!("no row for {name}:\n{index}"));
+        assert!(row.contains(figures), "{row}");
+        assert!(
+            row.contains(&format!("[report](campaign-{name}/report.md)")),
+            "{row}"
+        );
+        assert!(out.join(format!("campaign-{name}/report.md")).is_file());
+    }
+    // the cut's campaign runs each scene with both integrators
+    let runs = [
+        "campaign-biaxial/local_h300",
+        "campaign-footing/local_h250",
+        "campaign-vertical_cut/local_h100",
+        "campaign-vertical_cut/local_h100_explicit",
+    ];
+    // a run done again would write its run.json anew
+    let written = |out: &Path| -> Vec<std::time::SystemTime> {
+        runs.iter()
+            .map(|r| {
+                out.join(r)
+                    .join("run.json")
+                    .metadata()
+                    .unwrap()
+                    .modified()
+                    .unwrap()
+            })
+            .collect()
+    };
+    let first = written(&out);
+    assert!(paper(&root, &out).success());
+    assert_eq!(written(&out), first, "a finished run was run again");
+}
