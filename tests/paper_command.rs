@@ -1,7 +1,7 @@
 //! The `paper` command end to end on one short scene per benchmark (copies
 //! of the coarsest validation scenes with their campaign specs, 4 steps):
-//! the three campaigns write their reports, the index links each beside its
-//! figures, and a second command resumes: no finished run is run again.
+//! the three campaigns write their reports (each naming every run's scheme),
+//! the index links each beside its figures, and a second command resumes: no finished run is run again.
 
 mod common;
 
@@ -58,6 +58,13 @@ fn paper_runs_three_campaigns_indexes_them_and_resumes() {
         );
         assert!(out.join(format!("campaign-{name}/report.md")).is_file());
     }
+    // each report says which scheme each run used
+    let cut = std::fs::read_to_string(out.join("campaign-vertical_cut/report.md")).unwrap();
+    assert!(
+        cut.contains("implicit dynamic, generalised-α ρ∞ = 0.8"),
+        "{cut}"
+    );
+    assert!(cut.contains("explicit MUSL, CFL"), "{cut}");
     // the cut's campaign runs each scene with both integrators
     let runs = [
         "campaign-biaxial/local_h300",

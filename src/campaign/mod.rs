@@ -146,6 +146,8 @@ pub struct CampaignRun {
     pub scene: String,
     /// The integrator the run used.
     pub analysis: AnalysisKind,
+    /// The scheme in words ([`crate::scene::Scene::scheme`]), for the report.
+    pub scheme: String,
     /// Time histories of a time-history benchmark (the cut: u_A, q_B, run-out).
     pub history: Option<History>,
     /// Fields at the scene's `[output] snapshot_times` (paper Fig. 10).

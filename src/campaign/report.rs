@@ -396,10 +396,12 @@ pub(super) fn stopped_notes(runs: &[CampaignRun]) -> String {
 
 /// The report section with every run's stage profile (wall time by stage).
 pub(super) fn profiles_section(runs: &[CampaignRun]) -> String {
-    let mut md =
-        String::from("\n## Stage profiles\n\nWall time of every run by stage (exclusive).\n\n");
+    let mut md = String::from(
+        "\n## Stage profiles\n\nThe scheme of every run and its wall time by stage (exclusive).\n\n",
+    );
     for r in runs {
-        let _ = writeln!(md, "### {}\n\n```\n{}\n```\n", r.name, r.profile.trim_end());
+        let (name, scheme, profile) = (&r.name, &r.scheme, r.profile.trim_end());
+        let _ = writeln!(md, "### {name}\n\n{scheme}\n\n```\n{profile}\n```\n");
     }
     md
 }

@@ -450,6 +450,7 @@ fn gather(
     let mut run = CampaignRun {
         scene: planned.scene_file.clone(),
         analysis: scene.scene.analysis,
+        scheme: scene.scheme(),
         history: None,
         fields: record.fields,
         volumes: record.volumes,

@@ -27,6 +27,7 @@ fn blank_run(
         dissipation: None,
         energy: None,
         wall_seconds: 0.0,
+        scheme: String::new(),
         profile: String::new(),
         step_factor: 1,
         scene: name.trim_end_matches("_explicit").into(),

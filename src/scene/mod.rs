@@ -209,6 +209,28 @@ fn list(errors: &[FieldError]) -> String {
 }
 
 impl Scene {
+    /// The time scheme in words, for reports: "quasi-static", "quasi-static,
+    /// path following (dissipation control)", "implicit dynamic, Newmark γ =
+    /// 0.6" or "explicit MUSL, CFL 0.5".
+    pub fn scheme(&self) -> String {
+        let solver = &self.solver;
+        match self.scene.analysis {
+            AnalysisKind::QuasiStatic if solver.follows_path() => {
+                "quasi-static, path following (dissipation control)".into()
+            }
+            AnalysisKind::QuasiStatic => "quasi-static".into(),
+            AnalysisKind::ImplicitDynamic => {
+                let steps = if solver.adaptive() {
+                    ", adaptive steps"
+                } else {
+                    ""
+                };
+                format!("implicit dynamic, {}{steps}", solver.time_scheme())
+            }
+            AnalysisKind::Explicit => format!("explicit MUSL, CFL {}", solver.cfl),
+        }
+    }
+
     /// Read, apply `overrides` (`key.path=value`), parse and validate a scene file.
     pub fn load(path: &Path, overrides: &[String]) -> Result<Scene, SceneError> {
         let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io {
