@@ -98,34 +98,12 @@ enum Command {
         /// Output directory (default: out/campaign-<dir name>).
         #[arg(long)]
         out: Option<PathBuf>,
-        /// Scenes run at the same time.
-        #[arg(long, default_value_t = 2, value_parser = cli_values::count)]
-        jobs: usize,
-        /// Override a value in every scene; an empty value removes the key (repeatable).
-        #[arg(long = "set", value_name = "KEY=VALUE")]
-        overrides: Vec<String>,
         /// Also run every scene with K times the steps at Δt / K and report
         /// the time-step discrepancy of each curve (step_convergence.csv).
         #[arg(long, value_name = "K", value_parser = cli_values::factor)]
         step_refinement: Option<usize>,
-        /// `ours` (the scenes as written: GIMP, m as written, no double
-        /// mapping) or `paper` (bilinear cells, Gauss points, m = 1, double
-        /// mapping of the stress increment, no B-bar); the paper's runs go
-        /// to out/campaign-<dir name>-paper by default.
-        #[arg(long, value_enum, default_value_t = FormulationArg::Ours)]
-        formulation: FormulationArg,
-        /// Run only the K-th of N disjoint parts (e.g. `--shard 2/3`), for a
-        /// cluster job array; no report (see `--collect`).
-        #[arg(long, value_name = "K/N", conflicts_with = "collect")]
-        shard: Option<String>,
-        /// Run nothing: build the report from the runs every shard left in
-        /// the output directory.
-        #[arg(long)]
-        collect: bool,
-        /// Checkpoint every run every N steps; a run stopped earlier (a
-        /// killed campaign) is then resumed from its checkpoint.
-        #[arg(long, value_name = "N", value_parser = cli_values::positive_u64)]
-        checkpoint_every: Option<u64>,
+        #[command(flatten)]
+        campaign: CampaignArgs,
     },
     /// The whole paper: the biaxial, footing and vertical-cut campaigns one
     /// after the other into OUT/campaign-<name>/, and OUT/README.md putting
@@ -140,24 +118,8 @@ enum Command {
         /// The folder holding biaxial/, footing/ and vertical_cut/.
         #[arg(long = "from", value_name = "DIR", default_value = "validation")]
         root: PathBuf,
-        /// Scenes run at the same time.
-        #[arg(long, default_value_t = 2, value_parser = cli_values::count)]
-        jobs: usize,
-        /// Override a value in every scene; an empty value removes the key (repeatable).
-        #[arg(long = "set", value_name = "KEY=VALUE")]
-        overrides: Vec<String>,
-        /// `ours` or `paper` (as for `campaign`).
-        #[arg(long, value_enum, default_value_t = FormulationArg::Ours)]
-        formulation: FormulationArg,
-        /// Run only the K-th of N disjoint parts of every campaign; no reports.
-        #[arg(long, value_name = "K/N", conflicts_with = "collect")]
-        shard: Option<String>,
-        /// Run nothing: build the reports and the index from the shards' runs.
-        #[arg(long)]
-        collect: bool,
-        /// Checkpoint every run every N steps (a killed run resumes from it).
-        #[arg(long, value_name = "N", value_parser = cli_values::positive_u64)]
-        checkpoint_every: Option<u64>,
+        #[command(flatten)]
+        campaign: CampaignArgs,
     },
     /// Error against run time: run a study spec's sweep (each run a whole
     /// process, timed `repeats` times) and write study.csv,
@@ -204,6 +166,53 @@ enum Command {
     },
 }
 
+/// The options `campaign` and `paper` share.
+#[derive(clap::Args)]
+struct CampaignArgs {
+    /// Scenes run at the same time.
+    #[arg(long, default_value_t = 2, value_parser = cli_values::count)]
+    jobs: usize,
+    /// Override a value in every scene; an empty value removes the key (repeatable).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    overrides: Vec<String>,
+    /// `ours` (the scenes as written: GIMP, m as written, no double
+    /// mapping) or `paper` (bilinear cells, Gauss points, m = 1, double
+    /// mapping of the stress increment, no B-bar); a campaign's paper runs
+    /// go to out/campaign-<dir name>-paper by default.
+    #[arg(long, value_enum, default_value_t = FormulationArg::Ours)]
+    formulation: FormulationArg,
+    /// Run only the K-th of N disjoint parts (e.g. `--shard 2/3`), for a
+    /// cluster job array; no report (see `--collect`).
+    #[arg(long, value_name = "K/N", conflicts_with = "collect")]
+    shard: Option<String>,
+    /// Run nothing: build the report from the runs every shard left in
+    /// the output directory.
+    #[arg(long)]
+    collect: bool,
+    /// Checkpoint every run every N steps; a run stopped earlier (a
+    /// killed campaign) is then resumed from its checkpoint.
+    #[arg(long, value_name = "N", value_parser = cli_values::positive_u64)]
+    checkpoint_every: Option<u64>,
+}
+
+impl CampaignArgs {
+    /// The campaign options, with `step_refinement`, or the message of a
+    /// bad `--shard`.
+    fn options(self, step_refinement: Option<usize>) -> Result<CampaignOptions, String> {
+        Ok(CampaignOptions {
+            jobs: self.jobs,
+            overrides: self.overrides,
+            step_refinement,
+            formulation: match self.formulation {
+                FormulationArg::Ours => Formulation::AsWritten,
+                FormulationArg::Paper => Formulation::Paper,
+            },
+            part: parse_part(self.shard, self.collect)?,
+            checkpoint_every: self.checkpoint_every.map(|n| n as usize),
+        })
+    }
+}
+
 /// `--formulation`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 enum FormulationArg {
@@ -233,36 +242,24 @@ fn main() -> ExitCode {
         Command::Campaign {
             dir,
             out,
-            jobs,
-            overrides,
             step_refinement,
-            formulation,
-            shard,
-            collect,
-            checkpoint_every,
+            campaign,
         } => {
-            let part = match parse_part(shard, collect) {
-                Ok(part) => part,
+            let options = match campaign.options(step_refinement) {
+                Ok(options) => options,
                 Err(e) => return fail(2, ErrorId::CliArgument, &e),
             };
+            let part = options.part;
             let name = dir
                 .file_name()
                 .map(|s| s.to_string_lossy().into_owned())
                 .unwrap_or_else(|| "campaign".into());
-            let (formulation, suffix) = match formulation {
-                FormulationArg::Ours => (Formulation::AsWritten, ""),
-                FormulationArg::Paper => (Formulation::Paper, "-paper"),
+            let suffix = match options.formulation {
+                Formulation::Paper => "-paper",
+                _ => "",
             };
             let out = out
                 .unwrap_or_else(|| PathBuf::from("out").join(format!("campaign-{name}{suffix}")));
-            let options = CampaignOptions {
-                jobs,
-                overrides,
-                step_refinement,
-                formulation,
-                part,
-                checkpoint_every: checkpoint_every.map(|n| n as usize),
-            };
             install_interrupt();
             match mpm_geo::campaign::run_campaign(&dir, &out, &options) {
                 Ok(runs) => {
@@ -297,30 +294,14 @@ fn main() -> ExitCode {
         Command::Paper {
             out,
             root,
-            jobs,
-            overrides,
-            formulation,
-            shard,
-            collect,
-            checkpoint_every,
+            campaign,
         } => {
-            let part = match parse_part(shard, collect) {
-                Ok(part) => part,
+            let options = match campaign.options(None) {
+                Ok(options) => options,
                 Err(e) => return fail(2, ErrorId::CliArgument, &e),
             };
-            let formulation = match formulation {
-                FormulationArg::Ours => Formulation::AsWritten,
-                FormulationArg::Paper => Formulation::Paper,
-            };
+            let part = options.part;
             let out = out.unwrap_or_else(|| PathBuf::from("out").join("paper"));
-            let options = CampaignOptions {
-                jobs,
-                overrides,
-                step_refinement: None,
-                formulation,
-                part,
-                checkpoint_every: checkpoint_every.map(|n| n as usize),
-            };
             install_interrupt();
             match mpm_geo::paper::run_paper(&root, &out, &options) {
                 Ok(outcomes) => {
