@@ -320,7 +320,7 @@ impl TractionPoints {
 ///   are stable up to CFL 0.9 with it (1.0 with `top_points`).
 ///   The first step then equals a bilinear FE model with the top nodes
 ///   tied: 12,635 kN/m per m on the biaxial at h = 1/300 m, as an independent
-///   FE computation gives (`tests/rigid_contact.rs`).
+///   FE computation gives (`scripts/rough_top_fe.py`, `tests/rigid_contact.rs`).
 #[derive(Clone, Debug, Default)]
 pub struct DrivenPoints {
     /// The tied material point, or `None` for a surface point.

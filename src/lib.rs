@@ -17,6 +17,8 @@
 //!   (double mapping);
 //! - the step: [`integrators`] (implicit Newton/Newmark and explicit MUSL,
 //!   each a list of named stages in the order of paper Fig. 1);
+//! - the answers: [`closed_form`] (the exact solutions the validation tests
+//!   and the studies compare runs against);
 //! - the run: [`simulation`] (time loop, monitors), [`monitor`], [`output`],
 //!   [`run`] and [`profile`] (what a run writes and measures),
 //!   [`provenance`] (where a run came from, what it found),
@@ -38,6 +40,7 @@ pub mod bc;
 pub mod campaign;
 pub mod checkpoint;
 pub mod cli_values;
+pub mod closed_form;
 pub mod constitutive;
 pub mod dofs;
 pub mod energy;

@@ -3,15 +3,20 @@
 //! (h = 1/300 and 1/500 m, local, to δ = 2.0 mm): the finer mesh is more
 //! brittle — a lower load at the final displacement — and localises in a
 //! narrower band (M4 of theory §9, measured on εq of D8 clipped at its 99th
-//! percentile, see `metrics::clip_outliers`). Both are strict
-//! inequalities between the two runs; the measured values are printed.
+//! percentile, see `metrics::clip_outliers`), about two cells wide on either
+//! mesh: a band set by the mesh, not by the material.
+//!
+//! Measured: F(δ = 2 mm) = 8.205 kN/m at h = 1/300 m and 7.144 kN/m at
+//! 1/500 m (12.9 % lower); band width 6.23 mm (1.87 h) and 4.04 mm (2.02 h),
+//! 35 % narrower. Bounds, within 2× of those: the load 6.5–26 % lower, the
+//! band 18–70 % narrower, each band 1–4 cells wide.
 
 mod common;
 
 use mpm_geo::metrics::{clip_outliers, shear_band_width};
 use mpm_geo::output::deviatoric_hencky_strain;
 
-/// (load at the last step, band width) of a local biaxial run to 200 steps.
+/// (load at the last step, band width in m) of a local biaxial run to 200 steps.
 fn run(cells_per_metre: usize) -> (f64, f64) {
     let path = format!("biaxial/local_h{cells_per_metre}.toml");
     let mut sim = common::simulation(&path, &["scene.steps=200", "output.snapshots=[]"]);
@@ -41,16 +46,20 @@ fn run(cells_per_metre: usize) -> (f64, f64) {
     (load, band.width)
 }
 
+/// value in lo..=hi, named in the failure.
+fn assert_within(name: &str, value: f64, lo: f64, hi: f64) {
+    assert!(
+        (lo..=hi).contains(&value),
+        "{name} {value:.3} not in [{lo}, {hi}]"
+    );
+}
+
 #[test]
 fn finer_local_mesh_is_more_brittle_with_a_narrower_band() {
     let (load_coarse, band_coarse) = run(300);
     let (load_fine, band_fine) = run(500);
-    assert!(
-        load_fine < load_coarse,
-        "F: h=1/500 {load_fine} vs h=1/300 {load_coarse}"
-    );
-    assert!(
-        band_fine < band_coarse,
-        "band: h=1/500 {band_fine} vs h=1/300 {band_coarse}"
-    );
+    assert_within("load drop", 1.0 - load_fine / load_coarse, 0.065, 0.26);
+    assert_within("band narrowing", 1.0 - band_fine / band_coarse, 0.18, 0.70);
+    assert_within("band at h = 1/300 m, cells", band_coarse * 300.0, 1.0, 4.0);
+    assert_within("band at h = 1/500 m, cells", band_fine * 500.0, 1.0, 4.0);
 }

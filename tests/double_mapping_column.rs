@@ -14,17 +14,8 @@ fn run(overrides: &[&str]) -> (f64, f64) {
     let mut sim: Simulation = common::simulation(SCENE, overrides);
     let history = common::run_history(&mut sim);
     let settlement = history.last().unwrap().1[common::column(&sim, "top_settlement")];
-    let scene = &sim.model.scene;
-    let g = scene.loads.gravity_ramp.as_ref().unwrap().max;
-    let rho = scene.materials["soil"].density();
-    let p = &sim.model.particles;
-    let sum: f64 = (0..p.len())
-        .map(|i| {
-            let exact = -rho * g * (1.0 - p.position0[i][1]);
-            (p.stress[i][1] - exact).powi(2)
-        })
-        .sum();
-    ((sum / p.len() as f64).sqrt(), settlement)
+    let g = sim.model.scene.loads.gravity_ramp.as_ref().unwrap().max;
+    (common::column_stress_rms(&sim, g), settlement)
 }
 
 /// Check 2: smoothing the stress increment (theory D37–D38) or the total

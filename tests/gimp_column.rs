@@ -5,16 +5,17 @@
 //! 400 steps) because each point's strain jumps when it crosses a cell edge;
 //! with GIMP it converges to the large-strain solution.
 //!
-//! Exact (1-D, hypoelastic with the Jaumann rate = logarithmic strain): the
-//! stretch at initial height Y is λ = exp(−ρ0 g (H − Y)/M), M = E(1 − ν)/((1 + ν)(1 − 2ν)),
-//! so the top settles H − (M/ρ0 g)(1 − exp(−ρ0 g H/M)) = 0.11219 m.
+//! Exact (1-D, hypoelastic with the Jaumann rate = logarithmic strain,
+//! [`mpm_geo::closed_form::Column::settlement`], theory §8.4): the top settles
+//! H − (M/ρ0 g)(1 − exp(−ρ0 g H/M)) = 0.11219 m.
 
 mod common;
 
 const SCENE: &str = "elastic/soft_column.toml";
 
-/// Top settlement (m) and RMS of σyy − (−ρ0 g (H − Y)) (kPa), GIMP, `steps` steps.
-fn run_gimp(steps: usize) -> (f64, f64) {
+/// Top settlement (m), its exact value (m) and the RMS of σyy − (−ρ0 g (H − Y))
+/// (kPa), GIMP, `steps` steps.
+fn run_gimp(steps: usize) -> (f64, f64, f64) {
     let dt = 1.0 / steps as f64;
     let overrides = [
         "grid.shape_functions=gimp".to_string(),
@@ -31,18 +32,8 @@ fn run_gimp(steps: usize) -> (f64, f64) {
     let mut sim = common::simulation(SCENE, &overrides);
     let history = common::run_history(&mut sim);
     let settlement = -history.last().unwrap().1[common::column(&sim, "top_settlement")];
-    let rho = sim.model.scene.materials["soil"].density();
-    let p = &sim.model.particles;
-    let sum: f64 = (0..p.len())
-        .map(|i| (p.stress[i][1] + rho * 9.81 * (1.0 - p.position0[i][1])).powi(2))
-        .sum();
-    (settlement, (sum / p.len() as f64).sqrt())
-}
-
-fn exact_settlement() -> f64 {
-    let (e, nu, rho, g, h): (f64, f64, f64, f64, f64) = (60.0, 0.3, 2.0, 9.81, 1.0);
-    let m = e * (1.0 - nu) / ((1.0 + nu) * (1.0 - 2.0 * nu));
-    h - m / (rho * g) * (1.0 - (-rho * g * h / m).exp())
+    let exact = common::elastic_column(&sim).settlement(9.81);
+    (settlement, exact, common::column_stress_rms(&sim, 9.81))
 }
 
 /// The settlement approaches the exact one as the step shrinks: within 1 % at
@@ -53,9 +44,8 @@ fn exact_settlement() -> f64 {
 /// double mapping; the weight at the base is 19.6 kPa).
 #[test]
 fn gimp_settlement_converges_to_the_large_strain_solution() {
-    let exact = exact_settlement();
-    let (coarse, rms) = run_gimp(20);
-    let (fine, _) = run_gimp(100);
+    let (coarse, exact, rms) = run_gimp(20);
+    let (fine, _, _) = run_gimp(100);
     let (e_coarse, e_fine) = (coarse / exact - 1.0, fine / exact - 1.0);
     assert!(e_coarse.abs() < 0.01, "20 steps: {coarse} m vs {exact} m");
     assert!(e_fine.abs() < 0.005, "100 steps: {fine} m vs {exact} m");

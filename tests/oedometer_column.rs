@@ -1,9 +1,10 @@
 //! Oedometric column under self-weight (theory §8.4), quasi-static implicit.
 //!
-//! Exact answer (1D, confined): u_y(y) = −(ρg/M)(H y − y²/2), M = K + 4G/3,
-//! σyy(y) = −ρg(H − y). With material points at the 2×2 Gauss positions the
-//! first step integrates exactly like a Q4 FE mesh, whose nodal values are
-//! exact for this 1D problem: tolerance 1e−6 relative (Newton tolerance 1e−10).
+//! Exact answer (1D, confined, [`mpm_geo::closed_form::Column`]):
+//! u_y(y) = −(ρg/M)(H y − y²/2), M = K + 4G/3, σyy(y) = −ρg(H − y). With
+//! material points at the 2×2 Gauss positions the first step integrates
+//! exactly like a Q4 FE mesh, whose nodal values are exact for this 1D
+//! problem: tolerance 1e−6 relative (Newton tolerance 1e−10).
 //! The points' σyy is the cell's constant value −ρg(H − y_mid), so within
 //! ρgh/(2√3) of the exact profile (+1e−9 relative for round-off).
 
@@ -12,14 +13,6 @@ mod common;
 const RHO: f64 = 2.0;
 const G: f64 = 9.81;
 const H: f64 = 1.0;
-
-fn constrained_modulus(e: f64, nu: f64) -> f64 {
-    e * (1.0 - nu) / ((1.0 + nu) * (1.0 - 2.0 * nu))
-}
-
-fn exact_settlement(y: f64, m: f64) -> f64 {
-    -(RHO * G / m) * (H * y - 0.5 * y * y)
-}
 
 /// Largest nodal settlement error relative to the exact top settlement, and the
 /// largest |σyy − exact| at the points, after the single gravity step.
@@ -35,17 +28,18 @@ fn column_errors(cell_size: f64, layout: &str, shift: [f64; 2]) -> (f64, f64) {
         x[1] += shift[1] * cell_size;
     }
     sim.step_once().unwrap();
-    let m = constrained_modulus(10000.0, 0.3);
-    let top = exact_settlement(H, m).abs();
+    let column = common::elastic_column(&sim);
+    let top = column.small_strain_displacement(H, G).abs();
     let mut nodal = 0.0f64;
     for (node, du) in sim.model.last_increment.iter().enumerate() {
         let y = sim.model.grid.node_position(node)[1];
-        nodal = nodal.max((du[1] - exact_settlement(y, m)).abs() / top);
+        nodal = nodal.max((du[1] - column.small_strain_displacement(y, G)).abs() / top);
     }
     let mut stress = 0.0f64;
     for p in 0..sim.model.particles.len() {
         let y0 = sim.model.particles.position0[p][1] + shift[1] * cell_size;
-        stress = stress.max((sim.model.particles.stress[p][1] + RHO * G * (H - y0)).abs());
+        let exact = column.vertical_stress(y0, G);
+        stress = stress.max((sim.model.particles.stress[p][1] - exact).abs());
     }
     (nodal, stress)
 }

@@ -4,9 +4,10 @@
 //! the top equals that of a bilinear plane-strain FE model of the quarter
 //! specimen with 2 × 2 Gauss points, rollers on the symmetry lines and the top
 //! nodes fixed horizontally and pushed down together, on the same mesh.
-//! Reference values from an independent FE code (numpy, dense solve):
-//! 12,635.3 (h = 1/300 m) and 12,631.6 kN/m per m (h = 1/1000 m); theory §8.1
-//! quotes 12,632–12,635. Tying the top row of material points instead
+//! Reference values from an independent FE code, `scripts/rough_top_fe.py`
+//! (standard-library Python, banded Cholesky; `python3 scripts/rough_top_fe.py
+//! 300 1000`): 12,635.3 (h = 1/300 m) and 12,631.6 kN/m per m (h = 1/1000 m);
+//! theory §8.1 quotes 12,632–12,635 (h = 1/1000 … 1/300 m). Tying the top row of material points instead
 //! (`contact = "top_points"`, theory §8.0) carries the soil above that row
 //! with the platen and stiffens the specimen: measured +2.6 % at h = 1/300 m.
 

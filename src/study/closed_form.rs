@@ -4,7 +4,7 @@
 
 use serde::Deserialize;
 
-use crate::constitutive::{ConstitutiveModel, LinearElastic};
+use crate::closed_form::{constrained_modulus, Column};
 use crate::scene::{
     AnalysisKind, BodySpec, Component, ElasticSpec, GridLine, LoadSpec, MaterialSpec, Scene,
     VelocityProfile,
@@ -93,19 +93,13 @@ impl BarVibration {
     }
 }
 
-/// The settlement of an elastic column under its own weight, in uniaxial
-/// strain, large strain (hypoelastic with the Jaumann rate = logarithmic
-/// strain): the stretch at initial height Y is λ = exp(−ρ g (H − Y)/M), so the
-/// top settles s(g) = H − (M/ρg)(1 − exp(−ρgH/M)) in static equilibrium at
-/// gravity g. Evaluated at the scene's gravity g(t) (quasi-static runs).
+/// The large-strain settlement of an elastic column under its own weight,
+/// in uniaxial strain ([`Column::settlement`]), in static equilibrium at the
+/// scene's gravity g(t) (quasi-static runs).
 #[derive(Clone, Debug, PartialEq)]
 pub struct ColumnSettlement {
-    /// Column height H, m.
-    pub height: f64,
-    /// Constrained (P-wave) modulus M, kPa.
-    pub modulus: f64,
-    /// Initial density ρ, t/m³.
-    pub density: f64,
+    /// Height, constrained modulus and density of the column.
+    pub column: Column,
     /// The scene's gravity, for g(t).
     pub loads: LoadSpec,
 }
@@ -113,11 +107,7 @@ pub struct ColumnSettlement {
 impl ColumnSettlement {
     /// Settlement s(g) of the top at gravity g, m (positive down).
     pub fn settlement(&self, g: f64) -> f64 {
-        if g <= 0.0 {
-            return 0.0;
-        }
-        let scale = self.modulus / (self.density * g);
-        self.height - scale * (1.0 - (-self.height / scale).exp())
+        self.column.settlement(g)
     }
 
     /// Vertical displacement of the top at time t, −s(g(t)), m.
@@ -142,9 +132,11 @@ impl ColumnSettlement {
         }
         let [lo, hi] = body.bounds();
         Ok(Self {
-            height: hi[1] - lo[1],
-            modulus: p_wave_modulus(elastic),
-            density: elastic.density,
+            column: Column {
+                height: hi[1] - lo[1],
+                modulus: p_wave_modulus(elastic),
+                density: elastic.density,
+            },
             loads: scene.loads.clone(),
         })
     }
@@ -198,9 +190,9 @@ impl ClosedForm {
             ),
             Self::Column(c) => format!(
                 "closed form `column_settlement` (H = {} m, M = {:.4} kPa, ρ = {} t/m³; s = {:.5} m at the final gravity {} m/s²)",
-                c.height,
-                c.modulus,
-                c.density,
+                c.column.height,
+                c.column.modulus,
+                c.column.density,
                 c.settlement(c.loads.gravity_ramp.as_ref().map_or(c.loads.gravity, |r| r.max)),
                 c.loads.gravity_ramp.as_ref().map_or(c.loads.gravity, |r| r.max),
             ),
@@ -209,7 +201,7 @@ impl ClosedForm {
 }
 
 fn p_wave_modulus(elastic: &ElasticSpec) -> f64 {
-    LinearElastic::new(elastic.youngs_modulus, elastic.nu).p_wave_modulus()
+    constrained_modulus(elastic.youngs_modulus, elastic.nu)
 }
 
 fn has_gravity(loads: &LoadSpec) -> bool {

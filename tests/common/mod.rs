@@ -7,7 +7,8 @@ use std::path::{Path, PathBuf};
 use std::process::Child;
 use std::time::{Duration, Instant};
 
-use mpm_geo::scene::Scene;
+use mpm_geo::closed_form::{constrained_modulus, Column};
+use mpm_geo::scene::{MaterialSpec, Scene};
 use mpm_geo::simulation::Simulation;
 
 /// Path of a file under `validation/`.
@@ -36,6 +37,31 @@ pub fn run_history(sim: &mut Simulation) -> Vec<(f64, Vec<f64>)> {
         history.push((sim.model.time, sim.monitor_values()));
     }
     history
+}
+
+/// The closed-form column of a scene whose first body is an elastic box
+/// standing on y = 0 (`elastic/oedometer.toml`, `elastic/soft_column.toml`).
+pub fn elastic_column(sim: &Simulation) -> Column {
+    let body = &sim.model.scene.body[0];
+    let MaterialSpec::LinearElastic(elastic) = &sim.model.scene.materials[&body.material] else {
+        panic!("material `{}` is not linear_elastic", body.material)
+    };
+    Column {
+        height: body.bounds()[1][1],
+        modulus: constrained_modulus(elastic.youngs_modulus, elastic.nu),
+        density: elastic.density,
+    }
+}
+
+/// RMS over the material points of σyy − [`Column::vertical_stress`] at
+/// gravity `g`, kPa.
+pub fn column_stress_rms(sim: &Simulation, g: f64) -> f64 {
+    let column = elastic_column(sim);
+    let p = &sim.model.particles;
+    let sum: f64 = (0..p.len())
+        .map(|i| (p.stress[i][1] - column.vertical_stress(p.position0[i][1], g)).powi(2))
+        .sum();
+    (sum / p.len() as f64).sqrt()
 }
 
 /// Column index of monitor `name`.
