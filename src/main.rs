@@ -213,6 +213,21 @@ impl CampaignArgs {
     }
 }
 
+/// The exit of `campaign` and `paper`: 0 when every run completed (`whole`),
+/// 1 when some stopped early, the signal's code after an interrupt, 2 on
+/// an error.
+fn campaign_exit(result: Result<bool, mpm_geo::campaign::CampaignError>) -> ExitCode {
+    match result {
+        Ok(true) => ExitCode::SUCCESS,
+        Ok(false) => ExitCode::from(1),
+        Err(e @ mpm_geo::campaign::CampaignError::Interrupted { signal, .. }) => {
+            eprintln!("{e}");
+            ExitCode::from(signal.exit_code())
+        }
+        Err(e) => fail_with(2, &e),
+    }
+}
+
 /// `--formulation`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 enum FormulationArg {
@@ -261,8 +276,8 @@ fn main() -> ExitCode {
             let out = out
                 .unwrap_or_else(|| PathBuf::from("out").join(format!("campaign-{name}{suffix}")));
             install_interrupt();
-            match mpm_geo::campaign::run_campaign(&dir, &out, &options) {
-                Ok(runs) => {
+            campaign_exit(
+                mpm_geo::campaign::run_campaign(&dir, &out, &options).map(|runs| {
                     let stopped = runs.iter().filter(|r| r.error.is_some()).count();
                     if let Part::Shard { index, count } = part {
                         eprintln!(
@@ -278,18 +293,9 @@ fn main() -> ExitCode {
                             out.join("report.md").display()
                         );
                     }
-                    if stopped == 0 {
-                        ExitCode::SUCCESS
-                    } else {
-                        ExitCode::from(1)
-                    }
-                }
-                Err(e @ mpm_geo::campaign::CampaignError::Interrupted { signal, .. }) => {
-                    eprintln!("{e}");
-                    ExitCode::from(signal.exit_code())
-                }
-                Err(e) => fail_with(2, &e),
-            }
+                    stopped == 0
+                }),
+            )
         }
         Command::Paper {
             out,
@@ -303,8 +309,8 @@ fn main() -> ExitCode {
             let part = options.part;
             let out = out.unwrap_or_else(|| PathBuf::from("out").join("paper"));
             install_interrupt();
-            match mpm_geo::paper::run_paper(&root, &out, &options) {
-                Ok(outcomes) => {
+            campaign_exit(
+                mpm_geo::paper::run_paper(&root, &out, &options).map(|outcomes| {
                     for o in &outcomes {
                         let what = match &o.error {
                             Some(e) => format!("not reported: {e}"),
@@ -315,19 +321,9 @@ fn main() -> ExitCode {
                     if !matches!(part, Part::Shard { .. }) {
                         eprintln!("paper: index in {}", out.join("README.md").display());
                     }
-                    let whole = outcomes.iter().all(|o| o.error.is_none() && o.stopped == 0);
-                    if whole {
-                        ExitCode::SUCCESS
-                    } else {
-                        ExitCode::from(1)
-                    }
-                }
-                Err(e @ mpm_geo::campaign::CampaignError::Interrupted { signal, .. }) => {
-                    eprintln!("{e}");
-                    ExitCode::from(signal.exit_code())
-                }
-                Err(e) => fail_with(2, &e),
-            }
+                    outcomes.iter().all(|o| o.error.is_none() && o.stopped == 0)
+                }),
+            )
         }
         Command::Study {
             spec,

@@ -179,6 +179,9 @@ pub struct Residual {
     pub norm: f64,
     /// Reference force of theory D18.
     pub reference: f64,
+    /// Path following: the constraint's value g at the iterate (PF2; `None`
+    /// without path following).
+    pub constraint: Option<f64>,
 }
 
 /// Node-sized buffers of the residual evaluation, reused by every
@@ -380,8 +383,10 @@ impl StepSystem<'_> {
         // residual [R; g F_ref] (PF4), so that the line search weighs the
         // constraint too (from a converged start R ≈ 0, and every step along
         // the path would otherwise count as a growth of ‖R‖)
-        if let Some(c) = self.path {
-            let g = c.value(travel, self.driven_load(du, travel));
+        res.constraint = self
+            .path
+            .map(|c| c.value(travel, self.driven_load(du, travel)));
+        if let Some(g) = res.constraint {
             res.norm = res.norm.hypot(g * res.reference);
         }
         Ok(())
@@ -964,9 +969,7 @@ pub fn solve(
         } = &*current;
         let travel = *travel;
         gather_free_into(&system.dofs, &res.residual, &mut free_residual);
-        let constraint = path
-            .as_ref()
-            .map(|(c, _)| c.value(travel, system.driven_load(du, travel)));
+        let constraint = res.constraint;
         let kappa_settled = || match nonlocal.as_deref_mut() {
             Some(nl) => Ok(profile.time(Stage::Nonlocal, || {
                 nl.iterate(
