@@ -134,14 +134,14 @@ fn path_following_is_refused_where_it_cannot_apply() {
             &["solver.linear_solver=\"cholesky\""][..],
             "solver.linear_solver",
         ),
-        (
-            &["bc.rigid.0.ramp_time=0.005"][..],
-            "bc.rigid[0].ramp_time",
-        ),
+        (&["bc.rigid.0.ramp_time=0.005"][..], "bc.rigid[0].ramp_time"),
         (&["solver.path_max_steps=0"][..], "solver.path_max_steps"),
     ] {
         let e = try_with(extra).unwrap_err().to_string();
         // refused by the scene's checks, not as an override that does not apply
-        assert!(e.contains(field) && !e.contains("override"), "{extra:?}: {e}");
+        assert!(
+            e.contains(field) && !e.contains("override"),
+            "{extra:?}: {e}"
+        );
     }
 }
