@@ -165,10 +165,12 @@ mod tests {
     #[test]
     fn the_energy_removed_is_the_drop_of_kinetic_energy() {
         let walls = base_and_left_wall();
-        let mut points = Particles::default();
-        points.position = vec![[1.0, -1e-4], [-2e-4, 0.3], [2.0, 0.5], [-1e-4, -1e-4]];
-        points.velocity = vec![[3.0, -2.0], [-0.5, 4.0], [1.0, -7.0], [-1.5, -0.25]];
-        points.mass = vec![0.2, 0.3, 0.4, 0.1];
+        let mut points = Particles {
+            position: vec![[1.0, -1e-4], [-2e-4, 0.3], [2.0, 0.5], [-1e-4, -1e-4]],
+            velocity: vec![[3.0, -2.0], [-0.5, 4.0], [1.0, -7.0], [-1.5, -0.25]],
+            mass: vec![0.2, 0.3, 0.4, 0.1],
+            ..Particles::default()
+        };
         let kinetic = |p: &Particles| -> f64 {
             (0..4)
                 .map(|i| 0.5 * p.mass[i] * (p.velocity[i][0].powi(2) + p.velocity[i][1].powi(2)))
