@@ -7,8 +7,9 @@
 //! bodies; `Model::external_work`), W_int the work of the stresses on the
 //! strain increments, K the kinetic energy of the points (with the points
 //! removed after leaving the grid, which take theirs with them), B the
-//! kinetic energy the fixed dofs removed
-//! ([`crate::integrators::boundary_work`] B1), and R what remains: the
+//! energy taken at the boundary (the kinetic energy the fixed dofs removed,
+//! [`crate::integrators::boundary_work`] B1; the friction work, theory FR5;
+//! the points' velocity into a wall, [`crate::walls`] B2), and R what remains: the
 //! integrator's numerical dissipation (Newmark γ > ½, the P2G/G2P
 //! projections, MUSL's re-map); R < 0 is energy the run created.
 //! The internal work splits as

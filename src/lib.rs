@@ -76,3 +76,4 @@ pub mod stiffness;
 pub mod study;
 pub mod transfer;
 pub mod volumetric;
+pub mod walls;

@@ -19,6 +19,7 @@ use crate::scene::{
     ShapeFunctionChoice,
 };
 use crate::seeding::seed_particles;
+use crate::walls::Walls;
 
 /// A material point dropped from the run after it left the grid
 /// (`[grid] lost_points = "remove"`), as it was at that moment.
@@ -65,6 +66,9 @@ pub struct Model {
     /// Nodes of the frictional edges (`[[bc.friction]]`); their normal dofs
     /// are held in `constraints`.
     pub friction: crate::friction::FrictionEdges,
+    /// The grid edges the points cannot cross (theory eq. W1), from
+    /// `constraints`.
+    pub walls: Walls,
     /// Follower-pressure points.
     pub traction: TractionPoints,
     /// Penalty-tied points of rigid bodies.
@@ -100,9 +104,11 @@ pub struct Model {
     /// total strain increment), kJ per metre run: elastic energy stored plus
     /// plastic dissipation.
     pub internal_work: f64,
-    /// Kinetic energy removed where the fixed dofs zero the nodal motion so
-    /// far (the no-slip base, rollers), kJ per metre run
-    /// ([`crate::integrators::boundary_work`] B1).
+    /// Energy taken at the boundary so far, kJ per metre run: the kinetic
+    /// energy where the fixed dofs zero the nodal motion (the no-slip base,
+    /// rollers; [`crate::integrators::boundary_work`] B1), the friction work
+    /// (theory FR5) and the kinetic energy of the points put back on a wall
+    /// ([`crate::walls`], theory B2).
     pub boundary_work: f64,
     /// Kinetic energy K0 of the points at t = 0, kJ per metre run.
     pub initial_kinetic_energy: f64,
@@ -212,8 +218,10 @@ impl Model {
             });
         }
         let n_nodes = grid.node_count();
+        let constraints = Constraints::from_scene(&scene, &grid);
         let mut model = Model {
-            constraints: Constraints::from_scene(&scene, &grid),
+            walls: Walls::of(&grid, &constraints),
+            constraints,
             friction: crate::friction::FrictionEdges::from_scene(&scene, &grid),
             traction: TractionPoints::from_scene(&scene),
             compliances: materials

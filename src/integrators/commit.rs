@@ -1,7 +1,8 @@
 //! The commit stage, shared by both integrators: the converged step becomes
 //! the state of the material points (theory D14: F, V, accumulated strain;
-//! stresses and states), the boundary points follow the grid motion, and
-//! points that left the grid stop the run or are removed.
+//! stresses and states), points carried through a wall are put back on it
+//! (theory eq. W1, [`crate::walls`]), the boundary points follow the grid
+//! motion, and points that left the grid stop the run or are removed.
 
 use rayon::prelude::*;
 
@@ -37,8 +38,10 @@ pub struct NodalResults<'a> {
     pub boundary_work: f64,
 }
 
-/// Commit the step: deformation and stresses at the points, the step's
-/// energies, boundary points advected, lost points checked. Returns the
+/// Commit the step: points held on the soil's side of the walls (W1, their
+/// kinetic energy lost into it booked in B, B2), deformation and stresses at
+/// the points, the step's energies, boundary points advected, lost points
+/// checked. Returns the
 /// index remap when points were removed.
 pub fn commit(
     model: &mut Model,
@@ -64,6 +67,7 @@ pub fn commit_swapping(
 ) -> Result<Option<PointRemap>, StepError> {
     model.internal_work += converged.internal_work;
     model.dissipated_energy += converged.dissipation;
+    model.boundary_work += model.walls.hold_points(&mut model.particles);
     let p = &mut model.particles;
     std::mem::swap(&mut p.stress, &mut converged.stress);
     std::mem::swap(&mut p.state, &mut converged.state);
