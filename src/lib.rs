@@ -19,6 +19,7 @@
 //!   each a list of named stages in the order of paper Fig. 1);
 //! - the run: [`simulation`] (time loop, monitors), [`monitor`], [`output`],
 //!   [`run`] and [`profile`] (what a run writes and measures),
+//!   [`csv_columns`] (units and fields of every CSV column),
 //!   [`provenance`] (where a run came from, what it found),
 //!   [`checkpoint`] (saving and resuming a run), [`scene`]
 //!   (TOML input and its validation), [`campaign`] and [`metrics`] (mesh
@@ -39,6 +40,7 @@ pub mod campaign;
 pub mod checkpoint;
 pub mod cli_values;
 pub mod constitutive;
+pub mod csv_columns;
 pub mod dofs;
 pub mod energy;
 pub mod error;

@@ -641,20 +641,15 @@ fn print_run_summary(outcome: &RunOutcome, out: &Path) {
         effort += &format!("; time step {lo:.3e} to {hi:.3e} s (limited by {by})");
     }
     eprintln!("{effort}");
-    let names: Vec<String> = outcome
-        .simulation
-        .monitors
-        .iter()
-        .map(|m| m.name.clone())
-        .collect();
-    let Some(monitors) = monitor_summaries(&out.join("curve.csv"), &names) else {
+    let columns = outcome.simulation.monitor_columns();
+    let Some(monitors) = monitor_summaries(&out.join("curve.csv"), &columns) else {
         return;
     };
-    let width = monitors.iter().map(|m| m.name.len()).max().unwrap_or(0);
+    let width = monitors.iter().map(|m| m.column.len()).max().unwrap_or(0);
     for m in monitors {
         eprintln!(
             "  {:width$}  last {:>11.4e}  peak {:>11.4e} at t = {:.4e} s",
-            m.name, m.last, m.peak, m.peak_time
+            m.column, m.last, m.peak, m.peak_time
         );
     }
 }
