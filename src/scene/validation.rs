@@ -1028,7 +1028,7 @@ impl Scene {
             check(
                 e,
                 format!("{f}.name"),
-                !(unique && free) || !columns.contains(&column),
+                !(unique && free && columns.contains(&column)),
                 format!("its curve.csv column `{column}` (the name and the unit) is taken by another column"),
             );
             seen.push(&m.name);
