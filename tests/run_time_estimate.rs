@@ -93,7 +93,7 @@ fn check_prints_the_estimate_and_warns_of_hours() {
     let (ok, out, err) = mpm_geo(&["check", scene]);
     assert!(ok, "{err}");
     assert!(
-        out.contains("estimated run time") && out.contains("an estimate"),
+        out.contains("estimated run time") && out.contains("a rough estimate"),
         "{out}"
     );
     assert!(!err.contains("the run is estimated to take"), "{err}");
