@@ -4,7 +4,9 @@
 Reads every `*/run.json` under each campaign output directory given on the command line
 and writes, to the directory named by --out:
   timings.csv  one row per run: campaign, run, status, steps, Newton iterations, wall
-               seconds, then the seconds of every profile stage (src/profile.rs);
+               seconds, then the seconds of every profile stage (src/profile.rs); the
+               number columns named with their unit as mpm-geo's CSV files are
+               (`wall_s`, `steps_1`, `p2g_s`);
   timings.md   the same as a Markdown table, with a total per campaign and overall.
 Standard library only.
 """
@@ -24,15 +26,15 @@ def runs_of(campaign_dir):
         record = json.loads(run_json.read_text())
         # "profile": [{"stage": name, "calls": n, "seconds": s}, ...]
         by_stage = {e.get("stage"): e.get("seconds", 0.0) for e in record.get("profile") or []}
-        seconds = {stage: float(by_stage.get(stage, 0.0)) for stage in STAGES}
+        seconds = {f"{stage}_s": float(by_stage.get(stage, 0.0)) for stage in STAGES}
         usage = (record.get("solver") or {}).get("usage") or {}
         yield {
             "campaign": pathlib.Path(campaign_dir).name,
             "run": run_json.parent.name,
             "status": record.get("status", "?"),
-            "steps": record.get("steps_completed", 0),
-            "newton_iterations": usage.get("newton_iterations", 0),
-            "wall_seconds": record.get("wall_seconds", 0.0),
+            "steps_1": record.get("steps_completed", 0),
+            "newton_iterations_1": usage.get("newton_iterations", 0),
+            "wall_s": record.get("wall_seconds", 0.0),
             **seconds,
         }
 
@@ -45,22 +47,23 @@ def main():
     rows = [row for c in args.campaigns for row in runs_of(c)]
     out = pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    columns = ["campaign", "run", "status", "steps", "newton_iterations", "wall_seconds"] + STAGES
+    columns = ["campaign", "run", "status", "steps_1", "newton_iterations_1", "wall_s"] + [
+        f"{stage}_s" for stage in STAGES]
     with open(out / "timings.csv", "w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=columns)
         writer.writeheader()
         writer.writerows(rows)
     # the Markdown table leaves out stages that are zero in every run
-    used = [s for s in STAGES if any(r[s] > 0.0005 for r in rows)]
+    used = [s for s in STAGES if any(r[f"{s}_s"] > 0.0005 for r in rows)]
     lines = ["| campaign | run | status | steps | wall (s) | " + " | ".join(used) + " |",
              "|---|---|---|---|---|" + "---|" * len(used)]
     for r in rows:
-        lines.append(f"| {r['campaign']} | {r['run']} | {r['status']} | {r['steps']} | "
-                     f"{r['wall_seconds']:.1f} | " + " | ".join(f"{r[s]:.1f}" for s in used) + " |")
+        lines.append(f"| {r['campaign']} | {r['run']} | {r['status']} | {r['steps_1']} | "
+                     f"{r['wall_s']:.1f} | " + " | ".join(f"{r[s + '_s']:.1f}" for s in used) + " |")
     lines.append("")
     total = 0.0
     for c in dict.fromkeys(r["campaign"] for r in rows):
-        wall = sum(r["wall_seconds"] for r in rows if r["campaign"] == c)
+        wall = sum(r["wall_s"] for r in rows if r["campaign"] == c)
         total += wall
         lines.append(f"- {c}: {wall:.0f} s of run wall time "
                      f"({sum(r['campaign'] == c for r in rows)} runs)")

@@ -17,17 +17,28 @@ import csv
 import pathlib
 
 # (column of metrics.csv, heading, format) per benchmark
-CUT = [("status", "status", "{}"), ("onset_time", "onset (s)", "{:.4f}"),
-       ("uA_at_0.3", "u_A(0.3 s) (m)", "{:.3f}"), ("uA_final", "u_A(1 s) (m)", "{:.2f}"),
-       ("run_out_final", "run-out (m)", "{:.2f}"), ("qB_fall_roughness", "q_B roughness", "{:.2f}"),
-       ("M1_discrepancy", "M1", "{:.4f}")]
-LOAD_CURVE = [("status", "status", "{}"), ("peak_load", "peak", "{:.4g}"),
-              ("peak_delta", "δ at peak", "{:.4g}"), ("final_load", "final load", "{:.4g}"),
-              ("M1_discrepancy", "M1", "{:.4f}"), ("M2_peak_spread", "M2", "{:.4f}"),
-              ("M4_band_width", "band width (m)", "{:.4g}")]
-FOOTING = LOAD_CURVE + [("corner_band_reach_left", "corner reach L (B)", "{:.2f}"),
-                        ("corner_band_reach_right", "corner reach R (B)", "{:.2f}"),
-                        ("soil_inside_footing", "soil inside (m²/m)", "{:.3f}")]
+CUT = [("status", "status", "{}"), ("onset_time_s", "onset (s)", "{:.4f}"),
+       ("uA_at_0.3_m", "u_A(0.3 s) (m)", "{:.3f}"), ("uA_final_m", "u_A(1 s) (m)", "{:.2f}"),
+       ("run_out_final_m", "run-out (m)", "{:.2f}"),
+       ("qB_fall_roughness_1", "q_B roughness", "{:.2f}"), ("M1_discrepancy_1", "M1", "{:.4f}")]
+LOAD_CURVE = [("status", "status", "{}"), ("peak_load_kN_per_m", "peak", "{:.4g}"),
+              ("peak_delta_m", "δ at peak", "{:.4g}"), ("final_load_kN_per_m", "final load", "{:.4g}"),
+              ("M1_discrepancy_1", "M1", "{:.4f}"), ("M2_peak_spread_1", "M2", "{:.4f}"),
+              ("M4_band_width_m", "band width (m)", "{:.4g}")]
+FOOTING = LOAD_CURVE + [("corner_band_reach_left_1", "corner reach L (B)", "{:.2f}"),
+                        ("corner_band_reach_right_1", "corner reach R (B)", "{:.2f}"),
+                        ("soil_inside_footing_m2_per_m", "soil inside (m²/m)", "{:.3f}")]
+# units that end a column name (src/csv_columns.rs); the campaigns stored in
+# docs/results predate them: their columns are the names without the unit
+UNITS = ["kN_per_m2", "kN_per_m", "kJ_per_m", "m2_per_m", "kPa", "m", "s", "1"]
+
+
+def without_unit(column):
+    """The column's name before units were added (`peak_load_kN_per_m` → `peak_load`)."""
+    for unit in UNITS:
+        if column.endswith("_" + unit):
+            return column[: -len(unit) - 1]
+    return column
 
 
 def read(directory):
@@ -41,6 +52,8 @@ def read(directory):
 
 
 def cell(row, column, fmt):
+    if row is not None and column not in row:
+        column = without_unit(column)
     if row is None or row.get(column) in (None, "", "–"):
         return "–"
     value = row[column]
@@ -60,8 +73,8 @@ def main():
     columns = set(columns) | set(paper_columns)
     rows = list(ours.values()) + list(paper.values())
     # every campaign writes the footing's columns; only a footing campaign fills them
-    footing = any(row.get("corner_band_reach_left") not in (None, "", "–") for row in rows)
-    table = CUT if "onset_time" in columns else FOOTING if footing else LOAD_CURVE
+    footing = any(cell(row, "corner_band_reach_left_1", "{}") != "–" for row in rows)
+    table = CUT if {"onset_time_s", "onset_time"} & columns else FOOTING if footing else LOAD_CURVE
     print(f"Ours ({args.ours}) / the paper's literal formulation ({args.paper}).\n")
     print("| run | " + " | ".join(heading for _, heading, _ in table) + " |")
     print("|---|" + "---|" * len(table))

@@ -21,6 +21,7 @@
 //!   and the studies compare runs against);
 //! - the run: [`simulation`] (time loop, monitors), [`monitor`], [`output`],
 //!   [`run`] and [`profile`] (what a run writes and measures),
+//!   [`csv_columns`] (units and fields of every CSV column),
 //!   [`provenance`] (where a run came from, what it found),
 //!   [`checkpoint`] (saving and resuming a run), [`scene`]
 //!   (TOML input and its validation), [`campaign`] and [`metrics`] (mesh
@@ -42,6 +43,7 @@ pub mod checkpoint;
 pub mod cli_values;
 pub mod closed_form;
 pub mod constitutive;
+pub mod csv_columns;
 pub mod dofs;
 pub mod energy;
 pub mod error;

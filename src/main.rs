@@ -33,7 +33,8 @@ enum Command {
         /// Override a scene value, e.g. `--set grid.cell_size=0.002`; an empty value removes the key (`--set solver.newmark_gamma=`) so its default applies (repeatable).
         #[arg(long = "set", value_name = "KEY=VALUE")]
         overrides: Vec<String>,
-        /// No progress bar (and no progress lines).
+        /// No run-time estimate at the start, no progress bar (and no progress
+        /// lines); warnings are still printed.
         #[arg(long)]
         quiet: bool,
         /// Print the stage profile and work counters at the end (they are in
@@ -149,7 +150,8 @@ enum Command {
     Point(mpm_geo::point_driver::PointArgs),
     /// Print the table of error identifiers (docs/guide.md §11).
     Errors,
-    /// Validate a scene without running it (exit 0 when valid).
+    /// Validate a scene without running it (exit 0 when valid) and print its
+    /// estimated memory, step count and run time.
     Check {
         /// Scene file (TOML).
         scene: PathBuf,
@@ -419,6 +421,7 @@ fn main() -> ExitCode {
             Ok(mut s) => {
                 set_limits(&mut s, max_memory, max_steps);
                 let estimate = s.estimate_resources();
+                let run_time = s.run_time_of(&estimate);
                 match mpm_geo::simulation::Simulation::new(s) {
                     Ok(sim) => {
                         let sim = &sim.model;
@@ -426,13 +429,16 @@ fn main() -> ExitCode {
                             eprintln!("warning: {w}");
                         }
                         println!(
-                            "{}: valid ({} material points, {}×{} cells; {})",
+                            "{}: valid ({} material points, {}×{} cells; {})\n{run_time}",
                             scene.display(),
                             sim.particles.len(),
                             sim.grid.cells[0],
                             sim.grid.cells[1],
                             estimate
                         );
+                        if let Some(warning) = run_time.long_run_warning() {
+                            eprintln!("warning: {warning}");
+                        }
                         ExitCode::SUCCESS
                     }
                     Err(e) => fail_with(2, &e),
@@ -465,6 +471,7 @@ fn main() -> ExitCode {
             for w in loaded.warnings() {
                 eprintln!("warning: {w}");
             }
+            announce_run_time(&loaded, quiet);
             let stem = scene
                 .file_stem()
                 .map(|s| s.to_string_lossy().into_owned())
@@ -618,21 +625,28 @@ fn print_run_summary(outcome: &RunOutcome, out: &Path) {
         effort += &format!("; time step {lo:.3e} to {hi:.3e} s (limited by {by})");
     }
     eprintln!("{effort}");
-    let names: Vec<String> = outcome
-        .simulation
-        .monitors
-        .iter()
-        .map(|m| m.name.clone())
-        .collect();
-    let Some(monitors) = monitor_summaries(&out.join("curve.csv"), &names) else {
+    let columns = outcome.simulation.monitor_columns();
+    let Some(monitors) = monitor_summaries(&out.join("curve.csv"), &columns) else {
         return;
     };
-    let width = monitors.iter().map(|m| m.name.len()).max().unwrap_or(0);
+    let width = monitors.iter().map(|m| m.column.len()).max().unwrap_or(0);
     for m in monitors {
         eprintln!(
             "  {:width$}  last {:>11.4e}  peak {:>11.4e} at t = {:.4e} s",
-            m.name, m.last, m.peak, m.peak_time
+            m.column, m.last, m.peak, m.peak_time
         );
+    }
+}
+
+/// Print the run's time estimate (unless `quiet`) and warn of a run
+/// estimated to take more than an hour (even when `quiet`, as every warning).
+fn announce_run_time(scene: &Scene, quiet: bool) {
+    let run_time = scene.estimate_run_time();
+    if !quiet {
+        eprintln!("{run_time}");
+    }
+    if let Some(warning) = run_time.long_run_warning() {
+        eprintln!("warning: {warning}");
     }
 }
 

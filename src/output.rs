@@ -9,6 +9,7 @@ use std::path::{Path, PathBuf};
 
 use crate::atomic_file::{write_atomic, AtomicFile};
 use crate::constitutive::{deviatoric_stress, mean_stress};
+use crate::csv_columns::number;
 use crate::error::RunError;
 use crate::particles::Particles;
 
@@ -43,8 +44,15 @@ impl OutputError {
     }
 }
 
-/// `curve.csv`: columns `step, time`, the step's own columns
-/// ([`crate::simulation::Simulation::step_column_names`]) and one per monitor. Each row is
+/// The step column of `curve.csv` (the step number).
+pub const STEP_COLUMN: &str = "step_1";
+/// The time column of `curve.csv`, s (with path following, the travel per
+/// unit velocity).
+pub const TIME_COLUMN: &str = "time_s";
+
+/// `curve.csv`: columns `step_1, time_s`, the step's own columns
+/// ([`crate::simulation::Simulation::step_column_names`]) and one per monitor
+/// (named with its unit, [`crate::scene::MonitorSpec::column`]). Each row is
 /// formatted first and written with one write, then flushed; if that write
 /// fails (a full disk) the file is cut back to its last whole row and the
 /// writer refuses further rows, so the file never ends in a partial row.
@@ -58,8 +66,9 @@ pub struct CurveWriter {
 }
 
 impl CurveWriter {
-    /// Create the file and write the header (on failure the file is removed).
-    pub fn create(path: &Path, monitor_names: &[String]) -> Result<Self, OutputError> {
+    /// Create the file and write the header: `step_1, time_s` and `columns`
+    /// (on failure the file is removed).
+    pub fn create(path: &Path, columns: &[String]) -> Result<Self, OutputError> {
         let file = File::create(path).map_err(|e| OutputError::new(path, e))?;
         let mut writer = Self {
             file,
@@ -67,8 +76,8 @@ impl CurveWriter {
             whole: 0,
             broken: false,
         };
-        let mut header = vec!["step".to_string(), "time".to_string()];
-        header.extend(monitor_names.iter().cloned());
+        let mut header = vec![STEP_COLUMN.to_string(), TIME_COLUMN.to_string()];
+        header.extend(columns.iter().cloned());
         if let Err(e) = writer.write_record(&header) {
             let _ = std::fs::remove_file(path);
             return Err(e);
@@ -100,10 +109,11 @@ impl CurveWriter {
         })
     }
 
-    /// Append one row (values written with full round-trip precision) and flush.
+    /// Append one row (values written with full round-trip precision, a
+    /// value that is not finite as an empty field) and flush.
     pub fn row(&mut self, step: usize, time: f64, values: &[f64]) -> Result<(), OutputError> {
-        let mut record = vec![step.to_string(), format!("{time:e}")];
-        record.extend(values.iter().map(|v| format!("{v:e}")));
+        let mut record = vec![step.to_string(), number(time)];
+        record.extend(values.iter().map(|&v| number(v)));
         self.write_record(&record)
     }
 

@@ -13,6 +13,7 @@ use crate::constitutive::{
     deviatoric_stress, mean_stress, ConstitutiveError, ConstitutiveModel, ParameterProblem,
     PointState, StrengthVariable, Voigt,
 };
+use crate::csv_columns::number;
 
 /// Width of the quarter biaxial specimen w (m, paper §3.1): load F = −σyy·w (kN/m).
 pub const BIAXIAL_WIDTH: f64 = 0.03;
@@ -351,7 +352,9 @@ pub fn run_simple_shear(
     run_path(model, confinement, 3, shear_strains, &[])
 }
 
-/// Write the records as CSV: step, strains, stresses, p, q, κ, F, yielded.
+/// Write the records as CSV: step, strains, stresses (kPa), p, q, κ, F
+/// (kN/m), yielded (1 or 0); every column named with its unit
+/// ([`crate::csv_columns`]).
 pub fn write_csv(path: &Path, records: &[PointRecord]) -> Result<(), PointDriverError> {
     let err = |e: csv::Error| PointDriverError::Write {
         path: path.to_path_buf(),
@@ -366,33 +369,33 @@ pub fn write_csv(path: &Path, records: &[PointRecord]) -> Result<(), PointDriver
     let mut writer = csv::Writer::from_writer(file);
     writer
         .write_record([
-            "step",
-            "eps_xx",
-            "eps_yy",
-            "eps_zz",
-            "gamma_xy",
+            "step_1",
+            "eps_xx_1",
+            "eps_yy_1",
+            "eps_zz_1",
+            "gamma_xy_1",
             "sig_xx_kPa",
             "sig_yy_kPa",
             "sig_zz_kPa",
             "sig_xy_kPa",
             "p_kPa",
             "q_kPa",
-            "kappa",
+            "kappa_1",
             "F_kN_per_m",
-            "yielded",
+            "yielded_1",
         ])
         .map_err(err)?;
     for r in records {
         let mut row = vec![r.step.to_string()];
-        row.extend(r.strain.iter().map(|x| format!("{x:.10e}")));
-        row.extend(r.stress.iter().map(|x| format!("{x:.10e}")));
+        row.extend(r.strain.iter().map(|&x| number(x)));
+        row.extend(r.stress.iter().map(|&x| number(x)));
         for x in [
             r.mean_stress,
             r.deviatoric_stress,
             r.plastic_strain_eq,
             r.load,
         ] {
-            row.push(format!("{x:.10e}"));
+            row.push(number(x));
         }
         row.push(u8::from(r.yielded).to_string());
         writer.write_record(&row).map_err(err)?;
@@ -647,7 +650,7 @@ mod tests {
         run(&args).unwrap();
         let text = std::fs::read_to_string(&out).unwrap();
         assert_eq!(text.lines().count(), 52);
-        assert!(text.starts_with("step,eps_xx,eps_yy,eps_zz,gamma_xy,sig_xx_kPa"));
+        assert!(text.starts_with("step_1,eps_xx_1,eps_yy_1,eps_zz_1,gamma_xy_1,sig_xx_kPa"));
         let m = table1();
         let recs = run_simple_shear(&m, 100.0, &[0.01, 0.02, 0.05]).unwrap();
         assert!(recs

@@ -6,6 +6,7 @@
 
 use std::path::Path;
 
+use crate::output::TIME_COLUMN;
 use serde::Serialize;
 
 /// Where a run came from (`run.json` → `provenance`).
@@ -86,8 +87,10 @@ fn cpu_model() -> String {
 /// One monitor over a run (`run.json` → `summary.monitors`).
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct MonitorSummary {
-    /// The monitor's name (its `curve.csv` column).
+    /// The monitor's name.
     pub name: String,
+    /// Its `curve.csv` column: the name and the unit (`load_kN_per_m`).
+    pub column: String,
     /// Its value at the last row.
     pub last: f64,
     /// Its value of largest magnitude over the rows, and the time of it.
@@ -96,20 +99,25 @@ pub struct MonitorSummary {
     pub peak_time: f64,
 }
 
-/// The monitors `names` over the rows of a `curve.csv` (its `time` column
-/// and theirs); `None` when the file cannot be read or has no rows.
-pub fn monitor_summaries(curve: &Path, names: &[String]) -> Option<Vec<MonitorSummary>> {
+/// The monitors `(name, column)` over the rows of a `curve.csv` (its
+/// `time_s` column and theirs); `None` when the file cannot be read or has
+/// no rows.
+pub fn monitor_summaries(
+    curve: &Path,
+    monitors: &[(String, String)],
+) -> Option<Vec<MonitorSummary>> {
     let mut reader = csv::Reader::from_path(curve).ok()?;
     let header = reader.headers().ok()?.clone();
-    let time = header.iter().position(|h| h == "time")?;
-    let columns: Vec<(usize, &String)> = names
+    let time = header.iter().position(|h| h == TIME_COLUMN)?;
+    let columns: Vec<(usize, &(String, String))> = monitors
         .iter()
-        .filter_map(|n| header.iter().position(|h| h == n).map(|i| (i, n)))
+        .filter_map(|m| header.iter().position(|h| *h == m.1).map(|i| (i, m)))
         .collect();
     let mut out: Vec<MonitorSummary> = columns
         .iter()
-        .map(|(_, n)| MonitorSummary {
-            name: (*n).clone(),
+        .map(|(_, (name, column))| MonitorSummary {
+            name: name.clone(),
+            column: column.clone(),
             last: f64::NAN,
             peak: 0.0,
             peak_time: 0.0,
@@ -146,10 +154,16 @@ mod tests {
         let curve = dir.path().join("curve.csv");
         std::fs::write(
             &curve,
-            "step,time,load,u\n0,0e0,0e0,0e0\n1,1e-1,5e0,-2e0\n2,2e-1,3e0,-1e0\n",
+            "step_1,time_s,load_kN_per_m,u_m\n0,0e0,0e0,0e0\n1,1e-1,5e0,-2e0\n2,2e-1,3e0,-1e0\n",
         )
         .unwrap();
-        let names = vec!["load".to_string(), "u".to_string(), "missing".to_string()];
+        let names: Vec<(String, String)> = [
+            ("load", "load_kN_per_m"),
+            ("u", "u_m"),
+            ("missing", "missing_m"),
+        ]
+        .map(|(n, c)| (n.to_string(), c.to_string()))
+        .into();
         let s = monitor_summaries(&curve, &names).unwrap();
         let expected = [("load", 3.0, 5.0, 0.1), ("u", -1.0, -2.0, 0.1)];
         assert_eq!(s.len(), 2);

@@ -130,9 +130,9 @@ impl OutputObserver {
             }
             .at(sim.model.step, sim.model.time)
         })?;
-        let mut names = sim.step_column_names();
-        names.extend(sim.monitors.iter().map(|m| m.name.clone()));
-        let curve = CurveWriter::create(&dir.join("curve.csv"), &names).map_err(at(sim))?;
+        let mut columns = sim.step_column_names();
+        columns.extend(sim.monitor_columns().into_iter().map(|(_, column)| column));
+        let curve = CurveWriter::create(&dir.join("curve.csv"), &columns).map_err(at(sim))?;
         let progress = progress_bar(sim, show_progress);
         let mut pending_times = sim.model.scene.output.snapshot_times.clone();
         pending_times.sort_by(|a, b| b.total_cmp(a));
@@ -958,8 +958,8 @@ fn run_summary(run_json: &Path, sim: &Simulation, status: RunStatus<'_>) -> serd
         return serde_json::Value::Null;
     }
     let dir = run_json.parent().unwrap_or(Path::new("."));
-    let names: Vec<String> = sim.monitors.iter().map(|m| m.name.clone()).collect();
-    let monitors = monitor_summaries(&dir.join("curve.csv"), &names).unwrap_or_default();
+    let monitors =
+        monitor_summaries(&dir.join("curve.csv"), &sim.monitor_columns()).unwrap_or_default();
     let pvd = dir.join(PVD_FILE);
     json!({
         "status": status.name(),

@@ -57,6 +57,16 @@ impl Observer for NullObserver {
     }
 }
 
+/// The step's columns of `curve.csv` ([`Simulation::step_column_names`]):
+/// the step `dt_s`, then, with adaptive steps, its relative error estimate
+/// and the attempts redone for their error and for Newton failures.
+pub const STEP_COLUMNS: [&str; 4] = [
+    "dt_s",
+    "error_estimate_1",
+    "rejected_error_1",
+    "rejected_newton_1",
+];
+
 /// A run in progress.
 pub struct Simulation {
     /// The model and its state.
@@ -134,15 +144,20 @@ impl Simulation {
         Ok(report)
     }
 
-    /// The columns of `curve.csv` between `time` and the monitors: the step
-    /// `dt` (s), and with adaptive steps the step's relative error estimate
-    /// and the attempts redone for their error and for Newton failures.
+    /// The columns of `curve.csv` between `time_s` and the monitors: the
+    /// first of [`STEP_COLUMNS`], all four with adaptive steps.
     pub fn step_column_names(&self) -> Vec<String> {
-        let mut names = vec!["dt".to_string()];
-        if self.adaptive() {
-            names.extend(["error_estimate", "rejected_error", "rejected_newton"].map(String::from));
-        }
-        names
+        let used = if self.adaptive() { 4 } else { 1 };
+        STEP_COLUMNS[..used].iter().map(|c| c.to_string()).collect()
+    }
+
+    /// `(name, column)` of each monitor, in column order: the columns of
+    /// `curve.csv` after [`Self::step_column_names`].
+    pub fn monitor_columns(&self) -> Vec<(String, String)> {
+        self.monitors
+            .iter()
+            .map(|m| (m.name.clone(), m.spec.column()))
+            .collect()
     }
 
     /// The values of [`Self::step_column_names`] after the last step (zero

@@ -59,7 +59,10 @@ fn campaign_writes_curves_metrics_report_and_plots() {
     let metrics = std::fs::read_to_string(out.join("metrics.csv")).unwrap();
     let mut reader = csv::Reader::from_reader(metrics.as_bytes());
     let headers = reader.headers().unwrap().clone();
-    let slope_col = headers.iter().position(|h| h == "initial_slope").unwrap();
+    let slope_col = headers
+        .iter()
+        .position(|h| h == "initial_slope_kN_per_m2")
+        .unwrap();
     let rows: Vec<csv::StringRecord> = reader.records().map(|r| r.unwrap()).collect();
     assert_eq!(rows.len(), 2);
     for row in &rows {
@@ -75,9 +78,10 @@ fn campaign_writes_curves_metrics_report_and_plots() {
     assert!(!report.contains("## Footing"), "{report}");
     let inside = headers
         .iter()
-        .position(|h| h == "soil_inside_footing")
+        .position(|h| h == "soil_inside_footing_m2_per_m")
         .unwrap();
-    assert!(rows.iter().all(|row| &row[inside] == "–"));
+    // no footing: an empty field, not a text such as `–`
+    assert!(rows.iter().all(|row| row[inside].is_empty()));
     for png in ["curves.png", "fields_local.png", "fields_nonlocal.png"] {
         let bytes = std::fs::read(out.join(png)).unwrap();
         assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n", "{png} is not a PNG");
@@ -143,7 +147,7 @@ fn step_refinement_reports_the_time_step_discrepancy() {
         let headers = reader.headers().unwrap().clone();
         let col = headers
             .iter()
-            .position(|h| h == "whole_curve_step_discrepancy")
+            .position(|h| h == "whole_curve_step_discrepancy_1")
             .unwrap();
         let rows: Vec<csv::StringRecord> = reader.records().map(|r| r.unwrap()).collect();
         assert_eq!(rows.len(), 1);
@@ -186,7 +190,7 @@ fn metrics_without_wall_time(out: &std::path::Path) -> Vec<Vec<String>> {
         .headers()
         .unwrap()
         .iter()
-        .position(|h| h == "wall_seconds")
+        .position(|h| h == "wall_s")
         .unwrap();
     reader
         .records()

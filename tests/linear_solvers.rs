@@ -43,7 +43,10 @@ fn run(path: &str, overrides: &[&str], out: &Path) -> Vec<Vec<f64>> {
     let text = std::fs::read_to_string(out.join("curve.csv")).unwrap();
     let mut lines = text.lines();
     let header: Vec<&str> = lines.next().unwrap().split(',').collect();
-    let keep: Vec<bool> = header.iter().map(|h| *h != "energy_remainder").collect();
+    let keep: Vec<bool> = header
+        .iter()
+        .map(|h| *h != "energy_remainder_kJ_per_m")
+        .collect();
     lines
         .map(|l| {
             l.split(',')

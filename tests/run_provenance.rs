@@ -102,7 +102,7 @@ fn run_json_holds_provenance_and_summary() {
     for m in monitors {
         let i = header
             .iter()
-            .position(|h| *h == m["name"].as_str().unwrap())
+            .position(|h| *h == m["column"].as_str().unwrap())
             .unwrap();
         assert_eq!(m["last"].as_f64().unwrap(), last[i]);
         assert!(m["peak"].as_f64().unwrap().abs() >= last[i].abs());

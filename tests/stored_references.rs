@@ -10,6 +10,8 @@
 
 use std::path::Path;
 
+use mpm_geo::output::TIME_COLUMN;
+
 mod common;
 
 /// A `reference.toml`.
@@ -20,7 +22,7 @@ struct Reference {
     scene: String,
     /// `--set` overrides of the run.
     overrides: Vec<String>,
-    /// Monitor columns compared.
+    /// Monitors compared (each in its `curve.csv` column, named with its unit).
     columns: Vec<String>,
     /// Largest change allowed, as a share of the column's largest magnitude.
     tolerance: f64,
@@ -36,8 +38,10 @@ fn stored_curve(path: &Path, columns: &[String]) -> (Vec<f64>, Vec<Vec<f64>>) {
             .position(|h| h == name)
             .unwrap_or_else(|| panic!("{path:?} has no column {name}"))
     };
-    let (time, wanted): (usize, Vec<usize>) =
-        (index("time"), columns.iter().map(|c| index(c)).collect());
+    let (time, wanted): (usize, Vec<usize>) = (
+        index(TIME_COLUMN),
+        columns.iter().map(|c| index(c)).collect(),
+    );
     let (mut times, mut values) = (Vec::new(), vec![Vec::new(); columns.len()]);
     for record in reader.records() {
         let record = record.unwrap();
@@ -71,7 +75,12 @@ fn check(benchmark: &str) {
     let overrides: Vec<&str> = spec.overrides.iter().map(String::as_str).collect();
     let mut sim = common::simulation(&spec.scene, &overrides);
     let history = common::run_history(&mut sim);
-    let (times, stored) = stored_curve(&dir.join("curve.csv"), &spec.columns);
+    let csv_columns: Vec<String> = spec
+        .columns
+        .iter()
+        .map(|name| sim.monitors[common::column(&sim, name)].spec.column())
+        .collect();
+    let (times, stored) = stored_curve(&dir.join("curve.csv"), &csv_columns);
     assert_eq!(history.len(), times.len(), "{benchmark}: rows");
     for (row, ((t, _), stored_t)) in history.iter().zip(&times).enumerate() {
         assert!(

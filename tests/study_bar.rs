@@ -8,7 +8,7 @@ mod common;
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use mpm_geo::study::{log_log_slope, run_study, StudyOptions};
+use mpm_geo::study::{log_log_slope, refined_column, run_study, StudyOptions};
 
 /// (refined value, error) per series, from `study.csv`.
 fn series_errors(csv_path: &Path) -> BTreeMap<String, Vec<(f64, f64)>> {
@@ -20,10 +20,10 @@ fn series_errors(csv_path: &Path) -> BTreeMap<String, Vec<(f64, f64)>> {
             .position(|h| h == name)
             .unwrap_or_else(|| panic!("study.csv has no column {name}"))
     };
-    let (series, value, error, status) = (
+    let (series, refine, error, status) = (
         column("series"),
-        column("value"),
-        column("error"),
+        column("refine"),
+        column("error_1"),
         column("status"),
     );
     let mut out: BTreeMap<String, Vec<(f64, f64)>> = BTreeMap::new();
@@ -31,6 +31,8 @@ fn series_errors(csv_path: &Path) -> BTreeMap<String, Vec<(f64, f64)>> {
         let r = record.expect("row");
         assert_eq!(&r[status], "completed", "run {} did not complete", &r[0]);
         let parse = |i: usize| r[i].parse::<f64>().expect("number");
+        // the refined value is in the column of its key (`dt_s`, `solver.cfl_1`)
+        let value = column(&refined_column(&r[refine]));
         out.entry(r[series].to_string())
             .or_default()
             .push((parse(value), parse(error)));
@@ -111,7 +113,7 @@ fn study_without_timings(out: &Path) -> Vec<Vec<String>> {
         .headers()
         .unwrap()
         .iter()
-        .map(|h| !(h.contains("seconds") || h.contains("wall")))
+        .map(|h| !(h.starts_with("wall") || (h.ends_with("_s") && h != "dt_s")))
         .collect();
     reader
         .records()

@@ -308,6 +308,22 @@ fn opt<T: std::fmt::Display>(v: Option<T>) -> String {
     v.map_or_else(String::new, |v| v.to_string())
 }
 
+/// A number field of `bench.csv`: `v` in full precision, empty when it is
+/// not finite (a difference to an LU that did not run); the rule of
+/// `mpm_geo::csv_columns::number`, which this crate cannot depend on.
+fn number(v: f64) -> String {
+    if v.is_finite() {
+        format!("{v:e}")
+    } else {
+        String::new()
+    }
+}
+
+/// Header of `bench.csv`: the identifiers `system`, `solver` and `status`,
+/// and number columns named with their unit (`_s` seconds, `_1` counts and
+/// ratios; `symmetric_1` is 1 or 0), as in the CSV files of `mpm-geo`.
+const CSV_HEADER: &str = "system,n_1,nnz_1,symmetric_1,solver,symbolic_s,numeric_s,solve_s,probe_s,total_s,fill_1,iterations_1,residual_1,diff_to_lu_1,status";
+
 /// Writes the rows as CSV (one line per solver and system).
 pub fn write_csv(rows: &[BenchRow], path: &Path) -> Result<(), SolverError> {
     let err = |e: std::io::Error| SolverError::Io {
@@ -315,25 +331,25 @@ pub fn write_csv(rows: &[BenchRow], path: &Path) -> Result<(), SolverError> {
         message: e.to_string(),
     };
     let mut f = std::io::BufWriter::new(std::fs::File::create(path).map_err(err)?);
-    writeln!(f, "system,n,nnz,symmetric,solver,symbolic_seconds,numeric_seconds,solve_seconds,probe_seconds,total_seconds,fill,iterations,residual,diff_to_lu,status").map_err(err)?;
+    writeln!(f, "{CSV_HEADER}").map_err(err)?;
     for r in rows {
         writeln!(
             f,
-            "{},{},{},{},\"{}\",{:.6e},{:.6e},{:.6e},{:.6e},{:.6e},{},{},{:.3e},{:.3e},\"{}\"",
+            "{},{},{},{},\"{}\",{},{},{},{},{},{},{},{},{},\"{}\"",
             r.system,
             r.n,
             r.nnz,
-            r.symmetric,
+            u8::from(r.symmetric),
             r.solver,
-            r.symbolic_seconds,
-            r.numeric_seconds,
-            r.solve_seconds,
-            r.probe_seconds,
-            r.symbolic_seconds + r.numeric_seconds + r.solve_seconds,
+            number(r.symbolic_seconds),
+            number(r.numeric_seconds),
+            number(r.solve_seconds),
+            number(r.probe_seconds),
+            number(r.symbolic_seconds + r.numeric_seconds + r.solve_seconds),
             opt(r.fill),
             opt(r.iterations),
-            r.residual,
-            r.diff_to_lu,
+            number(r.residual),
+            number(r.diff_to_lu),
             r.status.replace('"', "'"),
         )
         .map_err(err)?;

@@ -8,7 +8,9 @@ use std::path::Path;
 
 use super::report::{fmt_opt, lost_points_notes, number_in, profiles_section, stopped_notes};
 use super::{CampaignError, CampaignRun, CurveProblem};
+use crate::csv_columns::{number, optional};
 use crate::metrics;
+use crate::output::TIME_COLUMN;
 use crate::plot::{self, Bounds, Panel, Series};
 use crate::scene::{MonitorKind, Scene, StressQuantity, VectorComponent};
 
@@ -31,7 +33,7 @@ pub const PEAK_WINDOW: f64 = 0.05;
 /// End of the failure phase after the onset, s (see [`PEAK_WINDOW`]).
 pub const FALL_WINDOW: f64 = 0.1;
 
-/// The `curve.csv` columns of a time-history run, named by the scene's monitors.
+/// The `curve.csv` columns of a time-history run, those of the scene's monitors.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct HistoryColumns {
     /// |u| of the monitored point A (`point_displacement`, `component = "norm"`).
@@ -60,11 +62,7 @@ impl HistoryColumns {
     /// The columns of `scene`; `None` without a `point_displacement` norm monitor.
     pub fn of_scene(scene: &Scene) -> Option<Self> {
         let find = |pred: &dyn Fn(&crate::scene::MonitorSpec) -> bool| {
-            scene
-                .monitor
-                .iter()
-                .find(|m| pred(m))
-                .map(|m| m.name.clone())
+            scene.monitor.iter().find(|m| pred(m)).map(|m| m.column())
         };
         Some(Self {
             displacement: find(&|m| {
@@ -125,7 +123,7 @@ impl History {
                 .position(|h| h == name)
                 .ok_or_else(|| refuse(CurveProblem::MissingColumn(name.to_string())))
         };
-        let time = column("time")?;
+        let time = column(TIME_COLUMN)?;
         let displacement = column(&columns.displacement)?;
         let stress = columns.stress.as_deref().map(column).transpose()?;
         let run_out = columns.run_out.as_deref().map(column).transpose()?;
@@ -360,34 +358,37 @@ pub(super) fn write_history_outputs(
     Ok(())
 }
 
+/// Header of `histories.csv`: the run's identifiers, then t and the
+/// monitored histories.
+const HISTORIES_HEADER: &str = "run,scene,family,integrator,cell_size_m,time_s,uA_m,qB_kPa,qB_neighbourhood_kPa,run_out_m,external_work_kJ_per_m,internal_work_kJ_per_m,kinetic_energy_kJ_per_m,boundary_work_kJ_per_m,energy_remainder_kJ_per_m\n";
+
+/// The value of row `i` of a history, an empty field past its end.
+fn history_field(history: &[(f64, f64)], i: usize) -> String {
+    optional(history.get(i).map(|p| p.1))
+}
+
 fn histories_csv(runs: &[CampaignRun]) -> String {
-    let mut text = String::from("run,scene,family,integrator,cell_size,time,uA,qB,qB_neighbourhood,run_out,external_work,internal_work,kinetic_energy,boundary_work,energy_remainder\n");
+    let mut text = String::from(HISTORIES_HEADER);
     for r in runs {
         let Some(h) = &r.history else { continue };
         for (i, (t, u)) in h.displacement.iter().enumerate() {
-            let q = h.stress.get(i).map(|p| p.1.to_string()).unwrap_or_default();
-            let group = h
-                .neighbourhood_stress
-                .get(i)
-                .map(|p| p.1.to_string())
-                .unwrap_or_default();
-            let x = h
-                .run_out
-                .get(i)
-                .map(|p| p.1.to_string())
-                .unwrap_or_default();
             let budget = match h.budget.get(i) {
-                Some((_, terms)) => terms.map(|v| v.to_string()).join(","),
+                Some((_, terms)) => terms.map(number).join(","),
                 None => ",,,,".to_string(),
             };
             let _ = writeln!(
                 text,
-                "{},{},{},{},{:e},{t:e},{u:e},{q},{group},{x},{budget}",
+                "{},{},{},{},{},{},{},{},{},{},{budget}",
                 r.name,
                 r.scene,
                 r.regularisation(),
                 r.integrator(),
-                r.cell_size
+                number(r.cell_size),
+                number(*t),
+                number(*u),
+                history_field(&h.stress, i),
+                history_field(&h.neighbourhood_stress, i),
+                history_field(&h.run_out, i),
             );
         }
     }
@@ -402,72 +403,84 @@ fn status(r: &CampaignRun) -> &'static str {
     }
 }
 
+/// Header of a time-history campaign's `metrics.csv`.
+const METRICS_HEADER: &str = "run,scene,family,integrator,cell_size_m,length_scale_m,status,wall_s,steps_1,newton_iterations_1,halvings_1,lost_points_1,onset_time_s,uA_at_0.3_m,uA_final_m,run_out_final_m,qB_peak_kPa,qB_peak_time_s,qB_fall_roughness_1,qB_neighbourhood_fall_roughness_1,qB_reversals_1,M1_discrepancy_1,energy_remainder_share_1\n";
+
 fn metrics_csv(runs: &[CampaignRun], m: &[HistoryMetrics]) -> String {
-    let mut csv = String::from("run,scene,family,integrator,cell_size,length_scale,status,wall_seconds,steps,newton_iterations,halvings,lost_points,onset_time,uA_at_0.3,uA_final,run_out_final,qB_peak,qB_peak_time,qB_fall_roughness,qB_neighbourhood_fall_roughness,qB_reversals,M1_discrepancy,energy_remainder_share\n");
+    let mut csv = String::from(METRICS_HEADER);
     for (r, mm) in runs.iter().zip(m) {
+        let fields = [
+            number(r.cell_size),
+            optional(r.length_scale),
+            status(r).to_string(),
+            number(r.wall_seconds),
+            r.effort.steps.to_string(),
+            r.effort.newton_iterations.to_string(),
+            r.effort.halvings.to_string(),
+            r.lost_points.0.to_string(),
+            optional(mm.onset),
+            optional(mm.displacement_at_comparison),
+            number(mm.final_displacement),
+            optional(mm.final_run_out),
+            optional(mm.stress_peak.map(|p| p.0)),
+            optional(mm.stress_peak.map(|p| p.1)),
+            optional(mm.stress_roughness),
+            optional(mm.neighbourhood_roughness),
+            mm.stress_reversals
+                .map(|n| n.to_string())
+                .unwrap_or_default(),
+            optional(mm.discrepancy),
+            optional(mm.final_remainder_share),
+        ];
         let _ = writeln!(
             csv,
-            "{},{},{},{},{:e},{},{},{:.2},{},{},{},{},{},{},{:e},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{}",
             r.name,
             r.scene,
             r.regularisation(),
             r.integrator(),
-            r.cell_size,
-            r.length_scale.map(|l| l.to_string()).unwrap_or_default(),
-            status(r),
-            r.wall_seconds,
-            r.effort.steps,
-            r.effort.newton_iterations,
-            r.effort.halvings,
-            r.lost_points.0,
-            fmt_opt(mm.onset, 1.0, 5),
-            fmt_opt(mm.displacement_at_comparison, 1.0, 5),
-            mm.final_displacement,
-            fmt_opt(mm.final_run_out, 1.0, 4),
-            fmt_opt(mm.stress_peak.map(|p| p.0), 1.0, 3),
-            fmt_opt(mm.stress_peak.map(|p| p.1), 1.0, 4),
-            fmt_opt(mm.stress_roughness, 1.0, 4),
-            fmt_opt(mm.neighbourhood_roughness, 1.0, 4),
-            mm.stress_reversals
-                .map(|n| n.to_string())
-                .unwrap_or_default(),
-            fmt_opt(mm.discrepancy, 1.0, 5),
-            fmt_opt(mm.final_remainder_share, 1.0, 4),
+            fields.join(",")
         );
     }
     csv
 }
 
+/// Header of `integrators.csv`: one row per scene run by both integrators.
+const INTEGRATORS_HEADER: &str = "scene,family,cell_size_m,onset_implicit_s,onset_explicit_s,onset_difference_s,uA_0.3_implicit_m,uA_0.3_explicit_m,uA_0.3_relative_difference_1,M1_explicit_vs_implicit_1,uA_final_implicit_m,uA_final_explicit_m,uA_final_relative_difference_1,run_out_implicit_m,run_out_explicit_m,remainder_share_implicit_1,remainder_share_explicit_1,wall_implicit_s,wall_explicit_s,steps_implicit_1,steps_explicit_1,newton_iterations_1,halvings_1\n";
+
 fn integrators_csv(pairs: &[IntegratorPair]) -> String {
-    let mut csv = String::from("scene,family,cell_size,onset_implicit,onset_explicit,onset_difference,uA_0.3_implicit,uA_0.3_explicit,uA_0.3_relative_difference,M1_explicit_vs_implicit,uA_final_implicit,uA_final_explicit,uA_final_relative_difference,run_out_implicit,run_out_explicit,remainder_share_implicit,remainder_share_explicit,wall_implicit,wall_explicit,steps_implicit,steps_explicit,newton_iterations,halvings\n");
+    let mut csv = String::from(INTEGRATORS_HEADER);
     for p in pairs {
         let ((ri, mi), (re, me)) = (p.implicit, p.explicit);
+        let fields = [
+            number(ri.cell_size),
+            optional(mi.onset),
+            optional(me.onset),
+            optional(p.onset_difference()),
+            optional(mi.displacement_at_comparison),
+            optional(me.displacement_at_comparison),
+            optional(p.displacement_difference()),
+            optional(p.discrepancy()),
+            number(mi.final_displacement),
+            number(me.final_displacement),
+            number(p.final_displacement_difference()),
+            optional(mi.final_run_out),
+            optional(me.final_run_out),
+            optional(mi.final_remainder_share),
+            optional(me.final_remainder_share),
+            number(ri.wall_seconds),
+            number(re.wall_seconds),
+            ri.effort.steps.to_string(),
+            re.effort.steps.to_string(),
+            ri.effort.newton_iterations.to_string(),
+            ri.effort.halvings.to_string(),
+        ];
         let _ = writeln!(
             csv,
-            "{},{},{:e},{},{},{},{},{},{},{},{:e},{:e},{:.5},{},{},{},{},{:.2},{:.2},{},{},{},{}",
+            "{},{},{}",
             ri.scene,
             ri.regularisation(),
-            ri.cell_size,
-            fmt_opt(mi.onset, 1.0, 5),
-            fmt_opt(me.onset, 1.0, 5),
-            fmt_opt(p.onset_difference(), 1.0, 5),
-            fmt_opt(mi.displacement_at_comparison, 1.0, 5),
-            fmt_opt(me.displacement_at_comparison, 1.0, 5),
-            fmt_opt(p.displacement_difference(), 1.0, 5),
-            fmt_opt(p.discrepancy(), 1.0, 5),
-            mi.final_displacement,
-            me.final_displacement,
-            p.final_displacement_difference(),
-            fmt_opt(mi.final_run_out, 1.0, 4),
-            fmt_opt(me.final_run_out, 1.0, 4),
-            fmt_opt(mi.final_remainder_share, 1.0, 4),
-            fmt_opt(me.final_remainder_share, 1.0, 4),
-            ri.wall_seconds,
-            re.wall_seconds,
-            ri.effort.steps,
-            re.effort.steps,
-            ri.effort.newton_iterations,
-            ri.effort.halvings,
+            fields.join(",")
         );
     }
     csv

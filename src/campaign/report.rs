@@ -3,6 +3,7 @@
 //! plots.
 
 use crate::atomic_file::write_atomic;
+use crate::csv_columns::{number, optional};
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -41,14 +42,15 @@ impl CurveColumns {
     }
 }
 
-/// Name of the scene's first monitor of the first kind in `kinds` it has.
-fn first_monitor_of(scene: &Scene, kinds: &[MonitorKind]) -> Option<String> {
+/// The `curve.csv` column of the scene's first monitor of the first kind in
+/// `kinds` it has.
+pub(super) fn first_monitor_of(scene: &Scene, kinds: &[MonitorKind]) -> Option<String> {
     kinds.iter().find_map(|kind| {
         scene
             .monitor
             .iter()
             .find(|m| m.kind == *kind)
-            .map(|m| m.name.clone())
+            .map(|m| m.column())
     })
 }
 
@@ -101,10 +103,10 @@ pub(super) fn number_in(
     })
 }
 
-/// Last value of column `name` of a CSV file.
-pub(super) fn last_value(path: &Path, name: &str) -> Option<f64> {
+/// Last value of `column` of a CSV file.
+pub(super) fn last_value(path: &Path, column: &str) -> Option<f64> {
     let mut reader = csv::Reader::from_path(path).ok()?;
-    let column = reader.headers().ok()?.iter().position(|h| h == name)?;
+    let column = reader.headers().ok()?.iter().position(|h| h == column)?;
     reader
         .records()
         .filter_map(|r| r.ok())
@@ -181,25 +183,23 @@ pub(super) fn write_step_convergence(
     };
     let rows = step_convergence(runs);
     let mut csv = String::from(
-        "run,step_factor,M1_step_discrepancy,whole_curve_step_discrepancy,M2_step_peak_spread,final_load,final_load_refined,wall_seconds,wall_seconds_refined\n",
+        "run,step_factor_1,M1_step_discrepancy_1,whole_curve_step_discrepancy_1,M2_step_peak_spread_1,final_load_kN_per_m,final_load_refined_kN_per_m,wall_s,wall_refined_s\n",
     );
     let mut md = String::from(
         "\n## Time-step convergence\n\nEach scene against the same scene with K times the steps at Δt / K (reference: the refined run). M1 and M2 as above.\n\n| run | K | M1 (step) | whole curve | M2 (step) | F_end | F_end (refined) | wall (s) | wall refined (s) |\n|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in &rows {
-        let _ = writeln!(
-            csv,
-            "{},{},{},{},{},{:e},{:e},{:.2},{:.2}",
-            r.name,
-            r.factor,
-            fmt_opt(r.discrepancy, 1.0, 5),
-            fmt_sci(r.whole_curve_discrepancy),
-            fmt_opt(r.peak_spread, 1.0, 5),
-            r.final_loads.0,
-            r.final_loads.1,
-            r.wall_seconds.0,
-            r.wall_seconds.1
-        );
+        let fields = [
+            r.factor.to_string(),
+            optional(r.discrepancy),
+            optional(r.whole_curve_discrepancy),
+            optional(r.peak_spread),
+            number(r.final_loads.0),
+            number(r.final_loads.1),
+            number(r.wall_seconds.0),
+            number(r.wall_seconds.1),
+        ];
+        let _ = writeln!(csv, "{},{}", r.name, fields.join(","));
         let _ = writeln!(
             md,
             "| {} | {} | {} | {} | {} | {:.3} | {:.3} | {:.1} | {:.1} |",
@@ -406,6 +406,37 @@ pub(super) fn profiles_section(runs: &[CampaignRun]) -> String {
     md
 }
 
+/// Header of a load-curve campaign's `metrics.csv`.
+const METRICS_HEADER: &str = "run,family,cell_size_m,length_scale_m,status,wall_s,initial_slope_kN_per_m2,peak_delta_m,peak_load_kN_per_m,final_load_kN_per_m,M1_discrepancy_1,M2_peak_spread_1,M3_brittleness_1,M4_band_width_m,M4_band_width_kappa_bar_m,load_curve_work_kJ_per_m,M5_dissipation_kJ_per_m,external_work_kJ_per_m,internal_work_kJ_per_m,kinetic_energy_kJ_per_m,energy_loss_1,soil_inside_footing_m2_per_m,corner_band_reach_left_1,corner_band_reach_right_1\n";
+
+/// The fields of `metrics.csv` after `run` and `family`.
+fn metrics_fields(r: &CampaignRun, mm: &RunMetrics, status: &str) -> Vec<String> {
+    vec![
+        number(r.cell_size),
+        optional(r.length_scale),
+        status.to_string(),
+        number(r.wall_seconds),
+        number(mm.initial_slope),
+        number(mm.peak.0),
+        number(mm.peak.1),
+        number(mm.final_load),
+        optional(mm.discrepancy),
+        optional(mm.peak_spread),
+        optional(mm.brittleness),
+        optional(mm.band_width),
+        optional(mm.band_width_kappa_bar),
+        optional(mm.external_work),
+        optional(r.dissipation),
+        optional(r.energy.map(|e| e.external)),
+        optional(r.energy.map(|e| e.internal)),
+        optional(r.energy.map(|e| e.kinetic)),
+        optional(r.energy.map(|e| e.relative_loss())),
+        optional(mm.soil_inside_footing),
+        optional(mm.corner_band.map(|c| c[0])),
+        optional(mm.corner_band.map(|c| c[1])),
+    ]
+}
+
 /// Write `curves.csv`, `metrics.csv`, `report.md` and the figures of a
 /// load-curve campaign (biaxial, footing) into `out`.
 pub(super) fn write_outputs(
@@ -421,7 +452,7 @@ pub(super) fn write_outputs(
     std::fs::create_dir_all(out).map_err(|e| io(out, &e))?;
     // combined curves
     let combined = out.join("curves.csv");
-    let mut text = String::from("run,family,cell_size,step,delta,load\n");
+    let mut text = String::from("run,family,cell_size_m,step_1,delta_m,load_kN_per_m\n");
     for r in runs {
         let family = if r.length_scale.is_some() {
             "nonlocal"
@@ -431,8 +462,11 @@ pub(super) fn write_outputs(
         for (step, (d, f)) in r.curve.iter().enumerate() {
             let _ = writeln!(
                 text,
-                "{},{family},{:e},{step},{d:e},{f:e}",
-                r.name, r.cell_size
+                "{},{family},{},{step},{},{}",
+                r.name,
+                number(r.cell_size),
+                number(*d),
+                number(*f)
             );
         }
     }
@@ -440,7 +474,7 @@ pub(super) fn write_outputs(
     // metrics
     let m = compute_metrics(runs, benchmark);
     let metrics_path = out.join("metrics.csv");
-    let mut csv = String::from("run,family,cell_size,length_scale,status,wall_seconds,initial_slope,peak_delta,peak_load,final_load,M1_discrepancy,M2_peak_spread,M3_brittleness,M4_band_width,M4_band_width_kappa_bar,load_curve_work,M5_dissipation,external_work,internal_work,kinetic_energy,energy_loss,soil_inside_footing,corner_band_reach_left,corner_band_reach_right\n");
+    let mut csv = String::from(METRICS_HEADER);
     let mut md = format!("# Mesh-objectivity report\n\nReference of each family: its finest completed mesh (theory §9). h and δ in {unit}, loads in kN/m, band width w (M4 on εq) and w_κ̄ (M4 on the nonlocal variable κ̄) in {unit}.\n\n| run | h ({unit}) | status | wall (s) | slope (kN/m/m) | peak F | δ_peak | F_end | β (M3) | M1 e_h | M2 | w ({unit}) | w/l_s | w_κ̄ ({unit}) | D (kJ/m, M5) |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     for (r, mm) in runs.iter().zip(&m) {
         let family = if r.length_scale.is_some() {
@@ -455,29 +489,9 @@ pub(super) fn write_outputs(
         };
         let _ = writeln!(
             csv,
-            "{},{family},{:e},{},{status},{:.2},{:.1},{:e},{:e},{:e},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{family},{}",
             r.name,
-            r.cell_size,
-            r.length_scale.map(|l| l.to_string()).unwrap_or_default(),
-            r.wall_seconds,
-            mm.initial_slope,
-            mm.peak.0,
-            mm.peak.1,
-            mm.final_load,
-            fmt_opt(mm.discrepancy, 1.0, 5),
-            fmt_opt(mm.peak_spread, 1.0, 5),
-            fmt_opt(mm.brittleness, 1.0, 5),
-            fmt_opt(mm.band_width, 1.0, 6),
-            fmt_opt(mm.band_width_kappa_bar, 1.0, 6),
-            fmt_opt(mm.external_work, 1.0, 6),
-            fmt_opt(r.dissipation, 1.0, 6),
-            fmt_opt(r.energy.map(|e| e.external), 1.0, 6),
-            fmt_opt(r.energy.map(|e| e.internal), 1.0, 6),
-            fmt_opt(r.energy.map(|e| e.kinetic), 1.0, 9),
-            fmt_opt(r.energy.map(|e| e.relative_loss()), 1.0, 5),
-            fmt_opt(mm.soil_inside_footing, 1.0, 5),
-            fmt_opt(mm.corner_band.map(|c| c[0]), 1.0, 5),
-            fmt_opt(mm.corner_band.map(|c| c[1]), 1.0, 5),
+            metrics_fields(r, mm, status).join(",")
         );
         let ratio = match (mm.band_width, r.length_scale) {
             (Some(w), Some(l)) => format!("{:.2}", w / l),

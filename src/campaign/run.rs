@@ -10,13 +10,15 @@ use std::time::Instant;
 use super::footing::FootingGeometry;
 use super::history::{write_history_outputs, History, HistoryColumns};
 use super::record::{fingerprint, Part, RunRecord};
-use super::report::{last_value, read_curve, write_outputs, write_step_convergence};
+use super::report::{
+    first_monitor_of, last_value, read_curve, write_outputs, write_step_convergence,
+};
 use super::spec::{Benchmark, CampaignSpec, SPEC_FILE};
 use super::{CampaignError, CampaignRun, CurveColumns, Effort, EnergyBalance};
 use crate::checkpoint::{Resumable, ResumeOptions, SceneSource};
 use crate::output::deviatoric_hencky_strain;
 use crate::run::{run_scene_with, RunOptions};
-use crate::scene::{Formulation, Scene};
+use crate::scene::{Formulation, MonitorKind, Scene};
 
 /// How a campaign is run.
 #[derive(Clone, Debug, Default)]
@@ -486,17 +488,19 @@ fn gather(
             run.history = Some(History::read(&curve, columns)?);
         }
     }
-    run.dissipation = last_value(&curve, "dissipation");
+    // the last value of the scene's first monitor of `kind`
+    let last = |kind| first_monitor_of(scene, &[kind]).and_then(|c| last_value(&curve, &c));
+    run.dissipation = last(MonitorKind::DissipatedEnergy);
     run.energy = match (
-        last_value(&curve, "external_work"),
-        last_value(&curve, "internal_work"),
-        last_value(&curve, "kinetic_energy"),
+        last(MonitorKind::ExternalWork),
+        last(MonitorKind::InternalWork),
+        last(MonitorKind::KineticEnergy),
     ) {
         (Some(external), Some(internal), Some(kinetic)) => Some(EnergyBalance {
             external,
             internal,
             kinetic,
-            boundary: last_value(&curve, "boundary_work").unwrap_or(0.0),
+            boundary: last(MonitorKind::BoundaryWork).unwrap_or(0.0),
         }),
         _ => None,
     };

@@ -66,8 +66,13 @@ pub struct ResourceEstimate {
     pub points: f64,
     /// Grid cells.
     pub cells: f64,
+    /// Grid nodes.
+    pub nodes: f64,
     /// Nonlocal weight pairs within the cutoff (points × neighbours), if nonlocal.
     pub neighbour_pairs: Option<f64>,
+    /// Unknowns of the implicit tangent (2 per node of the cells holding
+    /// points), if implicit.
+    pub unknowns: Option<f64>,
     /// Nonzeros of the implicit tangent, if implicit.
     pub matrix_nonzeros: Option<f64>,
     /// Entries of its sparse factor, if implicit.
@@ -240,7 +245,7 @@ impl Scene {
                 ],
             });
         }
-        let (mut matrix_nonzeros, mut factor_entries) = (None, None);
+        let (mut unknowns_estimate, mut matrix_nonzeros, mut factor_entries) = (None, None, None);
         if self.scene.analysis != AnalysisKind::Explicit {
             // cells holding points and their nodes; 2 unknowns per node
             let active_cells = (points / (ppc * ppc)).min(cells);
@@ -266,6 +271,7 @@ impl Scene {
                 bytes: fill * BYTES_PER_FACTOR_ENTRY,
                 fields,
             });
+            unknowns_estimate = Some(unknowns);
             matrix_nonzeros = Some(nonzeros);
             factor_entries = Some(fill);
         }
@@ -275,7 +281,9 @@ impl Scene {
         ResourceEstimate {
             points,
             cells,
+            nodes,
             neighbour_pairs: neighbour_pairs.map(|(pairs, _)| pairs),
+            unknowns: unknowns_estimate,
             matrix_nonzeros,
             factor_entries,
             parts,

@@ -10,7 +10,8 @@
 //! [`Scene::warnings`] (`conflicts.rs` those of entries that contradict each
 //! other), `overrides.rs` the `--set key=value` edits of the TOML table,
 //! `diagnostics.rs` the explanation of a file or override that cannot be
-//! read (file, line and column, plain words, "did you mean"). Every public
+//! read (file, line and column, plain words, "did you mean"), `budget.rs`
+//! and `run_time.rs` what a run will need (memory, steps, time). Every public
 //! item is re-exported here (`crate::scene::X`).
 
 use std::path::Path;
@@ -19,6 +20,7 @@ mod budget;
 mod conflicts;
 mod diagnostics;
 mod overrides;
+mod run_time;
 mod schema;
 mod validation;
 mod variants;
@@ -30,6 +32,7 @@ pub use budget::{
 };
 pub use diagnostics::{plain_toml_error, Location};
 pub use overrides::apply_override;
+pub use run_time::{human_duration, RunTimeEstimate, LONG_RUN_SECONDS};
 pub use schema::*;
 pub use validation::{polygon_contains, FieldError};
 pub use variants::Formulation;

@@ -563,3 +563,37 @@ fn wrong_types_are_named_in_plain_words_at_the_value() {
         }
     }
 }
+
+/// A monitor's `curve.csv` column is its name and its unit: one that ends in
+/// a column already taken (a step column, another monitor's) is refused
+/// naming the column; distinct columns load.
+#[test]
+fn monitor_columns_must_be_distinct() {
+    let with_monitors = |monitors: &str| {
+        Scene::from_str_with_overrides(&format!("{MINIMAL}\n{monitors}"), "t", &[])
+    };
+    let monitor =
+        |name: &str, kind: &str| format!("[[monitor]]\nname = \"{name}\"\nkind = \"{kind}\"\n");
+    let taken = with_monitors(&monitor("error_estimate", "max_plastic_strain"))
+        .unwrap_err()
+        .to_string();
+    assert!(taken.contains("`error_estimate_1`"), "{taken}");
+    let both = format!(
+        "{}{}",
+        monitor("energy", "kinetic_energy"),
+        monitor("energy_kJ_per", "run_out")
+    );
+    let taken = with_monitors(&both).unwrap_err().to_string();
+    assert!(
+        taken.contains("monitor[1].name") && taken.contains("`energy_kJ_per_m`"),
+        "{taken}"
+    );
+    let scene = with_monitors(&format!(
+        "{}{}",
+        monitor("energy", "kinetic_energy"),
+        monitor("front", "run_out")
+    ))
+    .unwrap();
+    let columns: Vec<String> = scene.monitor.iter().map(|m| m.column()).collect();
+    assert_eq!(columns, ["energy_kJ_per_m", "front_m"]);
+}

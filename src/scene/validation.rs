@@ -6,6 +6,8 @@ use std::fmt;
 
 use super::schema::*;
 use crate::constitutive::ConstitutiveModel;
+use crate::output::{STEP_COLUMN, TIME_COLUMN};
+use crate::simulation::STEP_COLUMNS;
 
 /// One problem found in a scene: the field path (`grid.cell_size`,
 /// `body[0].box`, …) and what is wrong with it.
@@ -999,21 +1001,38 @@ impl Scene {
         let lo = self.grid.origin;
         let hi = [lo[0] + self.grid.size[0], lo[1] + self.grid.size[1]];
         let mut seen = Vec::new();
+        let mut columns: Vec<String> = [STEP_COLUMN, TIME_COLUMN]
+            .iter()
+            .chain(STEP_COLUMNS.iter())
+            .map(|c| c.to_string())
+            .collect();
         for (i, m) in self.monitor.iter().enumerate() {
             let f = format!("monitor[{i}]");
+            let unique = !m.name.is_empty() && !seen.contains(&&m.name);
             check(
                 e,
                 format!("{f}.name"),
-                !m.name.is_empty() && !seen.contains(&&m.name),
+                unique,
                 "must be a non-empty, unique column name",
             );
+            let free = !matches!(m.name.as_str(), "step" | "time");
             check(
                 e,
                 format!("{f}.name"),
-                !matches!(m.name.as_str(), "step" | "time"),
+                free,
                 "`step` and `time` are reserved column names",
             );
+            // another name can still end in the same column (`load_kN_per`
+            // of a length beside `load` of a force)
+            let column = m.column();
+            check(
+                e,
+                format!("{f}.name"),
+                !(unique && free && columns.contains(&column)),
+                format!("its curve.csv column `{column}` (the name and the unit) is taken by another column"),
+            );
             seen.push(&m.name);
+            columns.push(column);
             check(
                 e,
                 format!("{f}.scale"),

@@ -8,7 +8,9 @@ use std::time::{Duration, Instant};
 
 use super::spec::PlannedRun;
 use super::StudyError;
+use crate::output::TIME_COLUMN;
 use crate::profile::Stage;
+use crate::scene::MonitorSpec;
 
 /// Monitor histories `(t, value)` by monitor name.
 pub type Histories = Vec<(String, Vec<(f64, f64)>)>;
@@ -227,7 +229,7 @@ pub fn execute(
         .map(|r| r.1.clone())
         .unwrap_or_default();
     let usage = read_usage(&out.join("run.json")).unwrap_or_default();
-    let histories = read_curve(&out.join("curve.csv")).unwrap_or_default();
+    let histories = read_curve(&out.join("curve.csv"), &planned.scene.monitor).unwrap_or_default();
     Ok(Measured {
         wall_seconds: walls,
         stage_seconds,
@@ -387,23 +389,20 @@ fn read_linear(path: &Path) -> Option<LinearFigures> {
     })
 }
 
-/// Every monitor column of `curve.csv` as `(t, value)` pairs.
-pub fn read_curve(path: &Path) -> Option<Histories> {
+/// The history `(t, value)` of each of `monitors` in `curve.csv`, by
+/// monitor name; a monitor without its column (named with its unit,
+/// [`crate::scene::MonitorSpec::column`]) is left out.
+pub fn read_curve(path: &Path, monitors: &[MonitorSpec]) -> Option<Histories> {
     let mut reader = csv::Reader::from_path(path).ok()?;
     let header: Vec<String> = reader.headers().ok()?.iter().map(String::from).collect();
-    let time = header.iter().position(|h| h == "time")?;
-    let mut columns: Histories = header
+    let time = header.iter().position(|h| h == TIME_COLUMN)?;
+    let (mut columns, indices): (Histories, Vec<usize>) = monitors
         .iter()
-        .enumerate()
-        .filter(|(i, h)| *i != time && h.as_str() != "step")
-        .map(|(_, h)| (h.clone(), Vec::new()))
-        .collect();
-    let indices: Vec<usize> = header
-        .iter()
-        .enumerate()
-        .filter(|(i, h)| *i != time && h.as_str() != "step")
-        .map(|(i, _)| i)
-        .collect();
+        .filter_map(|m| {
+            let i = header.iter().position(|h| *h == m.column())?;
+            Some(((m.name.clone(), Vec::new()), i))
+        })
+        .unzip();
     for record in reader.records() {
         let record = record.ok()?;
         let t: f64 = record.get(time)?.parse().ok()?;

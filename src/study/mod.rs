@@ -37,7 +37,7 @@ use std::path::{Path, PathBuf};
 pub use closed_form::{BarVibration, ClosedForm, ClosedFormName, ColumnSettlement};
 pub use execute::{median, read_curve, Measured};
 pub use measure::{error, interpolate, log_log_slope, mean_period, Reference};
-pub use report::{crossovers, observed_orders, pareto_front, Crossover, StudyRow};
+pub use report::{crossovers, observed_orders, pareto_front, refined_column, Crossover, StudyRow};
 pub use spec::{
     refined, Axis, CaseSpec, Measure, PlannedRun, Quantity, ReferenceSpec, RunReference,
     SeriesSpec, StudyPlan, StudySection, StudySpec,

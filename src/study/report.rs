@@ -10,6 +10,7 @@ use super::spec::{PlannedRun, RunReference, StudySpec};
 use super::StudyError;
 use crate::atomic_file::{write_atomic, AtomicFile};
 use crate::campaign::IntegratorChoice;
+use crate::csv_columns::{column, number, optional, scene_key_unit, Unit};
 use crate::plot::{plot_work_precision, Series};
 use crate::profile::Stage;
 use crate::scene::AnalysisKind;
@@ -182,22 +183,19 @@ pub fn observed_orders(rows: &[StudyRow]) -> Vec<(String, Option<f64>)> {
         .collect()
 }
 
-fn fmt_opt(v: Option<f64>) -> String {
-    v.map_or_else(|| "nan".to_string(), |v| format!("{v:e}"))
+/// The column of the refined values of `key` in `study.csv`: the key and
+/// its unit (`dt_s`, `solver.cfl_1`); `<key>_unknown_unit` for a key of no
+/// known unit ([`scene_key_unit`]).
+pub fn refined_column(key: &str) -> String {
+    match scene_key_unit(key) {
+        Some(unit) => column(key, unit),
+        None => format!("{key}_unknown_unit"),
+    }
 }
 
-/// `study.csv`: one row per run with every axis value, wall time (median,
-/// min, max over the repeats), per-stage seconds, steps, Newton iterations,
-/// factorisations, halvings, the error per quantity and the run's error.
-pub fn write_csv(path: &Path, spec: &StudySpec, rows: &[StudyRow]) -> Result<(), StudyError> {
-    let io = |e: &dyn std::fmt::Display| StudyError::Io {
-        path: path.display().to_string(),
-        message: e.to_string(),
-    };
-    let file = AtomicFile::create(path).map_err(|e| io(&e))?;
-    let mut w = csv::Writer::from_writer(file);
-    let cases = !spec.case.is_empty();
-    // error columns: every quantity of the spec and its cases, in order
+/// The error columns of `study.csv`: every quantity of the spec and its
+/// cases, in order, as relative errors (`error_top_uy_l2_1`).
+fn error_columns(spec: &StudySpec, rows: &[StudyRow]) -> Vec<String> {
     let mut columns: Vec<String> = Vec::new();
     for q in spec
         .quantity
@@ -208,6 +206,25 @@ pub fn write_csv(path: &Path, spec: &StudySpec, rows: &[StudyRow]) -> Result<(),
             columns.push(q.column());
         }
     }
+    columns
+}
+
+/// The refined keys of the rows, in order of first appearance.
+fn refined_keys(rows: &[StudyRow]) -> Vec<String> {
+    let mut keys: Vec<String> = Vec::new();
+    for (key, _) in rows.iter().filter_map(|r| r.planned.refine.as_ref()) {
+        if !keys.contains(key) {
+            keys.push(key.clone());
+        }
+    }
+    keys
+}
+
+/// Header of `study.csv`: identifiers (run, case, method, series,
+/// integrator, the axes, the refined key), the refined value per key, the
+/// effort and stage times, the errors, the status and the case's reference.
+fn study_header(spec: &StudySpec, keys: &[String], errors: &[String]) -> Vec<String> {
+    let cases = !spec.case.is_empty();
     let mut header: Vec<String> = ["run", "method", "series", "integrator"]
         .iter()
         .map(|s| s.to_string())
@@ -215,93 +232,122 @@ pub fn write_csv(path: &Path, spec: &StudySpec, rows: &[StudyRow]) -> Result<(),
     if cases {
         header.insert(1, "case".into());
     }
-    header.extend(spec.axis.iter().map(|a| a.name.clone()));
+    header.extend(spec.axis.iter().map(|a| format!("axis_{}", a.name)));
+    header.push("refine".into());
+    header.extend(keys.iter().map(|k| refined_column(k)));
     header.extend(
         [
-            "refine",
-            "value",
-            "repeats",
-            "wall_seconds",
-            "wall_min",
-            "wall_max",
-            "steps",
-            "newton_iterations",
-            "factorisations",
-            "halvings",
-            "linear_seconds_per_newton_iteration",
-            "factor_nnz",
-            "pcg_iterations",
-            "linear_fallbacks",
+            "repeats_1",
+            "wall_s",
+            "wall_min_s",
+            "wall_max_s",
+            "steps_1",
+            "newton_iterations_1",
+            "factorisations_1",
+            "halvings_1",
+            "linear_time_per_newton_iteration_s",
+            "factor_nnz_1",
+            "pcg_iterations_1",
+            "linear_fallbacks_1",
         ]
         .iter()
         .map(|s| s.to_string()),
     );
-    header.extend(Stage::ALL.iter().map(|s| format!("{}_seconds", s.name())));
-    header.extend(columns.iter().cloned());
-    header.extend(["error".to_string(), "status".to_string()]);
+    header.extend(Stage::ALL.iter().map(|s| column(s.name(), Unit::Second)));
+    header.extend(errors.iter().map(|c| column(c, Unit::One)));
+    header.extend(["error_1".to_string(), "status".to_string()]);
     if cases {
         header.push("reference".into());
     }
-    w.write_record(&header).map_err(|e| io(&e))?;
-    for row in rows {
-        let (p, m) = (&row.planned, &row.measured);
-        let mut record = vec![
-            p.name.clone(),
-            p.method.clone(),
-            spec.series
-                .get(p.series)
-                .map_or("reference".into(), |s| s.label.clone()),
-            format!("{:?}", p.integrator).to_lowercase(),
-        ];
-        if cases {
-            record.insert(1, p.case.clone().unwrap_or_default());
-        }
-        for axis in &spec.axis {
-            record.push(
-                p.axes
-                    .iter()
-                    .find(|(name, _)| name == &axis.name)
-                    .map_or(String::new(), |(_, v)| v.clone()),
-            );
-        }
-        let (key, value) = p.refine.clone().unwrap_or_default();
-        let walls = &m.wall_seconds;
-        record.extend([
-            key,
-            format!("{value:e}"),
-            walls.len().to_string(),
-            fmt_opt(Some(m.median_wall()).filter(|w| w.is_finite())),
-            fmt_opt(walls.iter().copied().reduce(f64::min)),
-            fmt_opt(walls.iter().copied().reduce(f64::max)),
-            m.steps.to_string(),
-            m.newton_iterations.to_string(),
-            m.factorisations.to_string(),
-            m.halvings.to_string(),
-            format!("{:e}", m.linear.seconds_per_newton_iteration),
-            m.linear
-                .factor_nnz
-                .map_or_else(String::new, |n| n.to_string()),
-            m.linear.pcg_iterations.to_string(),
-            m.linear.fallbacks.to_string(),
-        ]);
-        record.extend(
-            (0..Stage::ALL.len())
-                .map(|i| format!("{:e}", m.stage_seconds.get(i).copied().unwrap_or(0.0))),
-        );
-        record.extend(columns.iter().map(|c| {
-            p.quantities
+    header
+}
+
+/// The fields of one run in the order of [`study_header`].
+fn study_record(
+    spec: &StudySpec,
+    row: &StudyRow,
+    keys: &[String],
+    errors: &[String],
+) -> Vec<String> {
+    let (p, m) = (&row.planned, &row.measured);
+    let mut record = vec![
+        p.name.clone(),
+        p.method.clone(),
+        spec.series
+            .get(p.series)
+            .map_or("reference".into(), |s| s.label.clone()),
+        format!("{:?}", p.integrator).to_lowercase(),
+    ];
+    if !spec.case.is_empty() {
+        record.insert(1, p.case.clone().unwrap_or_default());
+    }
+    for axis in &spec.axis {
+        record.push(
+            p.axes
                 .iter()
-                .position(|q| &q.column() == c)
-                .map_or(String::new(), |i| {
-                    fmt_opt(row.errors.get(i).copied().flatten())
-                })
-        }));
-        record.push(fmt_opt(row.error()));
-        record.push(m.status.clone());
-        if cases {
-            record.push(p.reference.describe().replace(',', ";"));
-        }
-        w.write_record(&record).map_err(|e| io(&e))?;
+                .find(|(name, _)| name == &axis.name)
+                .map_or(String::new(), |(_, v)| v.clone()),
+        );
+    }
+    record.push(p.refine.as_ref().map_or(String::new(), |(k, _)| k.clone()));
+    record.extend(keys.iter().map(|key| match &p.refine {
+        Some((k, value)) if k == key => number(*value),
+        _ => String::new(),
+    }));
+    let walls = &m.wall_seconds;
+    record.extend([
+        walls.len().to_string(),
+        number(m.median_wall()),
+        optional(walls.iter().copied().reduce(f64::min)),
+        optional(walls.iter().copied().reduce(f64::max)),
+        m.steps.to_string(),
+        m.newton_iterations.to_string(),
+        m.factorisations.to_string(),
+        m.halvings.to_string(),
+        number(m.linear.seconds_per_newton_iteration),
+        m.linear
+            .factor_nnz
+            .map_or_else(String::new, |n| n.to_string()),
+        m.linear.pcg_iterations.to_string(),
+        m.linear.fallbacks.to_string(),
+    ]);
+    record.extend(
+        (0..Stage::ALL.len()).map(|i| number(m.stage_seconds.get(i).copied().unwrap_or(0.0))),
+    );
+    record.extend(errors.iter().map(|c| {
+        p.quantities
+            .iter()
+            .position(|q| &q.column() == c)
+            .map_or(String::new(), |i| {
+                optional(row.errors.get(i).copied().flatten())
+            })
+    }));
+    record.push(optional(row.error()));
+    record.push(m.status.clone());
+    if !spec.case.is_empty() {
+        record.push(p.reference.describe().replace(',', ";"));
+    }
+    record
+}
+
+/// `study.csv`: one row per run with its identifiers (every axis value as
+/// `axis_<name>`, the refined key), the refined value in the column of its
+/// key, wall time (median, min, max over the repeats), per-stage seconds,
+/// steps, Newton iterations, factorisations, halvings, the relative error
+/// per quantity and the run's error (docs/study.md).
+pub fn write_csv(path: &Path, spec: &StudySpec, rows: &[StudyRow]) -> Result<(), StudyError> {
+    let io = |e: &dyn std::fmt::Display| StudyError::Io {
+        path: path.display().to_string(),
+        message: e.to_string(),
+    };
+    let file = AtomicFile::create(path).map_err(|e| io(&e))?;
+    let mut w = csv::Writer::from_writer(file);
+    let (keys, errors) = (refined_keys(rows), error_columns(spec, rows));
+    w.write_record(study_header(spec, &keys, &errors))
+        .map_err(|e| io(&e))?;
+    for row in rows {
+        w.write_record(study_record(spec, row, &keys, &errors))
+            .map_err(|e| io(&e))?;
     }
     // whole or absent: renamed to its name once every row is written
     let file = w.into_inner().map_err(|e| io(&e.to_string()))?;
