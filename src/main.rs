@@ -106,8 +106,9 @@ enum Command {
         #[command(flatten)]
         campaign: CampaignArgs,
     },
-    /// The whole paper: the biaxial, footing and vertical-cut campaigns one
-    /// after the other into OUT/campaign-<name>/, and OUT/README.md putting
+    /// The whole paper: the biaxial, footing and vertical-cut campaigns (the
+    /// cut in both readings of its failure time) one after the other into
+    /// OUT/campaign-<name>/, and OUT/README.md putting
     /// each report beside the paper's figures and claim. Resumes like a
     /// campaign (finished runs are not run again). Measured at full size on
     /// 2 cores: hours (the cut's 16 runs alone ~2 h); `--set` or `--from`

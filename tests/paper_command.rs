@@ -15,6 +15,7 @@ fn short_root(dir: &Path) {
         ("biaxial", "local_h300.toml"),
         ("footing", "local_h250.toml"),
         ("vertical_cut", "local_h100.toml"),
+        ("vertical_cut_late", "local_h100.toml"),
     ] {
         let to = dir.join(benchmark);
         std::fs::create_dir_all(&to).unwrap();
@@ -46,6 +47,7 @@ fn paper_runs_three_campaigns_indexes_them_and_resumes() {
         ("biaxial", "Figs. 3–5"),
         ("footing", "Figs. 7–8"),
         ("vertical_cut", "Figs. 10–12"),
+        ("vertical_cut_late", "Figs. 10–12, late reading"),
     ] {
         let row = index
             .lines()

@@ -33,6 +33,13 @@ pub const PEAK_WINDOW: f64 = 0.05;
 /// End of the failure phase after the onset, s (see [`PEAK_WINDOW`]).
 pub const FALL_WINDOW: f64 = 0.1;
 
+/// The failure-phase figure of q_B runs from this long before each run's
+/// onset, s.
+const FAILURE_LEAD: f64 = 0.02;
+
+/// ... to this long after it, s (the failure window of issue 40, item 3).
+const FAILURE_PLOT: f64 = 0.15;
+
 /// The `curve.csv` columns of a time-history run, those of the scene's monitors.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct HistoryColumns {
@@ -221,7 +228,7 @@ pub struct HistoryMetrics {
 /// The failure phase of a q_B reading `stress` after the onset `t0`: its
 /// peak (q, t) up to [`PEAK_WINDOW`] after the onset and the fall roughness
 /// from the peak to [`FALL_WINDOW`] after it; `None` without a peak.
-fn failure_fall(stress: &[(f64, f64)], t0: f64) -> Option<((f64, f64), Option<f64>)> {
+pub fn failure_fall(stress: &[(f64, f64)], t0: f64) -> Option<((f64, f64), Option<f64>)> {
     let until =
         |end: f64| -> Vec<(f64, f64)> { stress.iter().copied().filter(|p| p.0 <= end).collect() };
     let (t, q) = metrics::peak(&until(t0 + PEAK_WINDOW)).ok()?;
@@ -499,7 +506,7 @@ fn spread(values: &[f64]) -> Option<f64> {
 
 fn report_md(runs: &[CampaignRun], m: &[HistoryMetrics], pairs: &[IntegratorPair]) -> String {
     let mut md = format!(
-        "# Vertical-cut campaign report\n\nPer run (theory §9 M1, M6): collapse onset = first time |u_A| > {ONSET_DISPLACEMENT} m; u_A at t = {COMPARISON_TIME} s and at the end; run-out front x_front = max_p x_p at the end; q_B peak of the failure phase (up to {PEAK_WINDOW} s after the onset); fall roughness = total variation of q_B from that peak to {FALL_WINDOW} s after the onset / its net drop over that time (1 = monotone fall; later B rides in the run-out flow), of the single point B and of the group of points that started within one cell of B (`neighbourhood_stress`, when the scene monitors it); reversals of q_B after the onset with a hysteresis of {:.0} % of its peak (M6 noise index); M1 = relative L2 discrepancy of u_A(t) on [0, t_end] against the finest mesh of the same family (regularisation and integrator); R/W = the energy budget's remainder (docs/theory.md E1) as a share of the work put in, at the end.\n\n| run | h (m) | status | wall (s) | steps | Newton | halvings | onset (s) | u_A(0.3) (m) | u_A end (m) | x_front end (m) | q_B peak (kPa) | roughness | roughness (group) | reversals | M1 | R/W end |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "# Vertical-cut campaign report\n\nPer run (theory §9 M1, M6): collapse onset = first time |u_A| > {ONSET_DISPLACEMENT} m; u_A at t = {COMPARISON_TIME} s and at the end; run-out front x_front = max_p x_p at the end; q_B peak of the failure phase (up to {PEAK_WINDOW} s after the onset); fall roughness = total variation of q_B from that peak to {FALL_WINDOW} s after the onset / its net drop over that time (1 = monotone fall; later B rides in the run-out flow, and while gravity still rises, to t = 0.6 s, the level of q_B follows the weight of the debris above B, which grows with the gravity ramp: `fig11_qB_neighbourhood_failure.png` shows the failure phase alone, `fig11_qB_neighbourhood.png` the whole run), of the single point B and of the group of points that started within one cell of B (`neighbourhood_stress`, when the scene monitors it); reversals of q_B after the onset with a hysteresis of {:.0} % of its peak (M6 noise index); M1 = relative L2 discrepancy of u_A(t) on [0, t_end] against the finest mesh of the same family (regularisation and integrator); R/W = the energy budget's remainder (docs/theory.md E1) as a share of the work put in, at the end.\n\n| run | h (m) | status | wall (s) | steps | Newton | halvings | onset (s) | u_A(0.3) (m) | u_A end (m) | x_front end (m) | q_B peak (kPa) | roughness | roughness (group) | reversals | M1 | R/W end |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
         100.0 * REVERSAL_THRESHOLD
     );
     for (r, mm) in runs.iter().zip(m) {
@@ -620,12 +627,7 @@ fn plot_histories(out: &Path, runs: &[CampaignRun]) -> plot::Result<()> {
             .filter_map(|r| {
                 let points = pick(r.history.as_ref()?);
                 (points.len() > 1).then(|| Series {
-                    name: format!(
-                        "{} {} h={:.3} m",
-                        r.regularisation(),
-                        r.integrator(),
-                        r.cell_size
-                    ),
+                    name: series_name(r),
                     points: points.clone(),
                     dashed: dashed(r),
                     color: colour_of(runs, r.cell_size),
@@ -635,7 +637,7 @@ fn plot_histories(out: &Path, runs: &[CampaignRun]) -> plot::Result<()> {
     };
     let implicit = |r: &CampaignRun| r.integrator() == "implicit";
     let local = |r: &CampaignRun| r.length_scale.is_none();
-    let figures: [(&str, &str, &str, Vec<Series>); 5] = [
+    let figures: [(&str, &str, &str, Vec<Series>); 6] = [
         (
             "fig11_qB.png",
             "Fig. 11: q at B (implicit; dashed: local, solid: nonlocal)",
@@ -647,6 +649,12 @@ fn plot_histories(out: &Path, runs: &[CampaignRun]) -> plot::Result<()> {
             "Fig. 11, q of the points within one cell of B (implicit; dashed: local)",
             "q_B (kPa)",
             series(&|h| &h.neighbourhood_stress, &implicit, &local),
+        ),
+        (
+            "fig11_qB_neighbourhood_failure.png",
+            "Fig. 11 over the failure phase: q of the points within one cell of B (implicit; dashed: local)",
+            "q_B (kPa)",
+            failure_window(runs),
         ),
         (
             "fig12_uA.png",
@@ -668,8 +676,12 @@ fn plot_histories(out: &Path, runs: &[CampaignRun]) -> plot::Result<()> {
         ),
     ];
     for (file, title, y_label, s) in figures {
+        let x_label = match file.contains("failure") {
+            true => "t − t_onset (s)",
+            false => "t (s)",
+        };
         if !s.is_empty() {
-            plot::plot_curves(out.join(file), title, "t (s)", y_label, &s)?;
+            plot::plot_curves(out.join(file), title, x_label, y_label, &s)?;
         }
     }
     let explicit = |r: &CampaignRun| r.integrator() == "explicit";
@@ -684,6 +696,41 @@ fn plot_histories(out: &Path, runs: &[CampaignRun]) -> plot::Result<()> {
             series(&|h| &h.run_out, &every, &explicit),
             series(&|h| &h.remainder_share, &every, &explicit),
         ],
+    )
+}
+
+/// The neighbourhood q_B of each implicit run over its failure phase: time
+/// shifted to the run's onset, from [`FAILURE_LEAD`] before it to
+/// [`FAILURE_PLOT`] after it; runs that never collapse are left out.
+fn failure_window(runs: &[CampaignRun]) -> Vec<Series> {
+    runs.iter()
+        .filter(|r| r.integrator() == "implicit")
+        .filter_map(|r| {
+            let h = r.history.as_ref()?;
+            let t0 = metrics::first_exceedance(&h.displacement, ONSET_DISPLACEMENT)?;
+            let points: Vec<(f64, f64)> = h
+                .neighbourhood_stress
+                .iter()
+                .map(|&(t, q)| (t - t0, q))
+                .filter(|&(t, _)| (-FAILURE_LEAD..=FAILURE_PLOT).contains(&t))
+                .collect();
+            (points.len() > 1).then(|| Series {
+                name: series_name(r),
+                points,
+                dashed: r.length_scale.is_none(),
+                color: colour_of(runs, r.cell_size),
+            })
+        })
+        .collect()
+}
+
+/// Legend entry of a run's curve.
+fn series_name(r: &CampaignRun) -> String {
+    format!(
+        "{} {} h={:.3} m",
+        r.regularisation(),
+        r.integrator(),
+        r.cell_size
     )
 }
 

@@ -25,7 +25,10 @@ pub use footing::{
     corner_band_reach, soil_inside_outline, FootingGeometry, CORNER_BAND_STRAIN,
     CORNER_STRIP_HALF_WIDTH,
 };
-pub use history::{compute_history_metrics, History, HistoryColumns, HistoryMetrics};
+pub use history::{
+    compute_history_metrics, failure_fall, History, HistoryColumns, HistoryMetrics,
+    ONSET_DISPLACEMENT,
+};
 pub use record::{fingerprint_text, Part, RunRecord, RECORD_FILE};
 pub use report::{compute_metrics, step_convergence, CurveColumns, RunMetrics, StepConvergence};
 pub use run::{run_campaign, CampaignOptions};

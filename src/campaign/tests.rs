@@ -281,6 +281,7 @@ fn history_metrics_follow_families_and_pair_the_integrators() {
         "fig12_uA.png",
         "fig11_qB.png",
         "fig11_qB_neighbourhood.png",
+        "fig11_qB_neighbourhood_failure.png",
         "implicit_vs_explicit.png",
         "integrators.png",
     ] {
