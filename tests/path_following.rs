@@ -15,10 +15,14 @@ const SCENE: &str = "biaxial/local_h300.toml";
 /// The scene's nominal step, s.
 const DT: f64 = 1e-3;
 
+/// The scene's start ramp of the platen (`bc.rigid.0.ramp_time`), s.
+const RAMP: f64 = 5e-3;
+
 /// The path-following twin of the scene: quasi-static, dissipation control.
-const PATH: [&str; 3] = [
+const PATH: [&str; 4] = [
     "scene.analysis=\"quasi_static\"",
-    "solver.newmark_gamma=",
+    "solver.rho_infinity=",
+    "bc.rigid.0.ramp_time=0",
     "solver.path_following=\"dissipation\"",
 ];
 
@@ -51,10 +55,12 @@ fn rising_load_at(curve: &[[f64; 3]], t: f64) -> f64 {
     a[1] + (b[1] - a[1]) * (t - a[0]) / (b[0] - a[0])
 }
 
-/// Before the peak the path-following run carries the dynamic run's loads
-/// within 0.1 % from the tenth step on (measured: at most 0.055 %; the
-/// dynamic run's impulsive start rings up to 1.5 % in its first steps) and
-/// peaks within 0.2 % of it (measured 0.08 %); past the peak it follows the
+/// Before the peak the path-following run carries the loads of the scene's
+/// dynamic run (generalised-α, 5 ms start ramp), compared at equal platen
+/// travel, within 0.05 % from the tenth step on (measured: at most
+/// 0.0093 %; 0.055 % against Newmark γ = 0.6 without the ramp, whose
+/// impulsive start rang up to 1.5 %) and peaks within 0.2 % of it
+/// (measured 0.11 %); past the peak it follows the
 /// softening branch without inertia: the platen's travel turns back by more
 /// than 30 μm (measured 65 μm, the snap-back the displacement-controlled run
 /// cannot follow) while the load falls below 80 % of the peak (measured
@@ -65,6 +71,12 @@ fn rising_load_at(curve: &[[f64; 3]], t: f64) -> f64 {
 fn local_biaxial_passes_its_peak_and_follows_the_snap_back() {
     let (dynamic, stop) = follow(&mut simulation(SCENE, &[]));
     assert!(stop.is_none(), "the dynamic run stopped: {stop:?}");
+    // after its start ramp the scene's platen has travelled v (t − T/2)
+    let dynamic: Vec<[f64; 3]> = dynamic
+        .iter()
+        .filter(|r| r[0] >= RAMP)
+        .map(|r| [r[0] - RAMP / 2.0, r[1], r[2]])
+        .collect();
     let (path, stop) = follow(&mut simulation(SCENE, &PATH));
     if let Some(message) = &stop {
         assert!(
@@ -77,19 +89,23 @@ fn local_biaxial_passes_its_peak_and_follows_the_snap_back() {
         .unwrap();
     let peak = path[peak_index];
     let dynamic_peak = dynamic.iter().map(|r| r[1]).fold(f64::MIN, f64::max);
-    // the dynamic run's impulsive start rings for its first ~8 steps (up to
-    // 1.5 % off); from the tenth step on the two agree
+    // compared at equal platen travel from the tenth step on
+    let mut largest = 0.0f64;
     for r in path[..peak_index].iter().filter(|r| r[0] >= 10.0 * DT) {
         let expected = rising_load_at(&dynamic, r[0]);
         let error = (r[1] - expected).abs() / expected;
+        largest = largest.max(error);
         assert!(
-            error < 1e-3,
+            error < 5e-4,
             "t = {}: load {} against {expected} ({error:.2e})",
             r[0],
             r[1]
         );
     }
     let peak_error = (peak[1] - dynamic_peak).abs() / dynamic_peak;
+    println!(
+        "before the peak within {largest:.2e} of the dynamic run; peak within {peak_error:.2e}"
+    );
     assert!(peak_error < 2e-3, "peak {} against {dynamic_peak}", peak[1]);
     let after = &path[peak_index..];
     let furthest = after.iter().map(|r| r[0]).fold(f64::MIN, f64::max);

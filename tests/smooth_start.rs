@@ -82,6 +82,7 @@ fn quasi_static(scene: &Driven, steps: usize) -> Vec<(f64, f64)> {
         "scene.dt=1.0".into(),
         format!("scene.steps={steps}"),
         format!("bc.rigid.0.velocity=[0.0, {}]", -scene.per_step),
+        "bc.rigid.0.ramp_time=0".into(),
     ];
     load_curve(scene, &overrides)
 }
@@ -92,6 +93,7 @@ fn dynamic(scene: &Driven, ramp_time: f64, gamma: f64, steps: usize) -> Vec<(f64
     let overrides = [
         format!("scene.steps={steps}"),
         format!("bc.rigid.0.ramp_time={ramp_time}"),
+        "solver.rho_infinity=".into(),
         format!("solver.newmark_gamma={gamma}"),
     ];
     load_curve(scene, &overrides)

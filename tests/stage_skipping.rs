@@ -283,6 +283,7 @@ fn explicit_integrator_assembles_and_factorises_nothing() {
             "scene.dt=5e-6",
             "scene.end_time=0.001",
             "bc.rigid.0.velocity=[0.0,-2.0]",
+            "bc.rigid.0.ramp_time=0",
             "solver.damping=0.7",
         ],
     );
