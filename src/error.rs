@@ -41,6 +41,13 @@ pub enum RunError {
 }
 
 impl RunError {
+    /// Whether `mpm-geo resume` can get past this stop: a failed write can
+    /// succeed once the cause is removed (a full disk), but a failed step
+    /// is computed again from the same checkpoint and fails the same way.
+    pub fn resumable(&self) -> bool {
+        matches!(self, RunError::Output { .. })
+    }
+
     /// The step error, if the run stopped in a step.
     pub fn cause(&self) -> Option<&StepError> {
         match self {

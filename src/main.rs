@@ -555,23 +555,28 @@ fn report(
     }
     print_run_summary(&outcome, out);
     print_warnings(sim);
-    let resume = || {
-        if out.join("checkpoint.bin").exists() {
-            format!("; continue with `mpm-geo resume {}`", out.display())
-        } else {
-            String::new()
-        }
+    let checkpoint = out.join("checkpoint.bin").exists();
+    let resume = || match checkpoint {
+        true => format!("; continue with `mpm-geo resume {}`", out.display()),
+        false => String::new(),
     };
     match (outcome.error, outcome.interrupted) {
-        (Some(e), _) => fail(
-            1,
-            e.error_id(),
-            &format!(
-                "run stopped: {e}\noutputs up to the last completed step are in {}{}",
-                out.display(),
-                resume()
-            ),
-        ),
+        (Some(e), _) => {
+            let next = match (e.resumable(), checkpoint) {
+                (true, _) => resume(),
+                // the same step from the same checkpoint fails the same way
+                (false, true) => "; resuming from the checkpoint would repeat this step: change the scene and run again".to_string(),
+                (false, false) => String::new(),
+            };
+            fail(
+                1,
+                e.error_id(),
+                &format!(
+                    "run stopped: {e}\noutputs up to the last completed step are in {}{next}",
+                    out.display(),
+                ),
+            )
+        }
         (None, Some(signal)) => {
             eprintln!(
                 "interrupted by {} after step {} (t = {:.6e} s); outputs up to it are in {}{}",

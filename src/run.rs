@@ -793,6 +793,16 @@ pub enum RunStatus<'a> {
 }
 
 impl RunStatus<'_> {
+    /// Whether `mpm-geo resume` can continue the run from its checkpoint: an
+    /// interrupted run, or one whose write failed ([`RunError::resumable`]).
+    pub fn resumable(&self) -> bool {
+        match self {
+            RunStatus::Interrupted(_) => true,
+            RunStatus::Failed(e) => e.resumable(),
+            RunStatus::Running | RunStatus::Completed => false,
+        }
+    }
+
     /// `running`, `completed`, `failed` or `interrupted`.
     pub fn name(&self) -> &'static str {
         match self {
@@ -968,7 +978,8 @@ fn run_summary(run_json: &Path, sim: &Simulation, status: RunStatus<'_>) -> serd
         "monitors": monitors,
         "outputs": dir.display().to_string(),
         "paraview": pvd.exists().then(|| pvd.display().to_string()),
-        "resume": matches!(status, RunStatus::Interrupted(_) | RunStatus::Failed(_))
+        "resume": status
+            .resumable()
             .then(|| dir.join("checkpoint.bin"))
             .filter(|c| c.exists())
             .map(|_| format!("mpm-geo resume {}", dir.display())),

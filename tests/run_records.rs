@@ -567,3 +567,33 @@ values = [0.5, 0.25]
     std::thread::sleep(Duration::from_millis(300));
     assert_eq!(text(&run.join("curve.csv")).lines().count(), rows);
 }
+
+/// A run whose step fails (a point falls out of the grid) keeps its last
+/// checkpoint but is not offered `mpm-geo resume`: the same step from the
+/// same checkpoint fails the same way, so the message says so, and
+/// `run.json`'s summary carries no resume command (an interrupted run, or
+/// one whose write failed, gets both).
+#[test]
+fn a_run_stopped_by_a_failed_step_is_not_offered_a_resume() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out");
+    let scene = common::validation("failures/falls_out_of_grid.toml");
+    let failed = mpm_geo(&[
+        "run",
+        scene.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--checkpoint-every",
+        "10",
+        "--quiet",
+    ]);
+    let stderr = String::from_utf8_lossy(&failed.stderr);
+    assert_eq!(failed.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("error[RUN_POINT_LEFT_GRID]"), "{stderr}");
+    assert!(out.join("checkpoint.bin").exists());
+    assert!(!stderr.contains("mpm-geo resume"), "{stderr}");
+    assert!(stderr.contains("would repeat this step"), "{stderr}");
+    let summary = &json(&out.join("run.json"))["summary"];
+    assert_eq!(summary["status"], "failed");
+    assert!(summary["resume"].is_null(), "{summary}");
+}
