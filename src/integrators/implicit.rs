@@ -237,8 +237,7 @@ impl ImplicitIntegrator {
     fn path_step(&mut self, model: &mut Model, profile: &Profile) -> Result<StepReport, StepError> {
         let scene = &model.scene;
         let end = scene.scene.end_time_or_steps();
-        let budget =
-            (scene.solver.path_max_steps).unwrap_or(10 * scene.scene.steps.unwrap_or(0).max(1));
+        let budget = scene.solver.path_step_budget(scene.scene.steps);
         if model.step >= budget {
             return Err(StepError::PathBudget {
                 steps: model.step,

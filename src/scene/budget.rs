@@ -294,7 +294,8 @@ impl Scene {
         }
     }
 
-    /// The step count: `scene.steps` (implicit), or `end_time` over the
+    /// The step count: `scene.steps` (implicit; a path-following run's step
+    /// budget, its most steps), or `end_time` over the
     /// explicit step (the scene's `dt`, else α_CFL times the smallest stable
     /// step h / c_p of the materials in use, combined with the penalty
     /// springs of rigid bodies as in [`crate::integrators::time_step`]).
@@ -306,6 +307,17 @@ impl Scene {
                 end / dt,
                 format!("adaptive steps: scene end {end:.4e} s / first step {dt:.4e} s"),
                 vec!["scene.end_time".into(), "scene.dt".into()],
+            );
+        }
+        if self.solver.follows_path() {
+            let budget = self.solver.path_step_budget(a.steps);
+            return (
+                budget as f64,
+                format!(
+                    "path following: at most solver.path_max_steps = {budget} steps to the end travel ({} nominal steps)",
+                    a.steps.unwrap_or(0)
+                ),
+                vec!["solver.path_max_steps".into(), "scene.steps".into()],
             );
         }
         if a.analysis != AnalysisKind::Explicit {

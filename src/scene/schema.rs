@@ -483,6 +483,13 @@ impl SolverSpec {
         self.path_following == PathFollowing::Dissipation
     }
 
+    /// The most steps a path-following run may take to its end travel:
+    /// `path_max_steps`, by default 10 × the nominal `steps`.
+    pub fn path_step_budget(&self, steps: Option<usize>) -> usize {
+        self.path_max_steps
+            .unwrap_or(10 * steps.unwrap_or(0).max(1))
+    }
+
     /// Whether an implicit dynamic run chooses its own steps.
     pub fn adaptive(&self) -> bool {
         self.time_step == TimeStepControl::Adaptive

@@ -48,8 +48,8 @@ fn overrides_change_values_and_reject_unknown_paths() {
 }
 
 /// An empty value removes a key, so that its default applies: the biaxial
-/// scene's Newmark γ = 0.6 gives way to generalised-α, which the scene
-/// refuses beside γ; a key inside an array's table goes too; an array
+/// scene's generalised-α gives way to Newmark γ = 0.6, which the scene
+/// refuses beside ρ∞; a key inside an array's table goes too; an array
 /// element cannot be removed.
 #[test]
 fn empty_override_removes_a_key() {
@@ -58,11 +58,11 @@ fn empty_override_removes_a_key() {
         let overrides: Vec<String> = overrides.iter().map(|o| o.to_string()).collect();
         Scene::from_str_with_overrides(biaxial, "biaxial", &overrides)
     };
-    let both = scene(&["solver.rho_infinity=0.8"]).unwrap_err();
+    let both = scene(&["solver.newmark_gamma=0.6"]).unwrap_err();
     assert!(both.to_string().contains("newmark_gamma"), "{both}");
-    let alpha = scene(&["solver.newmark_gamma=", "solver.rho_infinity=0.8"]).unwrap();
-    assert_eq!(alpha.solver.newmark_gamma, None);
-    assert_eq!(alpha.solver.rho_infinity, Some(0.8));
+    let newmark = scene(&["solver.rho_infinity=", "solver.newmark_gamma=0.6"]).unwrap();
+    assert_eq!(newmark.solver.rho_infinity, None);
+    assert_eq!(newmark.solver.newmark_gamma, Some(0.6));
     let unnamed = scene(&["monitor.0.name="]).unwrap_err();
     assert!(unnamed.to_string().contains("name"), "{unnamed}");
     let element = scene(&["bc.fixed.0="]).unwrap_err();
@@ -596,4 +596,33 @@ fn monitor_columns_must_be_distinct() {
     .unwrap();
     let columns: Vec<String> = scene.monitor.iter().map(|m| m.column()).collect();
     assert_eq!(columns, ["energy_kJ_per_m", "front_m"]);
+}
+
+/// A path-following run is budgeted at its most steps, `path_max_steps`
+/// (10 × the nominal steps by default), not at its nominal step count.
+#[test]
+fn a_path_following_run_is_estimated_at_its_step_budget() {
+    let biaxial = include_str!("../../validation/biaxial/local_h300.toml");
+    let path = |extra: &[&str]| {
+        let overrides: Vec<String> = [
+            "scene.analysis=\"quasi_static\"",
+            "solver.rho_infinity=",
+            "bc.rigid.0.ramp_time=0",
+            "solver.path_following=\"dissipation\"",
+        ]
+        .iter()
+        .chain(extra)
+        .map(|o| o.to_string())
+        .collect();
+        Scene::from_str_with_overrides(biaxial, "biaxial", &overrides).unwrap()
+    };
+    let nominal = path(&[]).scene.steps.unwrap() as f64;
+    assert_eq!(path(&[]).estimate_resources().steps, 10.0 * nominal);
+    let capped = path(&["solver.path_max_steps=500"]).estimate_resources();
+    assert_eq!(capped.steps, 500.0);
+    assert!(
+        capped.steps_reason.contains("path_max_steps"),
+        "{}",
+        capped.steps_reason
+    );
 }
