@@ -468,13 +468,24 @@ fn draw_legend<DB: DrawingBackend>(
 }
 
 /// Indices of the points of a curve of `n` points that carry a marker:
-/// about [`MARKERS_PER_CURVE`], evenly spread, first and last included.
-fn marker_indices(n: usize) -> Vec<usize> {
+/// about [`MARKERS_PER_CURVE`], evenly spread, shifted by `phase` ∈ [0, 1)
+/// of their spacing (first and last included at phase 0) so that curves
+/// lying on one another still show each one's markers.
+fn marker_indices(n: usize, phase: f64) -> Vec<usize> {
     if n <= MARKERS_PER_CURVE {
         return (0..n).collect();
     }
     let m = MARKERS_PER_CURVE - 1;
-    (0..=m).map(|k| k * (n - 1) / m).collect()
+    let step = (n - 1) as f64 / m as f64;
+    (0..=m)
+        .map(|k| ((k as f64 + phase) * step).round() as usize)
+        .filter(|&i| i < n)
+        .collect()
+}
+
+/// Marker phase of series `i` (three staggered positions).
+fn marker_phase(i: usize) -> f64 {
+    (i % 3) as f64 / 3.0
 }
 
 /// The curves of `panel` on `area`, axes fitted to them (y from 0), the
@@ -532,7 +543,7 @@ fn draw_curves<DB: DrawingBackend>(
         .bold_line_style(RGBColor(205, 205, 205))
         .draw()
         .map_err(de)?;
-    for (s, pts) in series.iter().zip(&clean) {
+    for (k, (s, pts)) in series.iter().zip(&clean).enumerate() {
         let color = series_color(s.color);
         let style = color.stroke_width(2);
         if s.dashed {
@@ -545,7 +556,7 @@ fn draw_curves<DB: DrawingBackend>(
                 .map_err(de)?;
         }
         if let Some(m) = s.marker {
-            let idx = marker_indices(pts.len());
+            let idx = marker_indices(pts.len(), marker_phase(k));
             chart
                 .draw_series(idx.iter().map(|&i| {
                     EmptyElement::at(pts[i]) + m.pixel_element::<DB>((0, 0), color)

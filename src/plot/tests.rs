@@ -421,10 +421,14 @@ fn local_and_nonlocal_differ_beyond_colour() {
     );
     let distinct: std::collections::HashSet<_> = (0..4).map(|i| format!("{:?}", Marker::of_index(i))).collect();
     assert_eq!(distinct.len(), 4);
-    assert_eq!(marker_indices(5), [0, 1, 2, 3, 4]);
-    let idx = marker_indices(227);
+    assert_eq!(marker_indices(5, 0.5), [0, 1, 2, 3, 4]);
+    let idx = marker_indices(227, 0.0);
     assert_eq!(idx.len(), MARKERS_PER_CURVE);
     assert_eq!((idx[0], idx[idx.len() - 1]), (0, 226));
+    // staggered: another series' markers fall between these
+    let other = marker_indices(227, marker_phase(1));
+    assert!(other.iter().all(|i| !idx.contains(i)), "{other:?}");
+    assert!(other.iter().all(|&i| i < 227));
     // a grey copy of the same two curves still tells them apart: drawn in
     // one colour, the dashed curve with triangles differs from the solid
     // one with circles
