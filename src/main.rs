@@ -23,7 +23,8 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Run a scene and write curve.csv, snapshots and run.json.
+    /// Run a scene and write curve.csv, its plot curve.png/.svg, snapshots
+    /// and run.json.
     Run {
         /// Scene file (TOML).
         scene: PathBuf,
@@ -47,8 +48,8 @@ enum Command {
         progress_every: Option<f64>,
         /// Remove the earlier run's files from the output directory instead
         /// of refusing it: exactly the files that run listed in its run.json
-        /// (curve.csv, snapshots, particles.pvd, checkpoints, exported
-        /// systems, its temporary files); nothing else there is touched,
+        /// (curve.csv, its plots, snapshots, particles.pvd, checkpoints,
+        /// exported systems, its temporary files); nothing else there is touched,
         /// whatever its name.
         #[arg(long)]
         overwrite: bool,
