@@ -40,17 +40,23 @@ const UNITS: [(&str, &str); 15] = [
     ("1", "1"),
 ];
 
+/// The quantity and the displayed unit of the number column `column`
+/// (`quantity_unit`): ("load", "kN/m") for `load_kN_per_m`; `None` when no
+/// unit is known.
+fn split_unit(column: &str) -> Option<(&str, &'static str)> {
+    UNITS.iter().find_map(|&(suffix, shown)| {
+        let quantity = column.strip_suffix(suffix)?.strip_suffix('_')?;
+        (!quantity.is_empty()).then_some((quantity, shown))
+    })
+}
+
 /// Axis label of the number column `column` (`quantity_unit`): "load
 /// (kN/m)" for `load_kN_per_m`; the name as it is when no unit is known.
 pub fn axis_label(column: &str) -> String {
-    for (suffix, shown) in UNITS {
-        if let Some(quantity) = column.strip_suffix(suffix).and_then(|q| q.strip_suffix('_')) {
-            if !quantity.is_empty() {
-                return format!("{quantity} ({shown})");
-            }
-        }
+    match split_unit(column) {
+        Some((quantity, unit)) => format!("{quantity} ({unit})"),
+        None => column.to_string(),
     }
-    column.to_string()
 }
 
 /// One monitor column of `curve.csv` as (time, value) points.
@@ -138,7 +144,7 @@ pub fn plot_run(dir: &Path) -> Result<[PathBuf; 2]> {
         .zip(&labels)
         .filter(|((c, _), _)| !c.points.is_empty())
         .map(|((c, s), label)| CurvePanel {
-            title: &c.column,
+            title: split_unit(&c.column).map_or(&c.column, |(q, _)| q),
             y_label: label,
             series: s,
         })
