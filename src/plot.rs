@@ -843,9 +843,12 @@ pub struct Panel<'a> {
     /// Plotted region, m (equal axis scales are kept).
     pub bounds: Bounds,
     /// Current volume V_p of each point, m³ per m (m² in the plane): each
-    /// point is drawn as a square of side [`EXTENT_FACTOR`]·√V_p, its own
-    /// current size, so a band whose points have spread apart stays closed.
-    /// Takes precedence over `marker`.
+    /// point is drawn as a rectangle of its current extent ([`extents`]):
+    /// sides [`EXTENT_FACTOR`]·√V_p, widened to the box of its Voronoi cell
+    /// where the points have been stretched further apart (up to
+    /// [`EXTENT_CAP`]·√V_p), larger rectangles drawn first, so that a band
+    /// whose points have spread apart shows no gap and is not drawn wider
+    /// than it is. Takes precedence over `marker`.
     pub volumes: Option<&'a [f64]>,
     /// Side of the square drawn per point, in model units, when `volumes`
     /// is `None`. Slightly more than the MP spacing closes the gaps between
@@ -859,15 +862,15 @@ pub struct Panel<'a> {
 /// Factor on the mean MP spacing for the automatic marker size.
 pub const AUTO_MARKER_FACTOR: f64 = 1.2;
 
-/// Factor on √V_p for the side of a point's square: √V_p is the point's
-/// spacing in a uniform layout, but 2×2 points per cell at the Gauss
-/// positions sit 0.58h apart with √V_p = 0.5h, and a stretched region
-/// spaces its points further apart along the stretch than √V_p. 1.2 closes
-/// both up to a stretch ratio of 1.2² = 1.44 (spacing over √V_p up to 1.2);
-/// a point stretched further than that may still leave a sliver (its
-/// deformed domain, F_p times its initial square, is not in the records the
-/// plots are drawn from).
+/// Factor on √V_p for the least side of a point's square: √V_p is the
+/// point's spacing in a uniform layout, but 2×2 points per cell at the
+/// Gauss positions sit 0.58h apart with √V_p = 0.5h; 1.2 closes that.
 pub const EXTENT_FACTOR: f64 = 1.2;
+
+/// Reach of a point's rectangle, in √V_p: a point stretched apart from its
+/// neighbours (along a shear band) is drawn out to the box of its Voronoi
+/// cell among the points this near, up to half this many √V_p from it.
+pub const EXTENT_CAP: f64 = 3.0;
 
 /// Label of the x axis of the field plots (positions are in metres).
 pub const FIELD_X_LABEL: &str = "x (m)";
@@ -1099,7 +1102,11 @@ fn draw_panel<DB: DrawingBackend>(
         .filter(|&i| p.positions[i][0].is_finite() && p.positions[i][1].is_finite())
         .collect();
     let sides = point_sides(p, &finite);
-    // low values first so that bands are drawn on top where points overlap
+    let area = |k: usize| sides[k].0 * sides[k].1;
+    // larger rectangles first, so that each point's own neighbourhood is
+    // painted by the smallest rectangle there, the large ones showing only
+    // in the gaps; among equal sizes low values first so that bands are
+    // drawn on top where points overlap
     let mut order: Vec<usize> = (0..finite.len()).collect();
     let value = |k: usize| {
         let v = p.values[finite[k]];
@@ -1109,14 +1116,14 @@ fn draw_panel<DB: DrawingBackend>(
             f64::NEG_INFINITY
         }
     };
-    order.sort_by(|&a, &b| value(a).total_cmp(&value(b)));
+    order.sort_by(|&a, &b| area(b).total_cmp(&area(a)).then(value(a).total_cmp(&value(b))));
     chart
         .draw_series(order.iter().map(|&k| {
             let i = finite[k];
             let [x, y] = p.positions[i];
-            let half = 0.5 * sides[k];
+            let (hx, hy) = (0.5 * sides[k].0, 0.5 * sides[k].1);
             Rectangle::new(
-                [(x - half, y - half), (x + half, y + half)],
+                [(x - hx, y - hy), (x + hx, y + hy)],
                 map_value(p.values[i], range).filled(),
             )
         }))
@@ -1124,20 +1131,112 @@ fn draw_panel<DB: DrawingBackend>(
     Ok(())
 }
 
-/// Side of the square of each point of `idx`: [`EXTENT_FACTOR`]·√V_p from
-/// the panel's volumes (a volume that is not finite and positive takes the
+/// Sides (x, y) of the rectangle of each point of `idx`: from the panel's
+/// volumes ([`extents`]; a volume that is not finite and positive takes the
 /// panel's fallback), else the panel's marker, else the automatic size.
-fn point_sides(p: &Panel<'_>, idx: &[usize]) -> Vec<f64> {
+fn point_sides(p: &Panel<'_>, idx: &[usize]) -> Vec<(f64, f64)> {
     let fallback = match p.marker {
         Some(m) if m.is_finite() && m > 0.0 => m,
         _ => auto_marker(p.positions, idx, p.bounds),
     };
-    idx.iter()
-        .map(|&i| match p.volumes.map(|v| v[i]) {
-            Some(v) if v.is_finite() && v > 0.0 => EXTENT_FACTOR * v.sqrt(),
-            _ => fallback,
+    let Some(volumes) = p.volumes else {
+        return vec![(fallback, fallback); idx.len()];
+    };
+    let base: Vec<f64> = idx
+        .iter()
+        .map(|&i| {
+            let v = volumes[i];
+            if v.is_finite() && v > 0.0 {
+                v.sqrt()
+            } else {
+                fallback / EXTENT_FACTOR
+            }
+        })
+        .collect();
+    let points: Vec<[f64; 2]> = idx.iter().map(|&i| p.positions[i]).collect();
+    extents(&points, &base)
+}
+
+/// Directions sampled around a point by [`extents`].
+const EXTENT_DIRECTIONS: usize = 32;
+
+/// Sides (x, y) of the rectangles of points at `points` of sizes `base`
+/// (√V_p): the box of the point's Voronoi cell among the points within
+/// [`EXTENT_CAP`]·base, sampled along [`EXTENT_DIRECTIONS`] rays, at least
+/// [`EXTENT_FACTOR`]·base wide and high. A ray with no point within 45° of
+/// it leaves the body (the boundary's outward side, a lost point) and
+/// reaches [`EXTENT_FACTOR`]·base / 2 only. So a stretched layout (a shear
+/// band's points) leaves no gap and the body is not drawn larger.
+pub fn extents(points: &[[f64; 2]], base: &[f64]) -> Vec<(f64, f64)> {
+    let mut sorted = base.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let Some(&median) = sorted.get(sorted.len() / 2) else {
+        return Vec::new();
+    };
+    let cell = EXTENT_CAP * median;
+    if !(cell.is_finite() && cell > 0.0) {
+        return base
+            .iter()
+            .map(|b| (EXTENT_FACTOR * b, EXTENT_FACTOR * b))
+            .collect();
+    }
+    let key = |p: [f64; 2]| ((p[0] / cell).floor() as i64, (p[1] / cell).floor() as i64);
+    let mut grid: std::collections::HashMap<(i64, i64), Vec<usize>> = Default::default();
+    for (i, &p) in points.iter().enumerate() {
+        grid.entry(key(p)).or_default().push(i);
+    }
+    let rays: Vec<(f64, f64)> = (0..EXTENT_DIRECTIONS)
+        .map(|k| (std::f64::consts::TAU * k as f64 / EXTENT_DIRECTIONS as f64).sin_cos())
+        .map(|(s, c)| (c, s))
+        .collect();
+    points
+        .iter()
+        .zip(base)
+        .enumerate()
+        .map(|(i, (&p, &b))| {
+            let reach = EXTENT_CAP * b;
+            let rings = (reach / cell).ceil().clamp(1.0, 8.0) as i64;
+            let (cx, cy) = key(p);
+            let mut near: Vec<(f64, f64)> = Vec::new();
+            for gx in cx - rings..=cx + rings {
+                for gy in cy - rings..=cy + rings {
+                    for &j in grid.get(&(gx, gy)).map_or(&[][..], |v| &v[..]) {
+                        let v = (points[j][0] - p[0], points[j][1] - p[1]);
+                        let d = v.0.hypot(v.1);
+                        if j != i && d > 0.0 && d <= reach {
+                            near.push(v);
+                        }
+                    }
+                }
+            }
+            let own = 0.5 * EXTENT_FACTOR * b;
+            let (mut hx, mut hy) = (own, own);
+            for &(ux, uy) in &rays {
+                let t = ray_to_cell_boundary((ux, uy), &near).map_or(own, |t| t.min(0.5 * reach));
+                hx = hx.max(t * ux.abs());
+                hy = hy.max(t * uy.abs());
+            }
+            (2.0 * hx, 2.0 * hy)
         })
         .collect()
+}
+
+/// Distance from a point along the unit ray `u` to the boundary of its
+/// Voronoi cell among its neighbours at offsets `near`; `None` when no
+/// neighbour lies within 45° of the ray (the ray leaves the body).
+fn ray_to_cell_boundary(u: (f64, f64), near: &[(f64, f64)]) -> Option<f64> {
+    let mut inside = false;
+    let mut t = f64::INFINITY;
+    for &(vx, vy) in near {
+        let along = u.0 * vx + u.1 * vy;
+        let d2 = vx * vx + vy * vy;
+        if along > 0.0 {
+            // the bisector of the point and this neighbour
+            t = t.min(d2 / (2.0 * along));
+            inside |= along >= std::f64::consts::FRAC_1_SQRT_2 * d2.sqrt();
+        }
+    }
+    inside.then_some(t)
 }
 
 fn auto_marker(positions: &[[f64; 2]], idx: &[usize], b: Bounds) -> f64 {

@@ -589,4 +589,46 @@ fn a_dense_block_of_points_has_no_background_inside() {
     let v = vec![1.4 * d * d; x.len()];
     let f = block("block_stretched.png", &x, Some(&v), None);
     assert!(f < 1e-4, "stretched block: {f} of its pixels are background");
+    // stretched 2:1 at constant volume (a shear band's points): spacing 2d
+    // along x, d/2 along y, √V = d
+    let x: Vec<[f64; 2]> = (0..30 * 120)
+        .map(|k| [0.1 + (k % 30) as f64 * 2.0 * d, 0.1 + (k / 30) as f64 * 0.5 * d])
+        .collect();
+    let v = vec![d * d; x.len()];
+    let f = block("block_band.png", &x, Some(&v), None);
+    assert!(f < 1e-4, "2:1 stretched block: {f} of its pixels are background");
+}
+
+#[test]
+fn stretched_points_grow_and_lost_points_do_not() {
+    let d = 0.01;
+    // a row stretched 2:1 between unstretched rows
+    let mut x = Vec::new();
+    for j in 0..5 {
+        let (dx, n) = if j == 2 { (2.0 * d, 20) } else { (d, 40) };
+        for i in 0..n {
+            x.push([i as f64 * dx, j as f64 * d]);
+        }
+    }
+    x.push([5.0, 5.0]); // lost far away
+    let base = vec![d; x.len()];
+    let sides = extents(&x, &base);
+    let tol = 1e-9;
+    let own = EXTENT_FACTOR * d;
+    // an inner point of an unstretched row: its own size
+    let (wx, wy) = sides[40 + 10];
+    assert!((wx - own).abs() < tol && (wy - own).abs() < tol, "{wx} {wy}");
+    // an inner point of the stretched row: as wide as its spacing, no higher
+    // than its own size
+    let (wx, wy) = sides[80 + 5];
+    assert!((wx - 2.0 * d).abs() < tol && (wy - own).abs() < tol, "{wx} {wy}");
+    // a point of the top row: not drawn taller (outward) than its own size
+    let (_, wy) = sides[140 + 20];
+    assert!((wy - own).abs() < tol, "{wy}");
+    // the lost point keeps its own size
+    let (wx, wy) = sides[180];
+    assert!((wx - own).abs() < tol && (wy - own).abs() < tol, "{wx} {wy}");
+    assert!(sides
+        .iter()
+        .all(|&(wx, wy)| wx <= EXTENT_CAP * d + tol && wy <= EXTENT_CAP * d + tol));
 }
