@@ -1159,10 +1159,15 @@ fn point_sides(p: &Panel<'_>, idx: &[usize]) -> Vec<(f64, f64)> {
 
 /// Directions sampled around a point by [`extents`].
 const EXTENT_DIRECTIONS: usize = 32;
+/// Factor on the sampled distances to the Voronoi cell's boundary: covers
+/// the corners between the sampled rays and the rounding of the rectangles
+/// to whole pixels, where two cells' boxes only touch.
+const CELL_MARGIN: f64 = 1.1;
 
 /// Sides (x, y) of the rectangles of points at `points` of sizes `base`
 /// (√V_p): the box of the point's Voronoi cell among the points within
-/// [`EXTENT_CAP`]·base, sampled along [`EXTENT_DIRECTIONS`] rays, at least
+/// [`EXTENT_CAP`]·base, sampled along [`EXTENT_DIRECTIONS`] rays (with a
+/// 10 % margin), at least
 /// [`EXTENT_FACTOR`]·base wide and high. A ray with no point within 45° of
 /// it leaves the body (the boundary's outward side, a lost point) and
 /// reaches [`EXTENT_FACTOR`]·base / 2 only. So a stretched layout (a shear
@@ -1212,7 +1217,8 @@ pub fn extents(points: &[[f64; 2]], base: &[f64]) -> Vec<(f64, f64)> {
             let own = 0.5 * EXTENT_FACTOR * b;
             let (mut hx, mut hy) = (own, own);
             for &(ux, uy) in &rays {
-                let t = ray_to_cell_boundary((ux, uy), &near).map_or(own, |t| t.min(0.5 * reach));
+                let t = ray_to_cell_boundary((ux, uy), &near)
+                    .map_or(own, |t| (CELL_MARGIN * t).min(0.5 * reach));
                 hx = hx.max(t * ux.abs());
                 hy = hy.max(t * uy.abs());
             }
