@@ -552,9 +552,8 @@ fn draw_run_plot(
     out: &Path,
 ) {
     let Ok(outcome) = outcome else { return };
-    let ended = outcome.error.is_some()
-        || outcome.interrupted.is_some()
-        || outcome.simulation.finished();
+    let ended =
+        outcome.error.is_some() || outcome.interrupted.is_some() || outcome.simulation.finished();
     if !ended {
         return;
     }
@@ -576,9 +575,11 @@ fn plot_command(dir: &Path) -> ExitCode {
         Err(e @ mpm_geo::plot::PlotError::Input(_)) => {
             fail(2, ErrorId::OutputDirectory, &e.to_string())
         }
-        Err(e @ mpm_geo::plot::PlotError::Empty(_)) => {
-            fail(2, ErrorId::OutputDirectory, &format!("{}: {e}", dir.display()))
-        }
+        Err(e @ mpm_geo::plot::PlotError::Empty(_)) => fail(
+            2,
+            ErrorId::OutputDirectory,
+            &format!("{}: {e}", dir.display()),
+        ),
         Err(e) => fail(2, ErrorId::OutputWrite, &e.to_string()),
     }
 }

@@ -416,10 +416,7 @@ const LEGEND_SAMPLE: i32 = 40;
 
 /// Width in pixels of the legend column for `entries` (0 when empty),
 /// at most 45 % of `width`.
-fn legend_width<DB: DrawingBackend>(
-    area: &DrawingArea<DB, Shift>,
-    entries: &[LegendEntry],
-) -> u32 {
+fn legend_width<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, entries: &[LegendEntry]) -> u32 {
     let font = TextStyle::from(("sans-serif", LEGEND_FONT).into_font());
     let widest = entries
         .iter()
@@ -558,9 +555,10 @@ fn draw_curves<DB: DrawingBackend>(
         if let Some(m) = s.marker {
             let idx = marker_indices(pts.len(), marker_phase(k));
             chart
-                .draw_series(idx.iter().map(|&i| {
-                    EmptyElement::at(pts[i]) + m.pixel_element::<DB>((0, 0), color)
-                }))
+                .draw_series(
+                    idx.iter()
+                        .map(|&i| EmptyElement::at(pts[i]) + m.pixel_element::<DB>((0, 0), color)),
+                )
                 .map_err(de)?;
         }
     }
@@ -592,7 +590,7 @@ pub fn decade_ticks(lo: f64, hi: f64, max: usize) -> Vec<f64> {
     let n = (b - a + 1).max(1) as usize;
     let every = n.div_ceil(max.max(1)).max(1);
     (a..=b)
-        .filter(|k| (k - a) as usize % every == 0)
+        .filter(|k| ((k - a) as usize).is_multiple_of(every))
         .map(|k| 10f64.powi(k))
         .collect()
 }
@@ -1116,7 +1114,11 @@ fn draw_panel<DB: DrawingBackend>(
             f64::NEG_INFINITY
         }
     };
-    order.sort_by(|&a, &b| area(b).total_cmp(&area(a)).then(value(a).total_cmp(&value(b))));
+    order.sort_by(|&a, &b| {
+        area(b)
+            .total_cmp(&area(a))
+            .then(value(a).total_cmp(&value(b)))
+    });
     chart
         .draw_series(order.iter().map(|&k| {
             let i = finite[k];

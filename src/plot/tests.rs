@@ -313,7 +313,9 @@ fn colormap_lightness_rises_steadily() {
     // 64 steps: each moves the channels by several units, so rounding to
     // u8 cannot reverse a step
     let n = 64;
-    let l: Vec<f64> = (0..=n).map(|k| lightness(colormap(k as f64 / n as f64))).collect();
+    let l: Vec<f64> = (0..=n)
+        .map(|k| lightness(colormap(k as f64 / n as f64)))
+        .collect();
     for (k, w) in l.windows(2).enumerate() {
         assert!(w[1] > w[0], "L* falls at {k}/{n}: {} -> {}", w[0], w[1]);
     }
@@ -419,7 +421,9 @@ fn local_and_nonlocal_differ_beyond_colour() {
         Marker::of_regularisation(true),
         Marker::of_regularisation(false)
     );
-    let distinct: std::collections::HashSet<_> = (0..4).map(|i| format!("{:?}", Marker::of_index(i))).collect();
+    let distinct: std::collections::HashSet<_> = (0..4)
+        .map(|i| format!("{:?}", Marker::of_index(i)))
+        .collect();
     assert_eq!(distinct.len(), 4);
     assert_eq!(marker_indices(5, 0.5), [0, 1, 2, 3, 4]);
     let idx = marker_indices(227, 0.0);
@@ -486,7 +490,10 @@ fn log_axes_are_labelled_at_decades() {
             points: (0..5)
                 .map(|i| {
                     let t = 0.01 * 3f64.powi(i);
-                    (t, 0.2 / (k as f64 + 1.0) * t.powf(-1.0 - k as f64 * 0.5) * 1e-3)
+                    (
+                        t,
+                        0.2 / (k as f64 + 1.0) * t.powf(-1.0 - k as f64 * 0.5) * 1e-3,
+                    )
                 })
                 .collect(),
             dashed: false,
@@ -499,11 +506,20 @@ fn log_axes_are_labelled_at_decades() {
     assert_eq!((img.width(), img.height()), CURVE_SIZE);
     assert_svg(
         &svg_path(&path),
-        &["wall time (s)", "error (relative, 1)", "10⁻", "Pareto front", "method 2"],
+        &[
+            "wall time (s)",
+            "error (relative, 1)",
+            "10⁻",
+            "Pareto front",
+            "method 2",
+        ],
     );
     // only decades are labelled: no "0.02"-style label in the SVG text
     let svg = std::fs::read_to_string(svg_path(&path)).unwrap();
-    assert!(!svg.contains(">0.02<") && !svg.contains(">2e"), "non-decade tick label");
+    assert!(
+        !svg.contains(">0.02<") && !svg.contains(">2e"),
+        "non-decade tick label"
+    );
 }
 
 /// Fraction of background (white) pixels inside the box of the pixels of
@@ -539,7 +555,10 @@ fn gauss_block(h: f64, n: usize) -> (Vec<[f64; 2]>, Vec<f64>) {
     for j in 0..n {
         for i in 0..n {
             for (a, b) in [(-g, -g), (g, -g), (-g, g), (g, g)] {
-                x.push([0.1 + (i as f64 + 0.5 + a) * h, 0.1 + (j as f64 + 0.5 + b) * h]);
+                x.push([
+                    0.1 + (i as f64 + 0.5 + a) * h,
+                    0.1 + (j as f64 + 0.5 + b) * h,
+                ]);
             }
         }
     }
@@ -588,15 +607,26 @@ fn a_dense_block_of_points_has_no_background_inside() {
         .collect();
     let v = vec![1.4 * d * d; x.len()];
     let f = block("block_stretched.png", &x, Some(&v), None);
-    assert!(f < 1e-4, "stretched block: {f} of its pixels are background");
+    assert!(
+        f < 1e-4,
+        "stretched block: {f} of its pixels are background"
+    );
     // stretched 2:1 at constant volume (a shear band's points): spacing 2d
     // along x, d/2 along y, √V = d
     let x: Vec<[f64; 2]> = (0..30 * 120)
-        .map(|k| [0.1 + (k % 30) as f64 * 2.0 * d, 0.1 + (k / 30) as f64 * 0.5 * d])
+        .map(|k| {
+            [
+                0.1 + (k % 30) as f64 * 2.0 * d,
+                0.1 + (k / 30) as f64 * 0.5 * d,
+            ]
+        })
         .collect();
     let v = vec![d * d; x.len()];
     let f = block("block_band.png", &x, Some(&v), None);
-    assert!(f < 1e-4, "2:1 stretched block: {f} of its pixels are background");
+    assert!(
+        f < 1e-4,
+        "2:1 stretched block: {f} of its pixels are background"
+    );
 }
 
 #[test]
@@ -617,7 +647,10 @@ fn stretched_points_grow_and_lost_points_do_not() {
     let own = EXTENT_FACTOR * d;
     // an inner point of an unstretched row: its own size
     let (wx, wy) = sides[40 + 10];
-    assert!((wx - own).abs() < tol && (wy - own).abs() < tol, "{wx} {wy}");
+    assert!(
+        (wx - own).abs() < tol && (wy - own).abs() < tol,
+        "{wx} {wy}"
+    );
     // an inner point of the stretched row: as wide as its spacing (with the
     // margin), no higher than its own size
     let (wx, wy) = sides[80 + 5];
@@ -630,7 +663,10 @@ fn stretched_points_grow_and_lost_points_do_not() {
     assert!((wy - own).abs() < tol, "{wy}");
     // the lost point keeps its own size
     let (wx, wy) = sides[180];
-    assert!((wx - own).abs() < tol && (wy - own).abs() < tol, "{wx} {wy}");
+    assert!(
+        (wx - own).abs() < tol && (wy - own).abs() < tol,
+        "{wx} {wy}"
+    );
     assert!(sides
         .iter()
         .all(|&(wx, wy)| wx <= EXTENT_CAP * d + tol && wy <= EXTENT_CAP * d + tol));
