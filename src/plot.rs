@@ -1168,7 +1168,7 @@ const CELL_MARGIN: f64 = 1.1;
 
 /// Sides (x, y) of the rectangles of points at `points` of sizes `base`
 /// (√V_p): the box of the point's Voronoi cell among the points within
-/// [`EXTENT_CAP`]·base, sampled along [`EXTENT_DIRECTIONS`] rays (with a
+/// [`EXTENT_CAP`]·base, sampled along 32 rays (with a
 /// 10 % margin), at least
 /// [`EXTENT_FACTOR`]·base wide and high. A ray with no point within 45° of
 /// it leaves the body (the boundary's outward side, a lost point) and
