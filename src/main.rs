@@ -23,7 +23,8 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Run a scene and write curve.csv, snapshots and run.json.
+    /// Run a scene and write curve.csv, its plot curve.png/.svg, snapshots
+    /// and run.json.
     Run {
         /// Scene file (TOML).
         scene: PathBuf,
@@ -47,8 +48,8 @@ enum Command {
         progress_every: Option<f64>,
         /// Remove the earlier run's files from the output directory instead
         /// of refusing it: exactly the files that run listed in its run.json
-        /// (curve.csv, snapshots, particles.pvd, checkpoints, exported
-        /// systems, its temporary files); nothing else there is touched,
+        /// (curve.csv, its plots, snapshots, particles.pvd, checkpoints,
+        /// exported systems, its temporary files); nothing else there is touched,
         /// whatever its name.
         #[arg(long)]
         overwrite: bool,
@@ -146,6 +147,13 @@ enum Command {
         /// Run nothing: build the report from the runs every shard measured.
         #[arg(long)]
         collect: bool,
+    },
+    /// Draw a run's plot again: DIR/curve.png and DIR/curve.svg, each
+    /// monitor of DIR/curve.csv against time (`run` and `resume` draw it
+    /// when the run ends).
+    Plot {
+        /// The run's output directory.
+        dir: PathBuf,
     },
     /// Homogeneous test on one material point (biaxial, triaxial, simple shear) → CSV.
     Point(mpm_geo::point_driver::PointArgs),
@@ -405,6 +413,7 @@ fn main() -> ExitCode {
                 Err(e) => fail_with(2, &e),
             }
         }
+        Command::Plot { dir } => plot_command(&dir),
         Command::Errors => {
             print!("{}", mpm_geo::error_id::markdown_table());
             ExitCode::SUCCESS
@@ -485,10 +494,12 @@ fn main() -> ExitCode {
                 overwrite,
                 checkpoint: checkpoint_every.map(|n| (source, n as usize)),
                 stop_after: stop_after_step,
-                extra_files: Vec::new(),
+                extra_files: run_plot_files(),
                 provenance: Some(Provenance::now(Some(&scene), &overrides)),
             };
-            report(run_scene_with(loaded, &out, &options), &out, quiet, profile)
+            let outcome = run_scene_with(loaded, &out, &options);
+            draw_run_plot(&outcome, &out);
+            report(outcome, &out, quiet, profile)
         }
         Command::Resume {
             dir,
@@ -515,10 +526,62 @@ fn main() -> ExitCode {
                 checkpoint_every: checkpoint_every.map(|n| n as usize),
                 stop_after: stop_after_step,
                 progress_every,
-                extra_files: Vec::new(),
+                extra_files: run_plot_files(),
             };
-            report(resumable.run(!quiet, &options), &dir, quiet, profile)
+            let outcome = resumable.run(!quiet, &options);
+            draw_run_plot(&outcome, &dir);
+            report(outcome, &dir, quiet, profile)
         }
+    }
+}
+
+/// The files of the run's curve plot, recorded in its `run.json` so that
+/// `--overwrite` removes them.
+fn run_plot_files() -> Vec<String> {
+    mpm_geo::plot::run_curve::FILES
+        .iter()
+        .map(|f| f.to_string())
+        .collect()
+}
+
+/// Draw the curve plot of a run that ended (completed, failed or
+/// interrupted: of its rows so far) while the directory is still locked; a
+/// run stopped as a kill would be (the test hook) draws nothing. A plot that
+/// cannot be drawn is a warning, never the run's failure.
+fn draw_run_plot(
+    outcome: &Result<RunOutcome, Box<dyn std::error::Error + Send + Sync>>,
+    out: &Path,
+) {
+    let Ok(outcome) = outcome else { return };
+    let ended =
+        outcome.error.is_some() || outcome.interrupted.is_some() || outcome.simulation.finished();
+    if !ended {
+        return;
+    }
+    match mpm_geo::plot::run_curve::plot_run(out) {
+        Ok(_) | Err(mpm_geo::plot::PlotError::Empty(_)) => {}
+        Err(e) => eprintln!("warning: the run's curve plot was not drawn: {e}"),
+    }
+}
+
+/// `mpm-geo plot DIR`: draw the run's curve plot again.
+fn plot_command(dir: &Path) -> ExitCode {
+    match mpm_geo::plot::run_curve::plot_run(dir) {
+        Ok(files) => {
+            for f in files {
+                println!("{}", f.display());
+            }
+            ExitCode::SUCCESS
+        }
+        Err(e @ mpm_geo::plot::PlotError::Input(_)) => {
+            fail(2, ErrorId::OutputDirectory, &e.to_string())
+        }
+        Err(e @ mpm_geo::plot::PlotError::Empty(_)) => fail(
+            2,
+            ErrorId::OutputDirectory,
+            &format!("{}: {e}", dir.display()),
+        ),
+        Err(e) => fail(2, ErrorId::OutputWrite, &e.to_string()),
     }
 }
 

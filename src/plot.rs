@@ -1,24 +1,33 @@
-//! PNG figures in the style of the paper's Figs. 3–5, on plain data.
+//! Figures in the style of the paper's Figs. 3–5, on plain data; every
+//! figure is written as PNG and, beside it under the same stem, as SVG.
 //!
-//! * [`plot_curves`]: load–displacement curves (Fig. 3 style: dashed = local,
-//!   solid = nonlocal, one colour per mesh, legend), inputs for the M1–M3
-//!   metrics of [`crate::metrics`];
+//! * [`plot_curves`]: load–displacement curves (Fig. 3 style: dashed =
+//!   local, solid = nonlocal, markers by [`Marker`], one colour per mesh,
+//!   the legend in its own column right of the axes, never over the data),
+//!   inputs for the M1–M3 metrics of [`crate::metrics`];
+//! * [`plot_work_precision`]: error against wall time on log–log axes,
+//!   ticks at whole decades labelled 10ᵏ;
 //! * [`plot_field`] / [`plot_field_panels`]: material points drawn as filled
-//!   squares coloured by a value (εq of \[D8\], κ̄ …), a contour-like picture
-//!   as in Figs. 4–5, several meshes side by side with one shared colour bar.
+//!   squares of their current size coloured by a value (εq of \[D8\], κ̄ …)
+//!   on the perceptual viridis map, a contour-like picture as in Figs. 4–5,
+//!   several meshes side by side with one shared, labelled colour bar;
+//! * [`run_curve`]: the plot of one run's `curve.csv`.
 //!
 //! Text uses DejaVu Sans compiled in from the `dejavu` crate and rendered by
 //! plotters' pure-Rust `ab_glyph` backend, so no system font (fontconfig,
-//! freetype) is needed on any machine.
+//! freetype) is needed on any machine; the SVG names the `sans-serif`
+//! family and keeps its text as text.
 
 use crate::atomic_file::AtomicPath;
 use plotters::coord::Shift;
-use plotters::element::DashedPathElement;
+use plotters::element::{DashedPathElement, DynElement};
 use plotters::prelude::*;
 use plotters::style::FontStyle;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 use thiserror::Error;
+
+pub mod run_curve;
 
 /// Why a figure could not be drawn.
 #[derive(Debug, Clone, PartialEq, Error)]
@@ -35,6 +44,9 @@ pub enum PlotError {
     /// The embedded font could not be registered.
     #[error("font registration failed")]
     Font,
+    /// An input file (a run's `curve.csv`) that cannot be read.
+    #[error("cannot read {0}")]
+    Input(String),
     /// Rendering or writing the file failed.
     #[error("drawing failed: {0}")]
     Drawing(String),
@@ -73,6 +85,40 @@ fn prepare_path(path: &Path) -> Result<()> {
     ensure_fonts()
 }
 
+/// The SVG written beside the PNG `path`: the same stem, extension `svg`.
+pub fn svg_path(path: &Path) -> PathBuf {
+    path.with_extension("svg")
+}
+
+/// A figure that can draw itself on any plotters backend (PNG and SVG).
+trait Figure {
+    /// Draw on `root` (already filled white).
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<()>;
+}
+
+/// Write `figure` of `size` pixels as the PNG `path` and the SVG
+/// [`svg_path`] beside it, each drawn under a temporary name and renamed
+/// once whole (whole or absent).
+fn render(path: &Path, size: (u32, u32), figure: &impl Figure) -> Result<()> {
+    prepare_path(path)?;
+    let png = AtomicPath::new(path);
+    {
+        let root = BitMapBackend::new(png.temp(), size).into_drawing_area();
+        root.fill(&WHITE).map_err(de)?;
+        figure.draw(&root)?;
+        root.present().map_err(de)?;
+    }
+    let svg = AtomicPath::new(&svg_path(path));
+    {
+        let root = SVGBackend::new(svg.temp(), size).into_drawing_area();
+        root.fill(&WHITE).map_err(de)?;
+        figure.draw(&root)?;
+        root.present().map_err(de)?;
+    }
+    png.commit().map_err(de)?;
+    svg.commit().map_err(de)
+}
+
 // ---------------------------------------------------------------------------
 // Colours
 // ---------------------------------------------------------------------------
@@ -94,14 +140,21 @@ pub fn series_color(i: usize) -> RGBColor {
     PALETTE[i % PALETTE.len()]
 }
 
-/// Control points of the field colour map (blue → cyan → green → yellow →
-/// red, the rainbow of the paper's contour plots); piecewise linear between.
-pub const COLORMAP: [RGBColor; 5] = [
-    RGBColor(0, 0, 180),
-    RGBColor(0, 200, 255),
-    RGBColor(40, 200, 40),
-    RGBColor(255, 230, 0),
-    RGBColor(220, 0, 0),
+/// Control points of the field colour map: viridis (van der Walt & Smith,
+/// matplotlib's default) at t = 0, 1/8, …, 1, piecewise linear between.
+/// Perceptually uniform: its lightness L* rises steadily from dark purple
+/// to yellow, so it reads in grey print and for colour-blind readers, and
+/// no false bands appear where the rainbow map turned from cyan to green.
+pub const COLORMAP: [RGBColor; 9] = [
+    RGBColor(68, 1, 84),
+    RGBColor(71, 45, 123),
+    RGBColor(59, 82, 139),
+    RGBColor(44, 114, 142),
+    RGBColor(33, 144, 140),
+    RGBColor(39, 173, 129),
+    RGBColor(93, 200, 99),
+    RGBColor(170, 220, 50),
+    RGBColor(253, 231, 37),
 ];
 
 /// Colour used for non-finite values.
@@ -152,10 +205,73 @@ fn fmt_tick(v: f64, span: f64) -> String {
 // Curves (Fig. 3)
 // ---------------------------------------------------------------------------
 
+/// Marker shape drawn along a curve, so that curves differ by more than
+/// colour (grey print, colour-blind readers): in comparisons local runs get
+/// [`Marker::Triangle`] and nonlocal runs [`Marker::Circle`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Marker {
+    /// Filled circle.
+    Circle,
+    /// Filled triangle pointing up.
+    Triangle,
+    /// Filled square.
+    Square,
+    /// Diagonal cross.
+    Cross,
+}
+
+impl Marker {
+    /// The shapes in order, for series told apart by index.
+    pub const ALL: [Marker; 4] = [
+        Marker::Circle,
+        Marker::Triangle,
+        Marker::Square,
+        Marker::Cross,
+    ];
+
+    /// Marker of series index `i` ([`Marker::ALL`] modulo its length).
+    pub fn of_index(i: usize) -> Self {
+        Self::ALL[i % Self::ALL.len()]
+    }
+
+    /// The marker of a run with (`true`) or without a length scale.
+    pub fn of_regularisation(nonlocal: bool) -> Self {
+        if nonlocal {
+            Marker::Circle
+        } else {
+            Marker::Triangle
+        }
+    }
+
+    /// This marker at pixel `at` of a backend, `color`.
+    fn pixel_element<DB: DrawingBackend>(
+        self,
+        at: (i32, i32),
+        color: RGBColor,
+    ) -> DynElement<'static, DB, (i32, i32)> {
+        let r = MARKER_RADIUS;
+        match self {
+            Marker::Circle => Circle::new(at, r, color.filled()).into_dyn(),
+            Marker::Triangle => TriangleMarker::new(at, r + 1, color.filled()).into_dyn(),
+            Marker::Square => {
+                let (x, y) = at;
+                let r = r - 1;
+                Rectangle::new([(x - r, y - r), (x + r, y + r)], color.filled()).into_dyn()
+            }
+            Marker::Cross => Cross::new(at, r, color.stroke_width(2)).into_dyn(),
+        }
+    }
+}
+
+/// Radius of the curve markers, px.
+const MARKER_RADIUS: i32 = 5;
+/// Markers drawn along a curve of many points (evenly spread by index).
+const MARKERS_PER_CURVE: usize = 12;
+
 /// One curve of [`plot_curves`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct Series {
-    /// Legend entry (e.g. "local, h = 2 mm").
+    /// Legend entry (e.g. "local, h = 2 mm"); empty: no legend entry.
     pub name: String,
     /// `(x, y)` points, drawn in order; non-finite points are dropped.
     pub points: Vec<(f64, f64)>,
@@ -163,12 +279,15 @@ pub struct Series {
     pub dashed: bool,
     /// Colour index into [`PALETTE`] (same index = same mesh).
     pub color: usize,
+    /// Markers along the curve (`None`: the line only).
+    pub marker: Option<Marker>,
 }
 
-/// Default size of [`plot_curves`] in pixels.
-pub const CURVE_SIZE: (u32, u32) = (960, 680);
+/// Default size of [`plot_curves`] in pixels (the legend column included).
+pub const CURVE_SIZE: (u32, u32) = (1200, 680);
 
-/// Load–displacement curves in paper Fig. 3 style, PNG of [`CURVE_SIZE`].
+/// Load–displacement curves in paper Fig. 3 style, PNG of [`CURVE_SIZE`]
+/// and SVG beside it.
 pub fn plot_curves(
     path: impl AsRef<Path>,
     title: &str,
@@ -200,13 +319,13 @@ pub fn plot_curves_sized(
 pub struct CurvePanel<'a> {
     /// Caption of the chart.
     pub title: &'a str,
-    /// Label of its y axis.
+    /// Label of its y axis, quantity and unit (e.g. "F (kN/m)").
     pub y_label: &'a str,
     /// Its curves.
     pub series: &'a [Series],
 }
 
-/// Charts of curves over one x quantity stacked in one PNG, each
+/// Charts of curves over one x quantity stacked in one figure, each
 /// [`CURVE_SIZE`] high.
 pub fn plot_curve_panels(
     path: impl AsRef<Path>,
@@ -217,34 +336,43 @@ pub fn plot_curve_panels(
     plot_curve_panels_sized(path, size, x_label, panels)
 }
 
-fn plot_curve_panels_sized(
+/// [`plot_curve_panels`] with an explicit image size `(width, height)`.
+pub fn plot_curve_panels_sized(
     path: impl AsRef<Path>,
     size: (u32, u32),
     x_label: &str,
     panels: &[CurvePanel<'_>],
 ) -> Result<()> {
-    let path = path.as_ref();
-    prepare_path(path)?;
-    // drawn under a temporary name, renamed once presented: whole or absent
-    let target = AtomicPath::new(path);
-    let temp = target.temp().to_path_buf();
-    let root = BitMapBackend::new(&temp, size).into_drawing_area();
-    root.fill(&WHITE).map_err(de)?;
-    for (area, panel) in root.split_evenly((panels.len(), 1)).iter().zip(panels) {
-        draw_curves(area, x_label, panel)?;
+    // refuse before any file is written
+    for panel in panels {
+        clean_points(panel.series)?;
     }
-    root.present().map_err(de)?;
-    drop(root);
-    target.commit().map_err(de)
+    if panels.is_empty() {
+        return Err(PlotError::Empty("no curve panels"));
+    }
+    render(path.as_ref(), size, &CurveFigure { x_label, panels })
 }
 
-/// The curves of `panel` on `area`, axes fitted to them (y from 0).
-fn draw_curves<DB: DrawingBackend>(
-    area: &DrawingArea<DB, Shift>,
-    x_label: &str,
-    panel: &CurvePanel<'_>,
-) -> Result<()> {
-    let series = panel.series;
+struct CurveFigure<'a, 'b> {
+    x_label: &'a str,
+    panels: &'a [CurvePanel<'b>],
+}
+
+impl Figure for CurveFigure<'_, '_> {
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<()> {
+        for (area, panel) in root
+            .split_evenly((self.panels.len(), 1))
+            .iter()
+            .zip(self.panels)
+        {
+            draw_curves(area, self.x_label, panel)?;
+        }
+        Ok(())
+    }
+}
+
+/// The finite points of each series; [`PlotError::Empty`] when there are none.
+fn clean_points(series: &[Series]) -> Result<Vec<Vec<(f64, f64)>>> {
     let clean: Vec<Vec<(f64, f64)>> = series
         .iter()
         .map(|s| {
@@ -255,21 +383,128 @@ fn draw_curves<DB: DrawingBackend>(
                 .collect()
         })
         .collect();
-    let all = clean.iter().flatten();
+    if clean.iter().all(|c| c.is_empty()) {
+        return Err(PlotError::Empty("no finite curve points"));
+    }
+    Ok(clean)
+}
+
+/// One legend row: the line (dashed or solid) with its marker, and the name.
+struct LegendEntry {
+    name: String,
+    color: RGBColor,
+    width: u32,
+    dashed: bool,
+    marker: Option<Marker>,
+}
+
+impl LegendEntry {
+    fn of(s: &Series) -> Self {
+        Self {
+            name: s.name.clone(),
+            color: series_color(s.color),
+            width: 2,
+            dashed: s.dashed,
+            marker: s.marker,
+        }
+    }
+}
+
+const LEGEND_FONT: u32 = 15;
+const LEGEND_ROW: i32 = 24;
+const LEGEND_SAMPLE: i32 = 40;
+
+/// Width in pixels of the legend column for `entries` (0 when empty),
+/// at most 45 % of `width`.
+fn legend_width<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, entries: &[LegendEntry]) -> u32 {
+    let font = TextStyle::from(("sans-serif", LEGEND_FONT).into_font());
+    let widest = entries
+        .iter()
+        .map(|e| area.estimate_text_size(&e.name, &font).map_or(0, |s| s.0))
+        .max();
+    match widest {
+        None => 0,
+        Some(w) => (w + LEGEND_SAMPLE as u32 + 36).min(area.dim_in_pixel().0 * 45 / 100),
+    }
+}
+
+/// The legend in its own area (right of the axes), top-aligned at `top`.
+fn draw_legend<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    entries: &[LegendEntry],
+    top: i32,
+) -> Result<()> {
+    let font = ("sans-serif", LEGEND_FONT).into_font().color(&BLACK);
+    for (k, e) in entries.iter().enumerate() {
+        let y = top + LEGEND_ROW * k as i32 + LEGEND_ROW / 2;
+        let (x0, x1) = (8, 8 + LEGEND_SAMPLE);
+        let style = e.color.stroke_width(e.width);
+        if e.dashed {
+            area.draw(&DashedPathElement::new(vec![(x0, y), (x1, y)], 7, 4, style))
+                .map_err(de)?;
+        } else {
+            area.draw(&PathElement::new(vec![(x0, y), (x1, y)], style))
+                .map_err(de)?;
+        }
+        if let Some(m) = e.marker {
+            area.draw(&m.pixel_element(((x0 + x1) / 2, y), e.color))
+                .map_err(de)?;
+        }
+        let pos = plotters::style::text_anchor::Pos::new(
+            plotters::style::text_anchor::HPos::Left,
+            plotters::style::text_anchor::VPos::Center,
+        );
+        area.draw(&Text::new(
+            e.name.clone(),
+            (x1 + 8, y),
+            font.clone().pos(pos),
+        ))
+        .map_err(de)?;
+    }
+    Ok(())
+}
+
+/// Indices of the points of a curve of `n` points that carry a marker:
+/// about [`MARKERS_PER_CURVE`], evenly spread, shifted by `phase` ∈ [0, 1)
+/// of their spacing (first and last included at phase 0) so that curves
+/// lying on one another still show each one's markers.
+fn marker_indices(n: usize, phase: f64) -> Vec<usize> {
+    if n <= MARKERS_PER_CURVE {
+        return (0..n).collect();
+    }
+    let m = MARKERS_PER_CURVE - 1;
+    let step = (n - 1) as f64 / m as f64;
+    (0..=m)
+        .map(|k| ((k as f64 + phase) * step).round() as usize)
+        .filter(|&i| i < n)
+        .collect()
+}
+
+/// Marker phase of series `i` (three staggered positions).
+fn marker_phase(i: usize) -> f64 {
+    (i % 3) as f64 / 3.0
+}
+
+/// The curves of `panel` on `area`, axes fitted to them (y from 0), the
+/// legend in a column right of the axes.
+fn draw_curves<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    x_label: &str,
+    panel: &CurvePanel<'_>,
+) -> Result<()> {
+    let series = panel.series;
+    let clean = clean_points(series)?;
     let (mut x0, mut x1, mut y0, mut y1) = (
         f64::INFINITY,
         f64::NEG_INFINITY,
         f64::INFINITY,
         f64::NEG_INFINITY,
     );
-    for &(x, y) in all {
+    for &(x, y) in clean.iter().flatten() {
         x0 = x0.min(x);
         x1 = x1.max(x);
         y0 = y0.min(y);
         y1 = y1.max(y);
-    }
-    if !x0.is_finite() {
-        return Err(PlotError::Empty("no finite curve points"));
     }
     // load curves start at 0: include the origin line, pad the top
     y0 = y0.min(0.0);
@@ -279,8 +514,15 @@ fn draw_curves<DB: DrawingBackend>(
     let (y0, y1) = pad(y0, y1);
     let y1 = y1 + 0.05 * (y1 - y0);
     let (xs, ys) = (x1 - x0, y1 - y0);
-    let mut chart = ChartBuilder::on(area)
-        .caption(panel.title, ("sans-serif", 26))
+    let entries: Vec<LegendEntry> = series
+        .iter()
+        .filter(|s| !s.name.is_empty())
+        .map(LegendEntry::of)
+        .collect();
+    let (w, _) = area.dim_in_pixel();
+    let (plot, legend) = area.split_horizontally(w - legend_width(area, &entries));
+    let mut chart = ChartBuilder::on(&plot)
+        .caption(panel.title, ("sans-serif", 24))
         .margin(16)
         .x_label_area_size(56)
         .y_label_area_size(80)
@@ -298,61 +540,105 @@ fn draw_curves<DB: DrawingBackend>(
         .bold_line_style(RGBColor(205, 205, 205))
         .draw()
         .map_err(de)?;
-    for (s, pts) in series.iter().zip(&clean) {
-        let style = series_color(s.color).stroke_width(2);
-        let anno = if s.dashed {
+    for (k, (s, pts)) in series.iter().zip(&clean).enumerate() {
+        let color = series_color(s.color);
+        let style = color.stroke_width(2);
+        if s.dashed {
             chart
                 .draw_series(DashedLineSeries::new(pts.clone(), 10, 6, style))
-                .map_err(de)?
+                .map_err(de)?;
         } else {
             chart
                 .draw_series(LineSeries::new(pts.clone(), style))
-                .map_err(de)?
-        };
-        let dashed = s.dashed;
-        anno.label(s.name.clone()).legend(move |(x, y)| {
-            let pts = vec![(x, y), (x + 30, y)];
-            if dashed {
-                DashedPathElement::new(pts, 7, 4, style).into_dyn()
-            } else {
-                PathElement::new(pts, style).into_dyn()
-            }
-        });
+                .map_err(de)?;
+        }
+        if let Some(m) = s.marker {
+            let idx = marker_indices(pts.len(), marker_phase(k));
+            chart
+                .draw_series(
+                    idx.iter()
+                        .map(|&i| EmptyElement::at(pts[i]) + m.pixel_element::<DB>((0, 0), color)),
+                )
+                .map_err(de)?;
+        }
     }
-    chart
-        .configure_series_labels()
-        .label_font(("sans-serif", 16))
-        .legend_area_size(40)
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .position(SeriesLabelPosition::UpperRight)
-        .draw()
-        .map_err(de)?;
-    Ok(())
+    // the legend starts level with the top of the axes
+    let top = chart.plotting_area().get_base_pixel().1 - area.get_base_pixel().1;
+    draw_legend(&legend, &entries, top)
 }
 
-/// Tick label of a logarithmic axis: plain decimals from 1e-3 to 1e4, else
-/// scientific.
-fn log_tick(v: f64) -> String {
-    if (1e-3..1e4).contains(&v.abs()) {
-        let text = format!("{v:.3}");
-        text.trim_end_matches('0').trim_end_matches('.').to_string()
-    } else {
-        format!("{v:.0e}")
+// ---------------------------------------------------------------------------
+// Work–precision (log–log)
+// ---------------------------------------------------------------------------
+
+/// The whole decades 10ᵏ from ≤ `lo` to ≥ `hi` (`0 < lo ≤ hi`): the range
+/// of a log axis that starts and ends on a labelled tick.
+pub fn decade_bounds(lo: f64, hi: f64) -> (f64, f64) {
+    let a = lo.log10().floor();
+    let mut b = hi.log10().ceil();
+    if b <= a {
+        b = a + 1.0;
+    }
+    (10f64.powf(a), 10f64.powf(b))
+}
+
+/// Labelled ticks of a log axis over the decade range `(lo, hi)` (from
+/// [`decade_bounds`]): every decade, or every 2nd, 3rd … so that at most
+/// `max` are labelled.
+pub fn decade_ticks(lo: f64, hi: f64, max: usize) -> Vec<f64> {
+    let (a, b) = (lo.log10().round() as i32, hi.log10().round() as i32);
+    let n = (b - a + 1).max(1) as usize;
+    let every = n.div_ceil(max.max(1)).max(1);
+    (a..=b)
+        .filter(|k| ((k - a) as usize).is_multiple_of(every))
+        .map(|k| 10f64.powi(k))
+        .collect()
+}
+
+/// The unlabelled grid lines 2·10ᵏ … 9·10ᵏ within `(lo, hi)`.
+fn minor_ticks(lo: f64, hi: f64) -> Vec<f64> {
+    let (a, b) = (lo.log10().round() as i32, hi.log10().round() as i32);
+    (a..b)
+        .flat_map(|k| (2..10).map(move |m| m as f64 * 10f64.powi(k)))
+        .filter(|v| *v > lo && *v < hi)
+        .collect()
+}
+
+/// Label of a decade tick `10^k`: "1", "10", "0.1" for k = 0, 1, −1, else
+/// `10` with a superscript exponent ("10⁻³", "10⁴").
+pub fn decade_label(v: f64) -> String {
+    let k = v.log10().round() as i32;
+    match k {
+        0 => "1".into(),
+        1 => "10".into(),
+        -1 => "0.1".into(),
+        _ => {
+            let sup: String = k
+                .to_string()
+                .chars()
+                .map(|c| match c {
+                    '-' => '⁻',
+                    d => ['⁰', '¹', '²', '³', '⁴', '⁵', '⁶', '⁷', '⁸', '⁹']
+                        [d.to_digit(10).unwrap_or(0) as usize],
+                })
+                .collect();
+            format!("10{sup}")
+        }
     }
 }
 
 /// Work-precision figure of a study: error against wall time, both axes
-/// logarithmic, one line with markers per method, the Pareto front (`front`,
-/// sorted by time) as a black step line with open circles. Points that are
-/// not finite and positive are dropped.
+/// logarithmic with whole decades labelled, one line with a distinct marker
+/// per method ([`Series::marker`], [`Marker::of_index`] when unset), the
+/// Pareto front (`front`, sorted by time) as a black dashed step line with
+/// open circles, the legend right of the axes. Points that are not finite
+/// and positive are dropped. PNG of [`CURVE_SIZE`] and SVG beside it.
 pub fn plot_work_precision(
     path: impl AsRef<Path>,
     title: &str,
     series: &[Series],
     front: &[(f64, f64)],
 ) -> Result<()> {
-    let path = path.as_ref();
     let keep = |p: &&(f64, f64)| p.0.is_finite() && p.1.is_finite() && p.0 > 0.0 && p.1 > 0.0;
     let clean: Vec<Vec<(f64, f64)>> = series
         .iter()
@@ -369,82 +655,133 @@ pub fn plot_work_precision(
             .fold((f64::INFINITY, 0.0f64), |(lo, hi), v| {
                 (lo.min(v), hi.max(v))
             });
-        (lo / 1.5, hi * 1.5)
+        decade_bounds(lo / 1.2, hi * 1.2)
     };
-    let ((x0, x1), (y0, y1)) = (bounds(|p| p.0), bounds(|p| p.1));
-    prepare_path(path)?;
-    // drawn under a temporary name, renamed once presented: whole or absent
-    let target = AtomicPath::new(path);
-    let temp = target.temp().to_path_buf();
-    let root = BitMapBackend::new(&temp, CURVE_SIZE).into_drawing_area();
-    root.fill(&WHITE).map_err(de)?;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(title, ("sans-serif", 24))
-        .margin(16)
-        .x_label_area_size(56)
-        .y_label_area_size(90)
-        .build_cartesian_2d((x0..x1).log_scale(), (y0..y1).log_scale())
-        .map_err(de)?;
-    chart
-        .configure_mesh()
-        .x_desc("wall time (s), median of the repeats")
-        .y_desc("error (relative)")
-        .label_style(("sans-serif", 16))
-        .axis_desc_style(("sans-serif", 19))
-        .x_labels(6)
-        .y_labels(8)
-        .x_label_formatter(&|v| log_tick(*v))
-        .y_label_formatter(&|v| log_tick(*v))
-        .light_line_style(RGBColor(235, 235, 235))
-        .bold_line_style(RGBColor(205, 205, 205))
-        .draw()
-        .map_err(de)?;
-    for (s, pts) in series.iter().zip(&clean) {
-        let color = series_color(s.color);
-        let style = color.stroke_width(2);
-        chart
-            .draw_series(LineSeries::new(pts.clone(), style))
-            .map_err(de)?
-            .label(s.name.clone())
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 30, y)], style));
-        chart
-            .draw_series(pts.iter().map(|&p| Circle::new(p, 4, color.filled())))
-            .map_err(de)?;
+    let figure = WorkPrecision {
+        title,
+        series,
+        clean,
+        front: front.iter().filter(keep).copied().collect(),
+        x: bounds(|p| p.0),
+        y: bounds(|p| p.1),
+    };
+    render(path.as_ref(), CURVE_SIZE, &figure)
+}
+
+struct WorkPrecision<'a> {
+    title: &'a str,
+    series: &'a [Series],
+    clean: Vec<Vec<(f64, f64)>>,
+    front: Vec<(f64, f64)>,
+    x: (f64, f64),
+    y: (f64, f64),
+}
+
+impl WorkPrecision<'_> {
+    fn marker(&self, i: usize) -> Marker {
+        self.series[i].marker.unwrap_or(Marker::of_index(i))
     }
-    let front: Vec<(f64, f64)> = front.iter().filter(keep).copied().collect();
-    if !front.is_empty() {
-        let mut steps = Vec::new();
-        for (i, &p) in front.iter().enumerate() {
-            if i > 0 {
-                steps.push((p.0, front[i - 1].1));
-            }
-            steps.push(p);
+
+    fn legend(&self) -> Vec<LegendEntry> {
+        let mut entries: Vec<LegendEntry> = self
+            .series
+            .iter()
+            .enumerate()
+            .map(|(i, s)| LegendEntry {
+                marker: Some(self.marker(i)),
+                ..LegendEntry::of(s)
+            })
+            .collect();
+        if !self.front.is_empty() {
+            entries.push(LegendEntry {
+                name: "Pareto front".into(),
+                color: BLACK,
+                width: 1,
+                dashed: true,
+                marker: None,
+            });
         }
-        let black = BLACK.stroke_width(1);
-        chart
-            .draw_series(DashedLineSeries::new(steps, 6, 4, black))
-            .map_err(de)?
-            .label("Pareto front")
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 30, y)], black));
-        chart
-            .draw_series(
-                front
-                    .iter()
-                    .map(|&p| Circle::new(p, 8, BLACK.stroke_width(2))),
-            )
-            .map_err(de)?;
+        entries
     }
-    chart
-        .configure_series_labels()
-        .label_font(("sans-serif", 15))
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .position(SeriesLabelPosition::UpperRight)
-        .draw()
-        .map_err(de)?;
-    root.present().map_err(de)?;
-    drop(root);
-    target.commit().map_err(de)
+}
+
+impl Figure for WorkPrecision<'_> {
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<()> {
+        let entries = self.legend();
+        let (w, _) = root.dim_in_pixel();
+        let (plot, legend) = root.split_horizontally(w - legend_width(root, &entries));
+        let ((x0, x1), (y0, y1)) = (self.x, self.y);
+        let x_axis = (x0..x1)
+            .log_scale()
+            .with_key_points(decade_ticks(x0, x1, 8))
+            .with_light_points(minor_ticks(x0, x1));
+        let y_axis = (y0..y1)
+            .log_scale()
+            .with_key_points(decade_ticks(y0, y1, 10))
+            .with_light_points(minor_ticks(y0, y1));
+        let mut chart = ChartBuilder::on(&plot)
+            .caption(self.title, ("sans-serif", 24))
+            .margin(16)
+            .x_label_area_size(56)
+            .y_label_area_size(90)
+            .build_cartesian_2d(x_axis, y_axis)
+            .map_err(de)?;
+        chart
+            .configure_mesh()
+            .x_desc("wall time (s), median of the repeats")
+            .y_desc("error (relative, 1)")
+            .label_style(("sans-serif", 16))
+            .axis_desc_style(("sans-serif", 19))
+            .x_label_formatter(&|v| decade_label(*v))
+            .y_label_formatter(&|v| decade_label(*v))
+            .light_line_style(RGBColor(235, 235, 235))
+            .bold_line_style(RGBColor(205, 205, 205))
+            .draw()
+            .map_err(de)?;
+        for (i, (s, pts)) in self.series.iter().zip(&self.clean).enumerate() {
+            let color = series_color(s.color);
+            let style = color.stroke_width(2);
+            if s.dashed {
+                chart
+                    .draw_series(DashedLineSeries::new(pts.clone(), 10, 6, style))
+                    .map_err(de)?;
+            } else {
+                chart
+                    .draw_series(LineSeries::new(pts.clone(), style))
+                    .map_err(de)?;
+            }
+            let m = self.marker(i);
+            chart
+                .draw_series(
+                    pts.iter()
+                        .map(|&p| EmptyElement::at(p) + m.pixel_element::<DB>((0, 0), color)),
+                )
+                .map_err(de)?;
+        }
+        let front = &self.front;
+        if !front.is_empty() {
+            let mut steps = Vec::new();
+            for (i, &p) in front.iter().enumerate() {
+                if i > 0 {
+                    steps.push((p.0, front[i - 1].1));
+                }
+                steps.push(p);
+            }
+            let black = BLACK.stroke_width(1);
+            chart
+                .draw_series(DashedLineSeries::new(steps, 6, 4, black))
+                .map_err(de)?;
+            chart
+                .draw_series(
+                    front
+                        .iter()
+                        .map(|&p| Circle::new(p, 9, BLACK.stroke_width(2))),
+                )
+                .map_err(de)?;
+        }
+        let top = chart.plotting_area().get_base_pixel().1 - root.get_base_pixel().1;
+        draw_legend(&legend, &entries, top)
+    }
 }
 
 // ---------------------------------------------------------------------------
@@ -488,55 +825,89 @@ impl Bounds {
 }
 
 /// One field picture of [`plot_field_panels`] (e.g. one mesh of Fig. 4).
+///
+/// Each point is drawn as a filled square of its current size, rather than
+/// the field being interpolated to a grid: the picture then shows the
+/// material where it is (a run-out, a crack-like band, lost points) and no
+/// value that no point holds, and needs no mask of the body's outline.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Panel<'a> {
     /// Caption above the panel (e.g. "(a) h = 3.3 mm").
     pub title: String,
-    /// Material point positions.
+    /// Material point positions, m.
     pub positions: &'a [[f64; 2]],
     /// One value per point (εq, κ̄ …); non-finite values are drawn grey.
     pub values: &'a [f64],
-    /// Plotted region (equal axis scales are kept).
+    /// Plotted region, m (equal axis scales are kept).
     pub bounds: Bounds,
-    /// Side of the square drawn per point, in model units. Slightly more
-    /// than the MP spacing closes the gaps between squares: for 2×2 MPs per
-    /// cell at the Gauss positions the spacing alternates 0.42h and 0.58h,
-    /// so use 0.6h. `None` = [`AUTO_MARKER_FACTOR`]·sqrt(area of the points'
-    /// bounding box / number of points) (= 0.6h for that layout).
+    /// Current volume V_p of each point, m³ per m (m² in the plane): each
+    /// point is drawn as a rectangle of its current extent ([`extents`]):
+    /// sides [`EXTENT_FACTOR`]·√V_p, widened to the box of its Voronoi cell
+    /// where the points have been stretched further apart (up to
+    /// [`EXTENT_CAP`]·√V_p), larger rectangles drawn first, so that a band
+    /// whose points have spread apart shows no gap and is not drawn wider
+    /// than it is. Takes precedence over `marker`.
+    pub volumes: Option<&'a [f64]>,
+    /// Side of the square drawn per point, in model units, when `volumes`
+    /// is `None`. Slightly more than the MP spacing closes the gaps between
+    /// squares: for 2×2 MPs per cell at the Gauss positions the spacing
+    /// alternates 0.42h and 0.58h, so use 0.6h. `None` =
+    /// [`AUTO_MARKER_FACTOR`]·sqrt(area of the points' bounding box / number
+    /// of points) (= 0.6h for that layout).
     pub marker: Option<f64>,
 }
 
 /// Factor on the mean MP spacing for the automatic marker size.
 pub const AUTO_MARKER_FACTOR: f64 = 1.2;
 
+/// Factor on √V_p for the least side of a point's square: √V_p is the
+/// point's spacing in a uniform layout, but 2×2 points per cell at the
+/// Gauss positions sit 0.58h apart with √V_p = 0.5h; 1.2 closes that.
+pub const EXTENT_FACTOR: f64 = 1.2;
+
+/// Reach of a point's rectangle, in √V_p: a point stretched apart from its
+/// neighbours (along a shear band) is drawn out to the box of its Voronoi
+/// cell among the points this near, up to half this many √V_p from it.
+pub const EXTENT_CAP: f64 = 3.0;
+
+/// Label of the x axis of the field plots (positions are in metres).
+pub const FIELD_X_LABEL: &str = "x (m)";
+/// Label of the y axis of the field plots.
+pub const FIELD_Y_LABEL: &str = "y (m)";
+
 /// Height in pixels of a field panel's drawing region (auto sizing).
 const PANEL_PLOT_H: f64 = 520.0;
 const PANEL_TITLE_H: u32 = 34;
 const PANEL_MARGIN: u32 = 10;
-const PANEL_XLAB: u32 = 34;
-const PANEL_YLAB: u32 = 56;
-const COLORBAR_W: u32 = 130;
+const PANEL_XLAB: u32 = 56;
+const PANEL_YLAB: u32 = 84;
+const COLORBAR_W: u32 = 150;
 const FIG_TITLE_H: u32 = 40;
 
 /// A single field in the style of paper Figs. 4–5: each point a filled
-/// square coloured by its value, with a colour bar. `range = None` uses the
-/// values' min and max. Size chosen from the bounds' aspect ratio.
+/// square coloured by its value, with a colour bar labelled `label` (the
+/// field and its unit, e.g. "εq (1)"). `range = None` uses the values' min
+/// and max. Size chosen from the bounds' aspect ratio; PNG and SVG.
+#[allow(clippy::too_many_arguments)]
 pub fn plot_field(
     path: impl AsRef<Path>,
     title: &str,
     positions: &[[f64; 2]],
     values: &[f64],
+    volumes: Option<&[f64]>,
     bounds: Bounds,
     range: Option<(f64, f64)>,
+    label: &str,
 ) -> Result<()> {
     let panel = Panel {
         title: String::new(),
         positions,
         values,
         bounds,
+        volumes,
         marker: None,
     };
-    plot_field_panels(path, title, &[panel], range, "")
+    plot_field_panels(path, title, &[panel], range, label)
 }
 
 /// Automatic figure size of [`plot_field_panels`] for these panels.
@@ -555,7 +926,8 @@ pub fn field_figure_size(panels: &[Panel<'_>]) -> (u32, u32) {
 }
 
 /// Several fields side by side (one per mesh, paper Figs. 4/5 a–d) with one
-/// shared colour range and colour bar labelled `colorbar_label`.
+/// shared colour range and colour bar labelled `colorbar_label` (the field
+/// and its unit); axes labelled [`FIELD_X_LABEL`] and [`FIELD_Y_LABEL`].
 /// `range = None` uses min and max over all panels' finite values.
 pub fn plot_field_panels(
     path: impl AsRef<Path>,
@@ -577,7 +949,6 @@ pub fn plot_field_panels_sized(
     range: Option<(f64, f64)>,
     colorbar_label: &str,
 ) -> Result<()> {
-    let path = path.as_ref();
     if panels.is_empty() {
         return Err(PlotError::Empty("no panels"));
     }
@@ -585,78 +956,89 @@ pub fn plot_field_panels_sized(
         if p.positions.len() != p.values.len() {
             return Err(PlotError::LengthMismatch("positions vs values"));
         }
+        if p.volumes.is_some_and(|v| v.len() != p.positions.len()) {
+            return Err(PlotError::LengthMismatch("positions vs volumes"));
+        }
         p.bounds.check()?;
     }
-    let range = match range {
-        Some((lo, hi)) => {
-            if !(lo.is_finite() && hi.is_finite() && hi >= lo) {
-                return Err(PlotError::Bounds("colour range"));
-            }
-            (lo, hi)
-        }
-        None => {
-            let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-            for v in panels.iter().flat_map(|p| p.values.iter()) {
-                if v.is_finite() {
-                    lo = lo.min(*v);
-                    hi = hi.max(*v);
-                }
-            }
-            if !lo.is_finite() {
-                (0.0, 1.0)
-            } else {
-                (lo, hi)
-            }
-        }
-    };
+    let range = colour_range(panels, range)?;
     let (w, h) = size;
-    if w < COLORBAR_W + 120 * panels.len() as u32 || h < FIG_TITLE_H + 140 {
+    if w < COLORBAR_W + 160 * panels.len() as u32 || h < FIG_TITLE_H + 180 {
         return Err(PlotError::Bounds("image too small"));
     }
+    let figure = FieldFigure {
+        title,
+        panels,
+        range,
+        colorbar_label,
+    };
+    render(path.as_ref(), size, &figure)
+}
 
-    prepare_path(path)?;
-    // drawn under a temporary name, renamed once presented: whole or absent
-    let target = AtomicPath::new(path);
-    let temp = target.temp().to_path_buf();
-    let root = BitMapBackend::new(&temp, size).into_drawing_area();
-    root.fill(&WHITE).map_err(de)?;
-    let (head, body) = root.split_vertically(FIG_TITLE_H);
-    if !title.is_empty() {
-        head.draw(&Text::new(
-            title.to_string(),
-            ((w / 2) as i32, (FIG_TITLE_H / 2) as i32),
-            ("sans-serif", 24)
-                .into_font()
-                .color(&BLACK)
-                .pos(text_center()),
-        ))
-        .map_err(de)?;
+/// The colour range: `range` checked, or min and max of the finite values.
+fn colour_range(panels: &[Panel<'_>], range: Option<(f64, f64)>) -> Result<(f64, f64)> {
+    if let Some((lo, hi)) = range {
+        if !(lo.is_finite() && hi.is_finite() && hi >= lo) {
+            return Err(PlotError::Bounds("colour range"));
+        }
+        return Ok((lo, hi));
     }
-    let (fields, bar) = body.split_horizontally(w - COLORBAR_W);
-    // panel widths proportional to their natural widths
-    let natural: Vec<f64> = panels
-        .iter()
-        .map(|p| {
-            PANEL_PLOT_H * (p.bounds.width() / p.bounds.height()).clamp(0.1, 10.0)
-                + (PANEL_YLAB + 2 * PANEL_MARGIN) as f64
-        })
-        .collect();
-    let total: f64 = natural.iter().sum();
-    let avail = (w - COLORBAR_W) as f64;
-    let mut breaks = Vec::with_capacity(panels.len());
-    let mut acc = 0.0;
-    for nat in &natural[..natural.len() - 1] {
-        acc += nat / total * avail;
-        breaks.push(acc.round() as i32);
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for v in panels.iter().flat_map(|p| p.values.iter()) {
+        if v.is_finite() {
+            lo = lo.min(*v);
+            hi = hi.max(*v);
+        }
     }
-    let areas = fields.split_by_breakpoints(breaks, Vec::<i32>::new());
-    for (p, area) in panels.iter().zip(&areas) {
-        draw_panel(area, p, range)?;
+    Ok(if lo.is_finite() { (lo, hi) } else { (0.0, 1.0) })
+}
+
+struct FieldFigure<'a, 'b> {
+    title: &'a str,
+    panels: &'a [Panel<'b>],
+    range: (f64, f64),
+    colorbar_label: &'a str,
+}
+
+impl Figure for FieldFigure<'_, '_> {
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<()> {
+        let (w, _) = root.dim_in_pixel();
+        let (head, body) = root.split_vertically(FIG_TITLE_H);
+        if !self.title.is_empty() {
+            head.draw(&Text::new(
+                self.title.to_string(),
+                ((w / 2) as i32, (FIG_TITLE_H / 2) as i32),
+                ("sans-serif", 24)
+                    .into_font()
+                    .color(&BLACK)
+                    .pos(text_center()),
+            ))
+            .map_err(de)?;
+        }
+        let (fields, bar) = body.split_horizontally(w - COLORBAR_W);
+        // panel widths proportional to their natural widths
+        let natural: Vec<f64> = self
+            .panels
+            .iter()
+            .map(|p| {
+                PANEL_PLOT_H * (p.bounds.width() / p.bounds.height()).clamp(0.1, 10.0)
+                    + (PANEL_YLAB + 2 * PANEL_MARGIN) as f64
+            })
+            .collect();
+        let total: f64 = natural.iter().sum();
+        let avail = (w - COLORBAR_W) as f64;
+        let mut breaks = Vec::with_capacity(self.panels.len());
+        let mut acc = 0.0;
+        for nat in &natural[..natural.len() - 1] {
+            acc += nat / total * avail;
+            breaks.push(acc.round() as i32);
+        }
+        let areas = fields.split_by_breakpoints(breaks, Vec::<i32>::new());
+        for (p, area) in self.panels.iter().zip(&areas) {
+            draw_panel(area, p, self.range)?;
+        }
+        draw_colorbar(&bar, self.range, self.colorbar_label)
     }
-    draw_colorbar(&bar, range, colorbar_label)?;
-    root.present().map_err(de)?;
-    drop(root);
-    target.commit().map_err(de)
 }
 
 fn text_center() -> plotters::style::text_anchor::Pos {
@@ -664,8 +1046,8 @@ fn text_center() -> plotters::style::text_anchor::Pos {
     Pos::new(HPos::Center, VPos::Center)
 }
 
-fn draw_panel(
-    area: &DrawingArea<BitMapBackend<'_>, Shift>,
+fn draw_panel<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
     p: &Panel<'_>,
     range: (f64, f64),
 ) -> Result<()> {
@@ -705,7 +1087,10 @@ fn draw_panel(
         .disable_mesh()
         .x_labels(4)
         .y_labels(6)
+        .x_desc(FIELD_X_LABEL)
+        .y_desc(FIELD_Y_LABEL)
         .label_style(("sans-serif", 14))
+        .axis_desc_style(("sans-serif", 16))
         .x_label_formatter(&|v| fmt_tick(*v, xs))
         .y_label_formatter(&|v| fmt_tick(*v, ys))
         .draw()
@@ -714,29 +1099,152 @@ fn draw_panel(
     let finite: Vec<usize> = (0..p.positions.len())
         .filter(|&i| p.positions[i][0].is_finite() && p.positions[i][1].is_finite())
         .collect();
-    let marker = match p.marker {
-        Some(m) if m.is_finite() && m > 0.0 => m,
-        _ => auto_marker(p.positions, &finite, b),
+    let sides = point_sides(p, &finite);
+    let area = |k: usize| sides[k].0 * sides[k].1;
+    // larger rectangles first, so that each point's own neighbourhood is
+    // painted by the smallest rectangle there, the large ones showing only
+    // in the gaps; among equal sizes low values first so that bands are
+    // drawn on top where points overlap
+    let mut order: Vec<usize> = (0..finite.len()).collect();
+    let value = |k: usize| {
+        let v = p.values[finite[k]];
+        if v.is_finite() {
+            v
+        } else {
+            f64::NEG_INFINITY
+        }
     };
-    // low values first so that bands are drawn on top where points overlap
-    let mut order = finite;
-    order.sort_by(|&i, &j| {
-        let (a, b) = (p.values[i], p.values[j]);
-        let a = if a.is_finite() { a } else { f64::NEG_INFINITY };
-        let b = if b.is_finite() { b } else { f64::NEG_INFINITY };
-        a.total_cmp(&b)
+    order.sort_by(|&a, &b| {
+        area(b)
+            .total_cmp(&area(a))
+            .then(value(a).total_cmp(&value(b)))
     });
-    let half = 0.5 * marker;
     chart
-        .draw_series(order.iter().map(|&i| {
+        .draw_series(order.iter().map(|&k| {
+            let i = finite[k];
             let [x, y] = p.positions[i];
+            let (hx, hy) = (0.5 * sides[k].0, 0.5 * sides[k].1);
             Rectangle::new(
-                [(x - half, y - half), (x + half, y + half)],
+                [(x - hx, y - hy), (x + hx, y + hy)],
                 map_value(p.values[i], range).filled(),
             )
         }))
         .map_err(de)?;
     Ok(())
+}
+
+/// Sides (x, y) of the rectangle of each point of `idx`: from the panel's
+/// volumes ([`extents`]; a volume that is not finite and positive takes the
+/// panel's fallback), else the panel's marker, else the automatic size.
+fn point_sides(p: &Panel<'_>, idx: &[usize]) -> Vec<(f64, f64)> {
+    let fallback = match p.marker {
+        Some(m) if m.is_finite() && m > 0.0 => m,
+        _ => auto_marker(p.positions, idx, p.bounds),
+    };
+    let Some(volumes) = p.volumes else {
+        return vec![(fallback, fallback); idx.len()];
+    };
+    let base: Vec<f64> = idx
+        .iter()
+        .map(|&i| {
+            let v = volumes[i];
+            if v.is_finite() && v > 0.0 {
+                v.sqrt()
+            } else {
+                fallback / EXTENT_FACTOR
+            }
+        })
+        .collect();
+    let points: Vec<[f64; 2]> = idx.iter().map(|&i| p.positions[i]).collect();
+    extents(&points, &base)
+}
+
+/// Directions sampled around a point by [`extents`].
+const EXTENT_DIRECTIONS: usize = 32;
+/// Factor on the sampled distances to the Voronoi cell's boundary: covers
+/// the corners between the sampled rays and the rounding of the rectangles
+/// to whole pixels, where two cells' boxes only touch.
+const CELL_MARGIN: f64 = 1.1;
+
+/// Sides (x, y) of the rectangles of points at `points` of sizes `base`
+/// (√V_p): the box of the point's Voronoi cell among the points within
+/// [`EXTENT_CAP`]·base, sampled along 32 rays (with a
+/// 10 % margin), at least
+/// [`EXTENT_FACTOR`]·base wide and high. A ray with no point within 45° of
+/// it leaves the body (the boundary's outward side, a lost point) and
+/// reaches [`EXTENT_FACTOR`]·base / 2 only. So a stretched layout (a shear
+/// band's points) leaves no gap and the body is not drawn larger.
+pub fn extents(points: &[[f64; 2]], base: &[f64]) -> Vec<(f64, f64)> {
+    let mut sorted = base.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let Some(&median) = sorted.get(sorted.len() / 2) else {
+        return Vec::new();
+    };
+    let cell = EXTENT_CAP * median;
+    if !(cell.is_finite() && cell > 0.0) {
+        return base
+            .iter()
+            .map(|b| (EXTENT_FACTOR * b, EXTENT_FACTOR * b))
+            .collect();
+    }
+    let key = |p: [f64; 2]| ((p[0] / cell).floor() as i64, (p[1] / cell).floor() as i64);
+    let mut grid: std::collections::HashMap<(i64, i64), Vec<usize>> = Default::default();
+    for (i, &p) in points.iter().enumerate() {
+        grid.entry(key(p)).or_default().push(i);
+    }
+    let rays: Vec<(f64, f64)> = (0..EXTENT_DIRECTIONS)
+        .map(|k| (std::f64::consts::TAU * k as f64 / EXTENT_DIRECTIONS as f64).sin_cos())
+        .map(|(s, c)| (c, s))
+        .collect();
+    points
+        .iter()
+        .zip(base)
+        .enumerate()
+        .map(|(i, (&p, &b))| {
+            let reach = EXTENT_CAP * b;
+            let rings = (reach / cell).ceil().clamp(1.0, 8.0) as i64;
+            let (cx, cy) = key(p);
+            let mut near: Vec<(f64, f64)> = Vec::new();
+            for gx in cx - rings..=cx + rings {
+                for gy in cy - rings..=cy + rings {
+                    for &j in grid.get(&(gx, gy)).map_or(&[][..], |v| &v[..]) {
+                        let v = (points[j][0] - p[0], points[j][1] - p[1]);
+                        let d = v.0.hypot(v.1);
+                        if j != i && d > 0.0 && d <= reach {
+                            near.push(v);
+                        }
+                    }
+                }
+            }
+            let own = 0.5 * EXTENT_FACTOR * b;
+            let (mut hx, mut hy) = (own, own);
+            for &(ux, uy) in &rays {
+                let t = ray_to_cell_boundary((ux, uy), &near)
+                    .map_or(own, |t| (CELL_MARGIN * t).min(0.5 * reach));
+                hx = hx.max(t * ux.abs());
+                hy = hy.max(t * uy.abs());
+            }
+            (2.0 * hx, 2.0 * hy)
+        })
+        .collect()
+}
+
+/// Distance from a point along the unit ray `u` to the boundary of its
+/// Voronoi cell among its neighbours at offsets `near`; `None` when no
+/// neighbour lies within 45° of the ray (the ray leaves the body).
+fn ray_to_cell_boundary(u: (f64, f64), near: &[(f64, f64)]) -> Option<f64> {
+    let mut inside = false;
+    let mut t = f64::INFINITY;
+    for &(vx, vy) in near {
+        let along = u.0 * vx + u.1 * vy;
+        let d2 = vx * vx + vy * vy;
+        if along > 0.0 {
+            // the bisector of the point and this neighbour
+            t = t.min(d2 / (2.0 * along));
+            inside |= along >= std::f64::consts::FRAC_1_SQRT_2 * d2.sqrt();
+        }
+    }
+    inside.then_some(t)
 }
 
 fn auto_marker(positions: &[[f64; 2]], idx: &[usize], b: Bounds) -> f64 {
@@ -761,8 +1269,8 @@ fn auto_marker(positions: &[[f64; 2]], idx: &[usize], b: Bounds) -> f64 {
     }
 }
 
-fn draw_colorbar(
-    area: &DrawingArea<BitMapBackend<'_>, Shift>,
+fn draw_colorbar<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
     range: (f64, f64),
     label: &str,
 ) -> Result<()> {
@@ -776,8 +1284,8 @@ fn draw_colorbar(
         .margin_top(PANEL_TITLE_H + PANEL_MARGIN)
         .margin_bottom(PANEL_XLAB + PANEL_MARGIN)
         .margin_left(12)
-        .margin_right(36)
-        .right_y_label_area_size(58)
+        .margin_right(40)
+        .right_y_label_area_size(66)
         .build_cartesian_2d(0.0..1.0, lo..hi)
         .map_err(de)?;
     chart
@@ -808,7 +1316,7 @@ fn draw_colorbar(
         let (w, h) = area.dim_in_pixel();
         area.draw(&Text::new(
             label.to_string(),
-            ((w as i32) - 16, (h / 2) as i32),
+            ((w as i32) - 18, (h / 2) as i32),
             ("sans-serif", 18)
                 .into_font()
                 .transform(FontTransform::Rotate270)

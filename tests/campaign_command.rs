@@ -85,6 +85,17 @@ fn campaign_writes_curves_metrics_report_and_plots() {
     for png in ["curves.png", "fields_local.png", "fields_nonlocal.png"] {
         let bytes = std::fs::read(out.join(png)).unwrap();
         assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n", "{png} is not a PNG");
+        // the SVG beside it, its axes labelled with units
+        let svg = std::fs::read_to_string(out.join(png).with_extension("svg")).unwrap();
+        let labels: &[&str] = if png == "curves.png" {
+            &["F (kN/m)", "δ (mm)"]
+        } else {
+            &["x (m)", "y (m)", "εq (1)"]
+        };
+        assert!(svg.contains("<svg"), "{png}: no SVG beside it");
+        for label in labels {
+            assert!(svg.contains(label), "{png}: `{label}` missing from its SVG");
+        }
     }
     for run in ["local_h300", "nonlocal_h300"] {
         assert!(out.join(run).join("run.json").exists());

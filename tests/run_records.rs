@@ -211,6 +211,15 @@ fn overwrite_removes_only_the_files_the_earlier_run_listed() {
             .contains(&"checkpoint.bin".into()),
         "{listed}"
     );
+    // the run's curve plot is drawn and listed, so --overwrite removes it
+    for plot in ["curve.png", "curve.svg"] {
+        assert!(out.join(plot).exists(), "{plot} not drawn");
+        assert!(
+            listed.as_array().unwrap().contains(&plot.into()),
+            "{plot} not listed: {listed}"
+        );
+    }
+    let first_plot = std::fs::read(out.join("curve.png")).unwrap();
     let mine = [
         "checkpoints/notes.txt",
         "checkpoint_plan.txt",
@@ -247,6 +256,8 @@ fn overwrite_removes_only_the_files_the_earlier_run_listed() {
         "checkpoint_plan.txt",
         "checkpoints",
         "curve.csv",
+        "curve.png",
+        "curve.svg",
         "notes.txt",
         "particles_plot.vtu",
         "results.pvd",
@@ -259,6 +270,8 @@ fn overwrite_removes_only_the_files_the_earlier_run_listed() {
         "the earlier run's files are gone, the user's stay"
     );
     assert_eq!(status(&out), "completed");
+    // the plot is the second run's (a shorter curve), not the first's
+    assert_ne!(std::fs::read(out.join("curve.png")).unwrap(), first_plot);
 
     let help = String::from_utf8_lossy(&mpm_geo(&["run", "--help"]).stdout).into_owned();
     assert!(

@@ -61,7 +61,12 @@ fn time_integrators_converge_at_their_orders() {
     let spec = common::validation("studies/elastic_bar_order.toml");
     let rows = run_study(&spec, out.path(), &options).expect("study runs");
     assert_eq!(rows.len(), 20, "5 series x 4 refinements");
-    for file in ["study.csv", "report.md", "work_precision.png"] {
+    for file in [
+        "study.csv",
+        "report.md",
+        "work_precision.png",
+        "work_precision.svg",
+    ] {
         assert!(out.path().join(file).exists(), "{file} written");
     }
     let series = series_errors(&out.path().join("study.csv"));

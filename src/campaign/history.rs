@@ -631,6 +631,7 @@ fn plot_histories(out: &Path, runs: &[CampaignRun]) -> plot::Result<()> {
                     points: points.clone(),
                     dashed: dashed(r),
                     color: colour_of(runs, r.cell_size),
+                    marker: Some(plot::Marker::of_regularisation(r.length_scale.is_some())),
                 })
             })
             .collect::<Vec<_>>()
@@ -806,6 +807,7 @@ fn plot_snapshots(out: &Path, runs: &[CampaignRun], window: Bounds) -> plot::Res
                         positions: &f.positions,
                         values,
                         bounds: window,
+                        volumes: Some(&f.volumes),
                         marker: Some(0.35 * r.cell_size),
                     })
                     .collect();
@@ -815,7 +817,7 @@ fn plot_snapshots(out: &Path, runs: &[CampaignRun], window: Bounds) -> plot::Res
                     &format!("Normalised εq at t = {time} s ({family}, {integrator})"),
                     &panels,
                     Some((0.0, 1.0)),
-                    "εq / max εq",
+                    "εq / max εq (1)",
                 )?;
             }
         }

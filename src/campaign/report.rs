@@ -567,6 +567,7 @@ pub(super) fn write_outputs(
             points: r.curve.iter().map(|(d, f)| (d * scale, *f)).collect(),
             dashed: r.length_scale.is_none(),
             color: sizes.iter().position(|&h| h == r.cell_size).unwrap_or(0),
+            marker: Some(plot::Marker::of_regularisation(r.length_scale.is_some())),
         })
         .collect();
     if !series.is_empty() {
@@ -597,6 +598,7 @@ pub(super) fn write_outputs(
                 positions: &r.positions,
                 values: &r.eps_q,
                 bounds: window,
+                volumes: (r.volumes.len() == r.positions.len()).then_some(&r.volumes[..]),
                 marker: Some(0.6 * r.cell_size),
             })
             .collect();
@@ -606,7 +608,7 @@ pub(super) fn write_outputs(
             &format!("Deviatoric strain εq at the last step ({family})"),
             &panels,
             None,
-            "εq",
+            "εq (1)",
         )
         .map_err(|e| io(&path, &e))?;
     }

@@ -286,6 +286,10 @@ fn history_metrics_follow_families_and_pair_the_integrators() {
         "integrators.png",
     ] {
         assert!(dir.path().join(file).exists(), "{file} missing");
+        if file.ends_with(".png") {
+            let svg = crate::plot::svg_path(&dir.path().join(file));
+            assert!(svg.exists(), "{} missing", svg.display());
+        }
     }
 }
 

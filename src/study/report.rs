@@ -11,7 +11,7 @@ use super::StudyError;
 use crate::atomic_file::{write_atomic, AtomicFile};
 use crate::campaign::IntegratorChoice;
 use crate::csv_columns::{column, number, optional, scene_key_unit, Unit};
-use crate::plot::{plot_work_precision, Series};
+use crate::plot::{plot_work_precision, Marker, Series};
 use crate::profile::Stage;
 use crate::scene::AnalysisKind;
 
@@ -372,6 +372,7 @@ pub fn write_figure(path: &Path, spec: &StudySpec, rows: &[StudyRow]) -> Result<
                 points,
                 dashed: false,
                 color: i,
+                marker: Some(Marker::of_index(i)),
             }
         })
         .collect();
