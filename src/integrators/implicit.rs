@@ -13,7 +13,7 @@ use super::newton::{
     self, Newmark, NewtonBuffers, NewtonError, NodalKinematics, Solution, StepSystem,
 };
 use super::p2g::{external_force, nodal_kinematics, KinematicsBuffers};
-use super::path::{PathConstraint, PathRecord};
+use super::path::{PathConstraint, PathRecord, MAX_RELEARNED};
 use super::step_control::{LocalError, StepControlRecord, StepController};
 use super::stresses::converged_stresses;
 use super::tangent::{background_block, Tangent};
@@ -49,6 +49,9 @@ pub struct ImplicitIntegrator {
     p2g: KinematicsBuffers,
     /// The step-size controller (`[solver] time_step = "adaptive"`).
     control: Option<StepController>,
+    /// Path following: the travel and load change of the last attempt
+    /// rejected for jumping off the path (PF6).
+    path_jump: Option<[f64; 2]>,
 }
 
 /// What an adaptive attempt needs to judge its error.
@@ -98,6 +101,7 @@ impl ImplicitIntegrator {
             newton_buffers: NewtonBuffers::default(),
             p2g: KinematicsBuffers::default(),
             control: StepController::of(&model.scene),
+            path_jump: None,
         })
         .map(|mut integrator| {
             if integrator.control.is_some() {
@@ -255,6 +259,7 @@ impl ImplicitIntegrator {
         };
         let mut shrink = 1.0;
         let mut cuts = 0;
+        let mut relearned = 0;
         let result = loop {
             let constraint = record.constraint(t, dt, end, shrink);
             match self.substep(
@@ -272,6 +277,19 @@ impl ImplicitIntegrator {
                     let load = model.driven.committed_load(&model.particles, model.time);
                     record.advance(dt, model.time - t, load - load_before, iterations);
                     break Ok(());
+                }
+                // a jump onto an elastic branch measures the body's present
+                // unloading stiffness: the step is redone at the same plastic
+                // travel, measured with it (PF6)
+                Ok(Attempt::Rejected(_))
+                    if relearned < MAX_RELEARNED
+                        && self
+                            .path_jump
+                            .take()
+                            .is_some_and(|[travel, load]| record.relearn(dt, travel, load)) =>
+                {
+                    relearned += 1;
+                    record.jumps += 1;
                 }
                 Ok(Attempt::Rejected(_)) if cuts < max_cuts => {
                     cuts += 1;
@@ -418,6 +436,7 @@ impl ImplicitIntegrator {
         if let Some(path) = system.path {
             let load_change = system.driven_load(&solution.du, dt) - path.start_load;
             if !path.accepts(system.dt, dt, load_change) {
+                self.path_jump = Some([dt, load_change]);
                 self.newton_buffers.recycle(solution.trial);
                 return Ok(Attempt::Rejected(f64::INFINITY));
             }

@@ -1,5 +1,5 @@
 //! Quasi-static path following by dissipation control (theory §3.7,
-//! eqs. PF1–PF5).
+//! eqs. PF1–PF6).
 //!
 //! A displacement-driven quasi-static run moves its rigid bodies by a fixed
 //! travel per step; where the load–travel curve turns back (a snap-back
@@ -24,7 +24,9 @@
 //! a brittle peak (measured: an arc length in the plane of travel and load
 //! unloaded the local footing at h = 0.25 m elastically from its peak to a
 //! tensile load). The driven load F is linear in (Δu, Δτ) (PF1), so every
-//! full Newton correction meets the constraint exactly.
+//! full Newton correction meets the constraint exactly. A step that jumps
+//! onto an elastic branch measures the body's present unloading stiffness,
+//! which replaces K_e from then on (PF6).
 
 use super::newton::StepSystem;
 use super::tangent::Border;
@@ -38,6 +40,14 @@ pub const PLASTIC_SHARE: f64 = 0.5;
 /// A plastic-travel step longer than this many times its predicted length is
 /// redone with half the plastic travel (PF5).
 pub const MAX_JUMP: f64 = 4.0;
+
+/// A jump whose plastic travel is at most this share of its travel is an
+/// elastic branch: its load change over its travel is the body's present
+/// unloading stiffness (PF6).
+pub const ELASTIC_SHARE: f64 = 0.1;
+
+/// The most times one step re-measures the unloading stiffness (PF6).
+pub const MAX_RELEARNED: usize = 3;
 
 /// A step taken in at most this many Newton iterations lets the next
 /// plastic travel double (PF5).
@@ -201,6 +211,32 @@ impl PathRecord {
         }
     }
 
+    /// After an attempt that jumped off the path with travel `travel` and
+    /// load change `load_change` (PF6): where the jump followed an elastic
+    /// branch (load and travel change together, its plastic travel at most
+    /// [`ELASTIC_SHARE`] of its travel), its slope ΔF/Δτ is the body's
+    /// present unloading stiffness, and F_ref = (ΔF/Δτ) Δt from now on, so
+    /// that elastic unloading keeps the plastic travel fixed at the present
+    /// stiffness too (the footing's softened body unloads up to a few per
+    /// cent stiffer than its first step). Returns whether F_ref changed
+    /// (by more than 0.1 %).
+    pub fn relearn(&mut self, dt: f64, travel: f64, load_change: f64) -> bool {
+        if self.load_scale <= 0.0 || travel * load_change <= 0.0 {
+            return false;
+        }
+        let scaled = [travel / dt, load_change / self.load_scale];
+        if (scaled[0] - scaled[1]).abs() > ELASTIC_SHARE * scaled[0].abs() {
+            return false;
+        }
+        let scale = load_change * dt / travel;
+        if (scale - self.load_scale).abs() <= 1e-3 * self.load_scale {
+            return false;
+        }
+        self.last_step[1] *= self.load_scale / scale;
+        self.load_scale = scale;
+        true
+    }
+
     /// After a step of travel `travel` and load change `load_change` that
     /// converged in `iterations` (PF5): the first step sets F_ref; the next
     /// plastic travel is this step's, doubled after an easy step, at most
@@ -272,5 +308,35 @@ mod tests {
         assert!((record.plastic_travel - 0.2).abs() < 1e-12);
         record.advance(1.0, 2.0, -30.0, 2);
         assert_eq!(record.plastic_travel, 1.0);
+    }
+
+    /// A jump along an elastic branch (load and travel falling together,
+    /// plastic travel within a tenth of the travel) re-measures F_ref, after
+    /// which unloading at that stiffness keeps the plastic travel fixed; the
+    /// last step keeps its load change in kN/m. A plastic jump, one whose
+    /// load and travel part ways, or one at the present stiffness changes
+    /// nothing.
+    #[test]
+    fn an_elastic_jump_measures_the_unloading_stiffness() {
+        let dt = 0.5;
+        let mut record = PathRecord {
+            load_scale: 10.0,
+            last_step: [1.0, 0.2],
+            plastic_travel: 0.5,
+            ..Default::default()
+        };
+        let before = record.clone();
+        for (travel, load) in [(-0.2, -2.0), (-0.2, -8.0), (-0.2, 3.0), (-0.2, -4.0001)] {
+            assert!(!record.relearn(dt, travel, load), "{travel}, {load}");
+            assert_eq!(record, before);
+        }
+        // 5 % stiffer than F_ref = 10 per nominal step
+        assert!(record.relearn(dt, -0.2, -4.2));
+        assert!((record.load_scale - 10.5).abs() < 1e-12);
+        assert!((record.last_step[1] * record.load_scale - 2.0).abs() < 1e-12);
+        let plastic = record.constraint(1.0, dt, 20.0, 1.0);
+        let unloading = -0.3;
+        let load = 10.5 / dt * unloading;
+        assert!((plastic.value(unloading, load) + plastic.arc).abs() < 1e-12);
     }
 }

@@ -400,7 +400,7 @@ pub enum PathFollowing {
     /// The rigid bodies' travel is an unknown of each step: the travel is
     /// prescribed in the elastic range, the plastic travel (whose product
     /// with the load is the dissipated energy) once the steps are mostly
-    /// plastic (theory §3.7, PF1–PF5): the run follows a load–displacement
+    /// plastic (theory §3.7, PF1–PF6): the run follows a load–displacement
     /// path through its peak and where it snaps back.
     Dissipation,
 }
