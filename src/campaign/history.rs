@@ -720,6 +720,7 @@ fn failure_window(runs: &[CampaignRun]) -> Vec<Series> {
                 points,
                 dashed: r.length_scale.is_none(),
                 color: colour_of(runs, r.cell_size),
+                marker: Some(plot::Marker::of_regularisation(r.length_scale.is_some())),
             })
         })
         .collect()
