@@ -382,11 +382,7 @@ fn execute(
         Ok(outcome) => outcome,
         Err(e) => {
             if let Some(lock) = e.downcast_ref::<crate::output_dir::OutputDirError>() {
-                if matches!(
-                    lock,
-                    crate::output_dir::OutputDirError::Locked { .. }
-                        | crate::output_dir::OutputDirError::LockUnreadable { .. }
-                ) {
+                if matches!(lock, crate::output_dir::OutputDirError::Locked { .. }) {
                     return Ok(Executed::Locked(lock.to_string()));
                 }
             }
