@@ -86,11 +86,8 @@ error_ids! {
         "the run would take more steps than the limit (explicit: end time over the stable step)";
         "check E, density, `cfl` and `dt`; raise `--max-steps` / `limits.max_steps` if the count is meant";
     OutputLocked => "OUTPUT_LOCKED":
-        "another run is writing into the output directory (its lock file names the process)";
+        "another run is writing into the output directory (the message names its process); a lock left by a killed run does not count";
         "wait for it, or choose another `--out`";
-    OutputLockUnreadable => "OUTPUT_LOCK_UNREADABLE":
-        "the output directory's lock file cannot be read";
-        "make sure no run is writing there, then remove `.mpm-geo.lock`";
     OutputReused => "OUTPUT_REUSED":
         "the output directory holds an earlier run's files";
         "choose another `--out`, or add `--overwrite` to remove the files that run lists in its `run.json` (other files are kept)";
@@ -240,7 +237,6 @@ impl Identified for OutputDirError {
     fn error_id(&self) -> ErrorId {
         match self {
             OutputDirError::Locked { .. } => ErrorId::OutputLocked,
-            OutputDirError::LockUnreadable { .. } => ErrorId::OutputLockUnreadable,
             OutputDirError::InUse { .. } => ErrorId::OutputReused,
             OutputDirError::Unlisted { .. } => ErrorId::OutputUnlisted,
             OutputDirError::Foreign { .. } => ErrorId::OutputForeign,

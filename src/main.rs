@@ -180,7 +180,8 @@ enum Command {
 /// The options `campaign` and `paper` share.
 #[derive(clap::Args)]
 struct CampaignArgs {
-    /// Scenes run at the same time.
+    /// Scenes run at the same time (each may use every thread, so a run
+    /// left alone at the end keeps all cores busy).
     #[arg(long, default_value_t = 2, value_parser = cli_values::count)]
     jobs: usize,
     /// Override a value in every scene; an empty value removes the key (repeatable).

@@ -1,10 +1,10 @@
-//! The output directory of a run: locked while the run writes it (a lock
-//! file created with `create_new` holding the process id, removed at the
-//! end), and refused when it holds an earlier run's files unless the user
+//! The output directory of a run: locked while the run writes it (an OS
+//! lock on a lock file holding the process id, removed at the end: see
+//! [`DirLock`]), and refused when it holds an earlier run's files unless the user
 //! asked to overwrite them, which then removes the files that run recorded
 //! in its `run.json` ([`crate::manifest`]) and nothing else.
 
-use std::io::Write;
+use std::io::{Read, Seek, Write};
 use std::path::{Path, PathBuf};
 
 use crate::manifest::{self, Manifest};
@@ -17,23 +17,14 @@ pub const LOCK_FILE: &str = ".mpm-geo.lock";
 pub enum OutputDirError {
     /// Another live process holds the directory's lock.
     #[error(
-        "output directory {dir} is locked by process {pid}, which is still running (another run is writing there); choose another --out, or remove {lock} if no run is writing there"
+        "output directory {dir} is locked by {}, which is still running (another run is writing there); wait for it, or choose another --out",
+        match pid { Some(pid) => format!("process {pid}"), None => "another process".to_string() }
     )]
     Locked {
         /// The directory.
         dir: String,
-        /// Process id in the lock file.
-        pid: u32,
-        /// The lock file.
-        lock: String,
-    },
-    /// The lock file exists but names no process (being created, or damaged).
-    #[error("output directory {dir} is locked ({lock} holds no process id); remove it if no run is writing there")]
-    LockUnreadable {
-        /// The directory.
-        dir: String,
-        /// The lock file.
-        lock: String,
+        /// The holder's process id, if its lock file names it yet.
+        pid: Option<u32>,
     },
     /// The directory holds an earlier run's files.
     #[error(
@@ -87,78 +78,140 @@ fn io(path: &Path) -> impl FnOnce(std::io::Error) -> OutputDirError + '_ {
     }
 }
 
-/// A locked output directory; the lock file is removed on drop.
+/// A locked output directory: the open lock file [`LOCK_FILE`], holding an
+/// exclusive OS advisory lock (`flock` on Unix, `LockFileEx` on Windows,
+/// through [`std::fs::File::try_lock`]) for as long as this value lives, and
+/// this process's id as its text (for the message of a refused run). On drop
+/// the file is removed, then closed.
+///
+/// Why an OS lock rather than "create the file, take over a dead process's":
+/// the kernel drops the lock when its process ends however it ends (`kill
+/// -9` too), so a lock file left by a killed run is simply not locked and the
+/// next run locks it. Nobody removes another process's file, so there is no
+/// takeover to race: when several runs start at once on a left-over lock,
+/// `try_lock` lets exactly one through. The one race left, a run that opened
+/// the file just before its holder removed it and locks the removed file, is
+/// closed by checking after locking that the name still points at the file
+/// locked (same device and inode), and opening again if not. (On network
+/// file systems this is as good as their lock support: NFSv4 has it.)
 #[derive(Debug)]
 pub struct DirLock {
     lock: PathBuf,
+    /// Holds the OS lock until dropped (after `lock` is removed).
+    _file: std::fs::File,
 }
 
+/// How many times [`DirLock::acquire`] opens the lock file again after the
+/// file it locked was removed by the run that held it.
+const LOCK_ATTEMPTS: usize = 100;
+
+/// How long a refused run waits for the holder to write its process id (it
+/// writes it right after locking).
+const HOLDER_WAIT: std::time::Duration = std::time::Duration::from_secs(1);
+
 impl DirLock {
-    /// Create `dir` if needed and lock it: create [`LOCK_FILE`] with
-    /// `create_new` and write this process's id. A lock of a process that
-    /// is no longer running is taken over with a warning on stderr.
+    /// Create `dir` if needed and lock it: open (or create) [`LOCK_FILE`],
+    /// take its OS lock without waiting, and write this process's id into
+    /// it. Another live holder gives [`OutputDirError::Locked`] naming its
+    /// process; a lock file that no process holds (one left by a killed run)
+    /// is taken, with a warning on stderr naming the process it names.
     pub fn acquire(dir: &Path) -> Result<Self, OutputDirError> {
         std::fs::create_dir_all(dir).map_err(io(dir))?;
         let lock = dir.join(LOCK_FILE);
-        match Self::create(&lock) {
-            Err(OutputDirError::Io { source, .. })
-                if source.kind() == std::io::ErrorKind::AlreadyExists => {}
-            other => return other,
-        }
-        let text = std::fs::read_to_string(&lock).map_err(io(&lock))?;
-        let Ok(pid) = text.trim().parse::<u32>() else {
-            return Err(OutputDirError::LockUnreadable {
-                dir: dir.display().to_string(),
-                lock: lock.display().to_string(),
-            });
-        };
-        if process_alive(pid) {
-            return Err(OutputDirError::Locked {
-                dir: dir.display().to_string(),
-                pid,
-                lock: lock.display().to_string(),
-            });
-        }
-        eprintln!(
-            "warning: taking over the lock of {} from process {pid}, which is no longer running (a run that was killed)",
-            dir.display()
-        );
-        std::fs::remove_file(&lock).map_err(io(&lock))?;
-        // a run starting at the same moment may win the new lock
-        Self::create(&lock).map_err(|e| match e {
-            OutputDirError::Io { source, .. }
-                if source.kind() == std::io::ErrorKind::AlreadyExists =>
-            {
-                OutputDirError::Locked {
-                    dir: dir.display().to_string(),
-                    pid: std::fs::read_to_string(&lock)
-                        .ok()
-                        .and_then(|t| t.trim().parse().ok())
-                        .unwrap_or(0),
-                    lock: lock.display().to_string(),
+        for _ in 0..LOCK_ATTEMPTS {
+            let file = std::fs::OpenOptions::new()
+                .read(true)
+                .write(true)
+                .create(true)
+                .truncate(false)
+                .open(&lock)
+                .map_err(io(&lock))?;
+            match file.try_lock() {
+                Ok(()) => {}
+                Err(std::fs::TryLockError::WouldBlock) => {
+                    return Err(OutputDirError::Locked {
+                        dir: dir.display().to_string(),
+                        pid: holder(&lock),
+                    })
                 }
+                Err(std::fs::TryLockError::Error(e)) => return Err(io(&lock)(e)),
             }
-            other => other,
+            if !names_file(&lock, &file).map_err(io(&lock))? {
+                // its holder removed it as we opened it: open the new one
+                continue;
+            }
+            // from here on the file is ours: on failure the guard removes it
+            let guard = Self {
+                lock: lock.clone(),
+                _file: file,
+            };
+            let mut file = &guard._file;
+            let mut earlier = String::new();
+            file.read_to_string(&mut earlier)
+                .and_then(|_| file.set_len(0))
+                .and_then(|()| file.seek(std::io::SeekFrom::Start(0)))
+                .and_then(|_| write!(file, "{}", std::process::id()))
+                .map_err(io(&lock))?;
+            if let Ok(pid) = earlier.trim().parse::<u32>() {
+                eprintln!(
+                    "warning: taking over the lock of {} from process {pid}, which is no longer running (a run that was killed)",
+                    dir.display()
+                );
+            }
+            return Ok(guard);
+        }
+        Err(OutputDirError::Locked {
+            dir: dir.display().to_string(),
+            pid: holder(&lock),
         })
     }
+}
 
-    fn create(lock: &Path) -> Result<Self, OutputDirError> {
-        let mut file = std::fs::OpenOptions::new()
-            .write(true)
-            .create_new(true)
-            .open(lock)
-            .map_err(io(lock))?;
-        let guard = Self {
-            lock: lock.to_path_buf(),
-        };
-        // on failure the guard removes the empty lock again
-        write!(file, "{}", std::process::id()).map_err(io(lock))?;
-        Ok(guard)
+/// Whether `path` names the open `file` (the same device and inode; on
+/// other systems, whether it exists).
+fn names_file(path: &Path, file: &std::fs::File) -> std::io::Result<bool> {
+    let named = match std::fs::metadata(path) {
+        Ok(m) => m,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(false),
+        Err(e) => return Err(e),
+    };
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        let open = file.metadata()?;
+        Ok(named.dev() == open.dev() && named.ino() == open.ino())
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = (named, file);
+        Ok(true)
+    }
+}
+
+/// The process id a held lock file names, waiting up to [`HOLDER_WAIT`]
+/// for the holder to write it (`None`: still not written, or the file is
+/// gone).
+fn holder(lock: &Path) -> Option<u32> {
+    let start = std::time::Instant::now();
+    loop {
+        let pid = std::fs::read_to_string(lock)
+            .ok()
+            .and_then(|t| t.trim().parse::<u32>().ok());
+        // a dead process's id is the text of a left-over file not yet rewritten
+        if let Some(pid) = pid.filter(|&p| process_alive(p)) {
+            return Some(pid);
+        }
+        if start.elapsed() > HOLDER_WAIT {
+            return None;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(10));
     }
 }
 
 impl Drop for DirLock {
     fn drop(&mut self) {
+        // removed while still locked: whoever locks the file next sees that
+        // its name is gone ([`names_file`]) and opens a new one
         let _ = std::fs::remove_file(&self.lock);
     }
 }
@@ -313,7 +366,7 @@ mod tests {
         let text = std::fs::read_to_string(dir.path().join(LOCK_FILE)).unwrap();
         assert_eq!(text, std::process::id().to_string());
         match DirLock::acquire(dir.path()) {
-            Err(OutputDirError::Locked { pid, .. }) => assert_eq!(pid, std::process::id()),
+            Err(OutputDirError::Locked { pid, .. }) => assert_eq!(pid, Some(std::process::id())),
             other => panic!("second lock: {other:?}"),
         }
         drop(lock);
