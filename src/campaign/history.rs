@@ -226,8 +226,9 @@ pub struct HistoryMetrics {
 }
 
 /// The failure phase of a q_B reading `stress` after the onset `t0`: its
-/// peak (q, t) up to [`PEAK_WINDOW`] after the onset and the fall roughness
-/// from the peak to [`FALL_WINDOW`] after it; `None` without a peak.
+/// peak (q, t) up to `PEAK_WINDOW` (0.05 s) after the onset and the fall
+/// roughness from the peak to `FALL_WINDOW` (0.1 s) after the onset; `None`
+/// without a peak.
 pub fn failure_fall(stress: &[(f64, f64)], t0: f64) -> Option<((f64, f64), Option<f64>)> {
     let until =
         |end: f64| -> Vec<(f64, f64)> { stress.iter().copied().filter(|p| p.0 <= end).collect() };
