@@ -112,7 +112,8 @@ enum Command {
     /// OUT/campaign-<name>/, and OUT/README.md putting
     /// each report beside the paper's figures and claim. Resumes like a
     /// campaign (finished runs are not run again). Measured at full size on
-    /// 2 cores: hours (the cut's 16 runs alone ~2 h); `--set` or `--from`
+    /// 2 cores: hours (2026-11-28, a 2-core AMD EPYC VM: the biaxial campaign
+    /// 29 min, the cut's 16 runs ~2 h); `--set` or `--from`
     /// with coarse copies for a quick look.
     Paper {
         /// Output directory (default: out/paper).
