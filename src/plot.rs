@@ -1004,17 +1004,7 @@ impl Figure for FieldFigure<'_, '_> {
     fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<()> {
         let (w, _) = root.dim_in_pixel();
         let (head, body) = root.split_vertically(FIG_TITLE_H);
-        if !self.title.is_empty() {
-            head.draw(&Text::new(
-                self.title.to_string(),
-                ((w / 2) as i32, (FIG_TITLE_H / 2) as i32),
-                ("sans-serif", 24)
-                    .into_font()
-                    .color(&BLACK)
-                    .pos(text_center()),
-            ))
-            .map_err(de)?;
-        }
+        draw_title(&head, self.title, 24)?;
         let (fields, bar) = body.split_horizontally(w - COLORBAR_W);
         // panel widths proportional to their natural widths
         let natural: Vec<f64> = self
@@ -1041,6 +1031,27 @@ impl Figure for FieldFigure<'_, '_> {
     }
 }
 
+/// `title` centred in `head` (nothing for an empty title), `size` px.
+fn draw_title<DB: DrawingBackend>(
+    head: &DrawingArea<DB, Shift>,
+    title: &str,
+    size: u32,
+) -> Result<()> {
+    if title.is_empty() {
+        return Ok(());
+    }
+    let (w, h) = head.dim_in_pixel();
+    head.draw(&Text::new(
+        title.to_string(),
+        ((w / 2) as i32, (h / 2) as i32),
+        ("sans-serif", size)
+            .into_font()
+            .color(&BLACK)
+            .pos(text_center()),
+    ))
+    .map_err(de)
+}
+
 fn text_center() -> plotters::style::text_anchor::Pos {
     use plotters::style::text_anchor::{HPos, Pos, VPos};
     Pos::new(HPos::Center, VPos::Center)
@@ -1053,17 +1064,7 @@ fn draw_panel<DB: DrawingBackend>(
 ) -> Result<()> {
     let (aw, ah) = area.dim_in_pixel();
     let (head, plot) = area.split_vertically(PANEL_TITLE_H);
-    if !p.title.is_empty() {
-        head.draw(&Text::new(
-            p.title.clone(),
-            ((aw / 2) as i32, (PANEL_TITLE_H / 2) as i32),
-            ("sans-serif", 20)
-                .into_font()
-                .color(&BLACK)
-                .pos(text_center()),
-        ))
-        .map_err(de)?;
-    }
+    draw_title(&head, &p.title, 20)?;
     // equal axis scales: shrink the data box to the bounds' aspect, centred
     let ph = ah.saturating_sub(PANEL_TITLE_H);
     let avail_w = aw.saturating_sub(PANEL_YLAB + 2 * PANEL_MARGIN).max(1) as f64;
