@@ -290,7 +290,7 @@ fn field_rejects_bad_input() {
     assert!(path.exists());
 }
 
-/// CIE L* of an sRGB colour (D65 white).
+/// CIE L* of an sRGB colour (white point of standard daylight).
 fn lightness(c: RGBColor) -> f64 {
     let lin = |u: u8| {
         let u = u as f64 / 255.0;
