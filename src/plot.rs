@@ -910,6 +910,10 @@ pub fn plot_field(
     plot_field_panels(path, title, &[panel], range, label)
 }
 
+/// The narrowest panel of a field figure, pixels (a slender body's panel is
+/// widened to it).
+const MIN_PANEL_W: u32 = 160;
+
 /// Automatic figure size of [`plot_field_panels`] for these panels.
 pub fn field_figure_size(panels: &[Panel<'_>]) -> (u32, u32) {
     let mut w = COLORBAR_W;
@@ -919,7 +923,8 @@ pub fn field_figure_size(panels: &[Panel<'_>]) -> (u32, u32) {
         } else {
             1.0
         };
-        w += (PANEL_PLOT_H * aspect).round() as u32 + PANEL_YLAB + 2 * PANEL_MARGIN;
+        let natural = (PANEL_PLOT_H * aspect).round() as u32 + PANEL_YLAB + 2 * PANEL_MARGIN;
+        w += natural.max(MIN_PANEL_W);
     }
     let h = FIG_TITLE_H + PANEL_TITLE_H + PANEL_PLOT_H as u32 + PANEL_XLAB + 2 * PANEL_MARGIN;
     (w.max(200), h)
@@ -963,7 +968,7 @@ pub fn plot_field_panels_sized(
     }
     let range = colour_range(panels, range)?;
     let (w, h) = size;
-    if w < COLORBAR_W + 160 * panels.len() as u32 || h < FIG_TITLE_H + 180 {
+    if w < COLORBAR_W + MIN_PANEL_W * panels.len() as u32 || h < FIG_TITLE_H + 180 {
         return Err(PlotError::Bounds("image too small"));
     }
     let figure = FieldFigure {

@@ -671,3 +671,20 @@ fn stretched_points_grow_and_lost_points_do_not() {
         .iter()
         .all(|&(wx, wy)| wx <= EXTENT_CAP * d + tol && wy <= EXTENT_CAP * d + tol));
 }
+
+/// A slender body (a bar 20 times taller than wide, as the campaign of
+/// `elastic/bar_explicit.toml` draws) still gets a field figure: its panel
+/// is widened to the narrowest one drawn, instead of refusing the figure.
+#[test]
+fn a_slender_body_gets_a_field_figure() {
+    let dir = out_dir();
+    let b = Bounds::new(0.0, 0.05, 0.0, 1.0);
+    let x: Vec<[f64; 2]> = (0..40)
+        .map(|i| [0.025, 0.0125 + 0.025 * i as f64])
+        .collect();
+    let e: Vec<f64> = (0..40).map(|i| i as f64).collect();
+    let path = dir.path.join("bar.png");
+    plot_field(&path, "bar", &x, &e, None, b, None, "εq (1)").unwrap();
+    let img = load(&path);
+    assert!(img.width() >= MIN_PANEL_W + COLORBAR_W, "{}", img.width());
+}
