@@ -1,7 +1,7 @@
 //! `mpm-geo paper`: the paper's three benchmarks in one command. The
-//! biaxial, footing and vertical-cut campaigns, the cut in both readings of
-//! its failure time (theory decision 36), (the directories of that name
-//! under the root, `validation/` by default) run one after the other, each
+//! biaxial, footing and vertical-cut campaigns, and the cut again in the
+//! late reading of its failure time (theory decision 36), from the
+//! directories of those names under the root (`validation/` by default), run one after the other, each
 //! into its own folder of the output (`campaign-<name>/`, as `mpm-geo
 //! campaign` writes it), and `README.md` there puts every campaign's report
 //! beside the paper's figures and the claim they test. Like a campaign it
