@@ -8,6 +8,10 @@ and writes, to the directory named by --out:
                number columns named with their unit as mpm-geo's CSV files are
                (`wall_s`, `steps_1`, `p2g_s`);
   timings.md   the same as a Markdown table, with a total per campaign and overall.
+With --base ROOT (the output root of a base binary's campaigns of the same
+names, as scripts/bench_campaigns.sh writes them), every row also carries the
+base run's wall time and the ratio base/new of the wall time and of every stage
+(`wall_ratio_1`, `p2g_ratio_1`, ...), and the totals their ratios.
 Standard library only.
 """
 import argparse
@@ -39,36 +43,85 @@ def runs_of(campaign_dir):
         }
 
 
+def ratio(base, new):
+    """base/new as text, or an empty string where either is missing."""
+    return f"{base / new:.2f}" if base and new else ""
+
+
+def add_base(rows, base_root):
+    """The base binary's wall time and the ratios base/new into every row."""
+    base = {}
+    for campaign in dict.fromkeys(r["campaign"] for r in rows):
+        for row in runs_of(pathlib.Path(base_root) / campaign):
+            base[(campaign, row["run"])] = row
+    for r in rows:
+        b = base.get((r["campaign"], r["run"]))
+        r["base_status"] = b["status"] if b else "missing"
+        r["base_wall_s"] = b["wall_s"] if b else None
+        for key in ["wall"] + STAGES:
+            r[f"{key}_ratio_1"] = ratio(b[f"{key}_s"], r[f"{key}_s"]) if b else ""
+
+
+def ratio_table(rows, used):
+    """Markdown rows: wall times of both binaries and the ratio of each stage."""
+    lines = ["| campaign | run | status (new / base) | wall new (s) | wall base (s) | base/new | "
+             + " | ".join(f"{s} base/new" for s in used) + " |",
+             "|---|---|---|---|---|---|" + "---|" * len(used)]
+    for r in rows:
+        base_wall = "" if r["base_wall_s"] is None else f"{r['base_wall_s']:.1f}"
+        lines.append(f"| {r['campaign']} | {r['run']} | {r['status']} / {r['base_status']} | "
+                     f"{r['wall_s']:.1f} | {base_wall} | {r['wall_ratio_1']} | "
+                     + " | ".join(r[f"{s}_ratio_1"] for s in used) + " |")
+    return lines
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("campaigns", nargs="+", help="campaign output directories")
     parser.add_argument("--out", required=True, help="directory for timings.csv and timings.md")
+    parser.add_argument("--base", help="output root of the base binary's campaigns (same names)")
     args = parser.parse_args()
     rows = [row for c in args.campaigns for row in runs_of(c)]
+    if args.base:
+        add_base(rows, args.base)
     out = pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     columns = ["campaign", "run", "status", "steps_1", "newton_iterations_1", "wall_s"] + [
         f"{stage}_s" for stage in STAGES]
+    if args.base:
+        columns += ["base_status", "base_wall_s", "wall_ratio_1"] + [
+            f"{stage}_ratio_1" for stage in STAGES]
     with open(out / "timings.csv", "w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=columns)
         writer.writeheader()
         writer.writerows(rows)
     # the Markdown table leaves out stages that are zero in every run
     used = [s for s in STAGES if any(r[f"{s}_s"] > 0.0005 for r in rows)]
-    lines = ["| campaign | run | status | steps | wall (s) | " + " | ".join(used) + " |",
-             "|---|---|---|---|---|" + "---|" * len(used)]
-    for r in rows:
-        lines.append(f"| {r['campaign']} | {r['run']} | {r['status']} | {r['steps_1']} | "
-                     f"{r['wall_s']:.1f} | " + " | ".join(f"{r[s + '_s']:.1f}" for s in used) + " |")
+    if args.base:
+        lines = ratio_table(rows, used)
+    else:
+        lines = ["| campaign | run | status | steps | wall (s) | " + " | ".join(used) + " |",
+                 "|---|---|---|---|---|" + "---|" * len(used)]
+        for r in rows:
+            lines.append(f"| {r['campaign']} | {r['run']} | {r['status']} | {r['steps_1']} | "
+                         f"{r['wall_s']:.1f} | " + " | ".join(f"{r[s + '_s']:.1f}" for s in used)
+                         + " |")
     lines.append("")
-    total = 0.0
+    total = base_total = 0.0
     for c in dict.fromkeys(r["campaign"] for r in rows):
-        wall = sum(r["wall_s"] for r in rows if r["campaign"] == c)
+        mine = [r for r in rows if r["campaign"] == c]
+        wall = sum(r["wall_s"] for r in mine)
         total += wall
-        lines.append(f"- {c}: {wall:.0f} s of run wall time "
-                     f"({sum(r['campaign'] == c for r in rows)} runs)")
-    lines.append(f"- all: {total:.0f} s = {total / 60:.1f} min of run wall time "
-                 "(runs in parallel overlap: see the campaigns' elapsed time in bench.log)")
+        line = f"- {c}: {wall:.0f} s of run wall time ({len(mine)} runs)"
+        if args.base:
+            base_wall = sum(r["base_wall_s"] or 0.0 for r in mine)
+            base_total += base_wall
+            line += f"; base {base_wall:.0f} s, ratio base/new {ratio(base_wall, wall)}"
+        lines.append(line)
+    line = f"- all: {total:.0f} s = {total / 60:.1f} min of run wall time"
+    if args.base:
+        line += f"; base {base_total / 60:.1f} min, ratio base/new {ratio(base_total, total)}"
+    lines.append(line + " (runs in parallel overlap: see the elapsed time per shard in bench.log)")
     (out / "timings.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 
