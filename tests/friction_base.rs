@@ -2,8 +2,9 @@
 //! FR1–FR4) on `validation/friction/sliding_block.toml`: an elastic block
 //! launched at v0 = 2 m/s on a base with μ = 0.4 under g = 10 decelerates by
 //! μ g and slides v0²/(2 μ g) = 0.5 m. Measured (final slide): implicit
-//! 0.5060 / 0.5006 m at h = 0.125 / 0.0625 (dt = 2e-3, ρ∞ = 0.5); explicit 0.4972 m at h = 0.125 and 0.0625 (dt = 1e-4; 0.4962 / 0.4975
-//! at CFL 0.8). Asserted
+//! 0.5060 / 0.5006 m at h = 0.125 / 0.0625 (dt = 2e-3, ρ∞ = 0.5); explicit
+//! 0.4994 / 0.4998 m (dt = 1e-4; 0.4972 on both before the re-map took the
+//! update's normal velocity, FR3). Asserted
 //! within 5 %; frictionless, the block keeps its speed (u(0.4) = 0.8 m within
 //! 1 %); at rest under gravity with μ > 0 it stays put.
 
@@ -90,8 +91,9 @@ fn block_at_rest_with_friction_stays_put() {
 
 /// The energy budget of the sliding block closes with the friction work in B
 /// (docs/theory.md E1): the block's kinetic energy K0 = 2 kJ/m goes to the
-/// base. Measured implicit B = 1.004 K0, |R| = 4e-3 K0; explicit (dt = 1e-4)
-/// B = 0.97 K0, R = −0.03 K0.
+/// base. Measured implicit B = 1.0005 K0, |R| = 5e-4 K0; explicit (dt = 1e-4)
+/// B = 0.974 K0, R = +0.0075 K0 (R = −0.03 K0 before FR3 took the update's
+/// normal velocity: the block crept up off the base, 12 mm at CFL 0.5).
 #[test]
 fn friction_work_closes_the_budget() {
     let implicit = ["scene.steps=350"];
@@ -100,7 +102,7 @@ fn friction_work_closes_the_budget() {
         "scene.dt=1.0e-4",
         "scene.end_time=0.7",
     ];
-    for (overrides, tolerance) in [(&implicit[..], 2e-2), (&explicit[..], 0.1)] {
+    for (overrides, tolerance) in [(&implicit[..], 5e-3), (&explicit[..], 0.05)] {
         friction_budget_closes(overrides, tolerance);
     }
 }

@@ -389,9 +389,9 @@ impl Buffers {
     }
 
     /// MUSL re-map (theory §4 step 4): p_i = Σ_p N_ip m_p v_p of the updated
-    /// point velocities, Dirichlet again (a frictional edge holds its normal
-    /// dof against the approach only, theory eq. FR3); Δu_i = Δt p_i / m_i into
-    /// `self.increment`.
+    /// point velocities, Dirichlet again (the normal dof of a frictional edge
+    /// takes the update's velocity, as a prescribed dof does, theory eq.
+    /// FR3); Δu_i = Δt p_i / m_i into `self.increment`.
     fn remap<S: Support>(&mut self, model: &Model, setup: &StepSetup, shapes: &[S], dt: f64) {
         let p = &model.particles;
         let (mass, velocity) = (&p.mass, &p.velocity);
@@ -420,14 +420,11 @@ impl Buffers {
             if grid.mass[node] > grid.tiny_mass {
                 let contact = model.friction.at(node);
                 for (c, uc) in u.iter_mut().enumerate() {
-                    if let Some(contact) = contact.filter(|f| f.normal == c) {
-                        // the edge stops the approach only: a node leaving it moves
-                        let v = remapped[node][c] / grid.mass[node];
-                        *uc = if v * contact.inward > 0.0 {
-                            dt * v
-                        } else {
-                            0.0
-                        };
+                    if contact.is_some_and(|f| f.normal == c) {
+                        // the update's decision: held where it stopped the
+                        // approach, the update's velocity where it let the
+                        // node leave, as the points moved in G2P
+                        *uc = dt * grid.velocity[node][c];
                         continue;
                     }
                     *uc = match dof[2 * node + c] {
