@@ -6,7 +6,6 @@
 //! reported as [`SolverError::NotPositiveDefinite`], never answered with a wrong solution;
 //! a solve that does not reach its tolerance is [`SolverError::NotConverged`].
 
-
 use crate::norms::{dot, norm, true_residual};
 use crate::{SolverError, SparseMatrix};
 
@@ -72,14 +71,14 @@ enum Built {
 /// as `Pcg::solve_faer`), because faer's is measurably slower at the same iteration counts.
 /// Medians of 7 solves to ‖b − K x‖/‖b‖ ≤ 1e-10 on the crate's elastic grid tangents, one
 /// sitting, `cargo test --release -p mpm-solvers --features study --lib measure_pcg --
-/// --ignored --nocapture --test-threads=1` (2 shared cores; the runs before and after agreed
-/// within the quoted ranges):
+/// --ignored --nocapture --test-threads=1`, five runs on 2 shared cores (two with faer's
+/// sparse product as the operator, three with [`SparseMatrix::mul_vec`]; the ranges span them):
 ///
 /// | system (n) | preconditioner | iterations (hand / faer) | faer's time / hand-written's |
 /// |---|---|---|---|
-/// | grid 40×40 (3,280) | Jacobi | 365 / 365 | 1.0–1.2 |
+/// | grid 40×40 (3,280) | Jacobi | 365 / 365 | 0.98–1.23 |
 /// | grid 100×100 (20,200) | Jacobi | 913 / 912 | 1.05–1.25 |
-/// | grid 200×150 (60,300) | Jacobi | 1522 / 1522 | 1.08–1.18 |
+/// | grid 200×150 (60,300) | Jacobi | 1522 / 1522 | 1.08–1.20 |
 /// | grid 40×40 | IC(0) | 74 / 74 | 1.05–1.10 |
 /// | grid 100×100 | IC(0) | 184 / 184 | 1.04–1.09 |
 /// | grid 200×150 | IC(0) | 305 / 305 | 0.99–1.12 |

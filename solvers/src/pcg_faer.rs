@@ -54,11 +54,13 @@ impl Pcg {
         let mut x = Mat::<f64>::zeros(n, 1);
         let mut buffer = MemBuffer::new(conjugate_gradient_scratch(&precond, op, 1, Par::Seq));
         let mut iterations = 0;
-        let not_positive = |iterations: usize| SolverError::NotPositiveDefinite {
+        let not_positive = |iterations: usize| {
+            SolverError::NotPositiveDefinite {
             method: "PCG",
             detail: format!(
                 "curvature pᵀKp or rᵀM⁻¹r < 0 near iteration {iterations}: K is not positive definite"
             ),
+        }
         };
         loop {
             let mut params = CgParams::<f64>::default();
@@ -80,7 +82,11 @@ impl Pcg {
                 MemStack::new(&mut buffer),
             );
             iterations += done;
-            let solution = x.col(0).try_as_col_major().expect("a column of a Mat").as_slice();
+            let solution = x
+                .col(0)
+                .try_as_col_major()
+                .expect("a column of a Mat")
+                .as_slice();
             match result {
                 Ok(info) => {
                     let residual = true_residual(k, solution, b, norm_b);

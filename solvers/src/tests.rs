@@ -1135,7 +1135,6 @@ fn measure_pcg_faer_against_hand_written() {
     }
 }
 
-
 /// Feature `study`: faer's conjugate gradient ([`Pcg::solve_faer`]) takes the iterations of
 /// the hand-written one (±1) to the same true residual, and reports an indefinite K.
 #[cfg(feature = "study")]
