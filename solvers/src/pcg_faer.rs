@@ -63,13 +63,15 @@ impl Pcg {
         }
         };
         loop {
-            let mut params = CgParams::<f64>::default();
             // `InitialGuessStatus::Zero` leaves faer 0.24's residual uninitialised (it never
             // copies b into it): the zero x is passed as a guess, for one product with K
-            params.initial_guess = InitialGuessStatus::MaybeNonZero;
-            params.abs_tolerance = 0.0;
-            params.rel_tolerance = tol;
-            params.max_iters = max_iterations - iterations;
+            let params = CgParams::<f64> {
+                initial_guess: InitialGuessStatus::MaybeNonZero,
+                abs_tolerance: 0.0,
+                rel_tolerance: tol,
+                max_iters: max_iterations - iterations,
+                ..Default::default()
+            };
             let mut done = 0;
             let result = conjugate_gradient(
                 x.as_mut(),
