@@ -7,6 +7,7 @@ use std::io::Write;
 use std::path::Path;
 
 use crate::mm::{list_systems, read_system, System};
+pub use crate::norms::{relative_difference, relative_residual};
 use crate::{
     Factorization, LinearOptions, LinearSolver, Method, Ordering, PcgOptions, Preconditioner,
     SolverError, SolverOptions, SparseMatrix,
@@ -170,24 +171,6 @@ fn median(mut v: Vec<f64>) -> f64 {
     } else {
         0.5 * (v[m - 1] + v[m])
     }
-}
-
-fn norm(v: &[f64]) -> f64 {
-    v.iter().map(|x| x * x).sum::<f64>().sqrt()
-}
-
-/// ‖b − Kx‖ / ‖b‖ (0 when b = 0 and x solves it).
-pub fn relative_residual(k: &SparseMatrix, x: &[f64], b: &[f64]) -> f64 {
-    let mut kx = vec![0.0; b.len()];
-    k.mul_vec(x, &mut kx);
-    let r: Vec<f64> = kx.iter().zip(b).map(|(a, b)| b - a).collect();
-    norm(&r) / norm(b).max(f64::MIN_POSITIVE)
-}
-
-/// ‖x − y‖ / ‖y‖.
-pub fn relative_difference(x: &[f64], y: &[f64]) -> f64 {
-    let d: Vec<f64> = x.iter().zip(y).map(|(a, b)| a - b).collect();
-    norm(&d) / norm(y).max(f64::MIN_POSITIVE)
 }
 
 /// One solve from scratch: (solution, stats, what solved it).

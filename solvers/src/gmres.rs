@@ -3,8 +3,13 @@
 //! as the preconditioner ([`crate::Method::LuReuse`]): when K changes little between
 //! iterations, a few Krylov steps (one product with K and one pair of triangular solves
 //! each) replace a numeric factorisation.
+//!
+//! Hand-written because faer 0.24 has no GMRES: its matrix-free Krylov solvers
+//! (`faer::matrix_free`) are conjugate gradients (symmetric positive definite only), BiCGSTAB
+//! (another method, two products and two preconditioner solves a step, no minimal-residual
+//! property) and LSMR (least squares).
 
-use crate::pcg::{dot, norm, true_residual};
+use crate::norms::{dot, norm, true_residual};
 use crate::{SolverError, SparseMatrix};
 
 /// The step from which [`gmres`] judges whether it will converge in time.

@@ -20,10 +20,13 @@
 //!   times faster than faer's sparse LU on the benchmarks' tangents, and on two threads faster
 //!   than faer's sparse Cholesky on symmetric ones (`linear_solver = "auto"`, the default, or
 //!   `"multifrontal"`);
-//! * [`mm`] writes and reads systems in Matrix Market format, and [`mod@bench`] runs every solver
-//!   on a directory of them (`mpm-solvers bench`).
+//! * [`mm`] writes and reads systems in Matrix Market format (the runs' `[output] systems`).
+//!
+//! With the cargo feature `study`, `bench` runs every solver, ordering and variant on a
+//! directory of exported systems (the binary `mpm-solvers bench`, which needs the feature).
 
 mod assembly;
+#[cfg(feature = "study")]
 pub mod bench;
 mod direct;
 mod error;
@@ -34,7 +37,10 @@ mod linear;
 mod matrix;
 pub mod mm;
 mod multifrontal;
+mod norms;
 mod pcg;
+#[cfg(feature = "study")]
+mod pcg_faer;
 
 pub use assembly::Assembler;
 pub use direct::{

@@ -891,7 +891,7 @@ fn split_tasks(fronts: &[Front], roots: &[usize], threads: usize) -> Vec<bool> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::bench::relative_residual as residual;
+    use crate::norms::relative_residual as residual;
 
     /// A 2D 5-point stencil with two unknowns per node and unsymmetric values (a convection-like
     /// skew part), diagonally dominant: every pivot is safe.

@@ -585,6 +585,7 @@ fn coupling_filter_shrinks_the_pattern() {
 
 // ---- LinearSolver: every method, fallbacks, Matrix Market round trip (issue 16) ----
 
+#[cfg(feature = "study")]
 use crate::bench::{solver_configs, BenchOptions};
 
 /// Unsymmetric perturbation of the elastic grid system (as a softening tangent is).
@@ -610,7 +611,8 @@ fn lu_reference(k: &SparseMatrix, b: &[f64]) -> Vec<f64> {
 /// Every configuration the bench runs (all orderings and variants, PCG, LDLᵀ with the
 /// feature) agrees with faer LU to 1e-8 relative on an SPD elastic system; PCG to its
 /// tolerance (error ≤ cond-bounded: checked through its true residual ≤ tol and the
-/// solution difference ≤ 1e-6).
+/// solution difference ≤ 1e-6). Feature `study` (the bench's configurations).
+#[cfg(feature = "study")]
 #[test]
 fn every_solver_agrees_with_lu_on_spd_system() {
     let (_, _, k) = elastic_system(24, 16);
@@ -788,16 +790,23 @@ fn inapplicable_methods_fall_back_with_a_warning() {
             s.warnings()
         );
     }
-    // the unsymmetric system by every LU variant: agreement with faer LU
-    let x_lu = lu_reference(&k_unsym, &b);
+    // the unsymmetric system by every LU variant of the bench: agreement with faer LU
+    #[cfg(feature = "study")]
+    every_lu_variant_agrees_with_lu(&k_unsym, &b);
+}
+
+/// Every LU variant the bench runs (feature `study`) agrees with faer's LU on `k_unsym`.
+#[cfg(feature = "study")]
+fn every_lu_variant_agrees_with_lu(k_unsym: &SparseMatrix, b: &[f64]) {
+    let x_lu = lu_reference(k_unsym, b);
     for (label, options) in solver_configs(false, k_unsym.n(), &BenchOptions::default()) {
         assert!(
             matches!(options.method, Method::Lu | Method::Multifrontal),
             "{label}"
         );
         let mut s = LinearSolver::new(options).unwrap();
-        s.factorize(&k_unsym, false).unwrap();
-        let mut x = b.clone();
+        s.factorize(k_unsym, false).unwrap();
+        let mut x = b.to_vec();
         s.solve_in_place(&mut x).unwrap();
         let d = rel_diff(&x, &x_lu);
         assert!(d <= 1e-8, "{label}: difference to LU {d:e}");
@@ -859,8 +868,17 @@ fn matrix_market_round_trip_is_exact() {
     assert_eq!(bits(back.x.as_deref().unwrap()), bits(&x));
     assert_eq!(back.meta["step"], 3);
     assert_eq!(crate::mm::list_systems(&dir).unwrap(), vec![json]);
+    #[cfg(feature = "study")]
+    bench_reads_the_system(&dir);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// The bench harness (feature `study`) runs every LU variant on the system written by
+/// [`matrix_market_round_trip_is_exact`], all in agreement with faer's LU.
+#[cfg(feature = "study")]
+fn bench_reads_the_system(dir: &std::path::Path) {
     let rows = crate::bench::run_bench(
-        &dir,
+        dir,
         &BenchOptions {
             repeats: 1,
             ..Default::default()
@@ -873,7 +891,6 @@ fn matrix_market_round_trip_is_exact() {
         "{rows:?}"
     );
     assert!(rows.iter().all(|r| r.diff_to_lu <= 1e-8), "{rows:?}");
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// `lu_reuse`: the LU of one tangent solves the next (same pattern, values changed a
@@ -1054,4 +1071,102 @@ fn auto_routes_systems_to_the_multifrontal_factorisation() {
         let one = if cholesky { (1, 0) } else { (0, 1) };
         assert_eq!(counts, one, "{expected:?}, Cholesky {cholesky}");
     }
+}
+
+/// Measurement (ignored; feature `study`): faer's conjugate gradient ([`Pcg::solve_faer`])
+/// against the hand-written [`Pcg::solve`], medians of 7 solves, on the elastic grid systems and
+/// the indefinite one of `inapplicable_methods_fall_back_with_a_warning`:
+/// `cargo test --release -p mpm-solvers --features study --lib measure_pcg -- --ignored
+/// --nocapture --test-threads=1`.
+#[cfg(feature = "study")]
+#[test]
+#[ignore]
+fn measure_pcg_faer_against_hand_written() {
+    let median = |mut v: Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let mut cases: Vec<(String, SparseMatrix)> = [(40, 40), (100, 100), (200, 150)]
+        .iter()
+        .map(|&(nx, ny)| (format!("grid {nx}x{ny}"), elastic_system(nx, ny).2))
+        .collect();
+    let (asm, blocks, k0) = elastic_system(20, 12);
+    let sigma = 0.37 * k0.get(0, 0);
+    cases.push((
+        "indefinite 20x12".into(),
+        asm.assemble_with_diagonal(&blocks, Some(&vec![-sigma; asm.n_dofs()]))
+            .unwrap(),
+    ));
+    for (name, k) in &cases {
+        let b = random_rhs(k.n(), 5);
+        for preconditioner in [Preconditioner::Jacobi, Preconditioner::IncompleteCholesky] {
+            let options = PcgOptions {
+                preconditioner,
+                tolerance: 1e-10,
+                max_iterations: 10_000,
+            };
+            let Ok(pcg) = Pcg::new(k, options) else {
+                println!("{name} {preconditioner:?}: preconditioner refused");
+                continue;
+            };
+            for (label, faer) in [("hand", false), ("faer", true)] {
+                let mut times = Vec::new();
+                let mut what = String::new();
+                for _ in 0..7 {
+                    let t = std::time::Instant::now();
+                    let r = if faer {
+                        pcg.solve_faer(k, &b)
+                    } else {
+                        pcg.solve(k, &b)
+                    };
+                    times.push(t.elapsed().as_secs_f64());
+                    what = match r {
+                        Ok(o) => format!("{} it, residual {:.2e}", o.iterations, o.residual),
+                        Err(e) => format!("{e}"),
+                    };
+                }
+                println!(
+                    "{name} n={} {preconditioner:?} {label}: {:.2} ms, {what}",
+                    k.n(),
+                    1e3 * median(times)
+                );
+            }
+        }
+    }
+}
+
+/// Feature `study`: faer's conjugate gradient ([`Pcg::solve_faer`]) takes the iterations of
+/// the hand-written one (±1) to the same true residual, and reports an indefinite K.
+#[cfg(feature = "study")]
+#[test]
+fn faer_conjugate_gradient_matches_the_hand_written_one() {
+    let (asm, blocks, k) = elastic_system(30, 20);
+    let b = random_rhs(k.n(), 5);
+    for preconditioner in [Preconditioner::Jacobi, Preconditioner::IncompleteCholesky] {
+        let options = PcgOptions {
+            preconditioner,
+            tolerance: 1e-10,
+            max_iterations: 5000,
+        };
+        let pcg = Pcg::new(&k, options).unwrap();
+        let (hand, faer) = (pcg.solve(&k, &b).unwrap(), pcg.solve_faer(&k, &b).unwrap());
+        assert!(
+            hand.iterations.abs_diff(faer.iterations) <= 1,
+            "{preconditioner:?}: {} against {}",
+            hand.iterations,
+            faer.iterations
+        );
+        assert!(faer.residual <= 1e-10 && hand.residual <= 1e-10);
+        assert!(rel_diff(&faer.x, &hand.x) <= 1e-6);
+    }
+    let sigma = 0.37 * k.get(0, 0);
+    let k_indef = asm
+        .assemble_with_diagonal(&blocks, Some(&vec![-sigma; asm.n_dofs()]))
+        .unwrap();
+    let pcg = Pcg::new(&k_indef, PcgOptions::default()).unwrap();
+    let err = pcg.solve_faer(&k_indef, &b).unwrap_err();
+    assert!(
+        matches!(err, SolverError::NotPositiveDefinite { .. }),
+        "{err:?}"
+    );
 }

@@ -390,7 +390,7 @@ impl<'b> Run<'_, 'b> {
 mod tests {
     use super::super::tests::grid_matrix_coupled;
     use super::*;
-    use crate::bench::{relative_difference, relative_residual};
+    use crate::norms::{relative_difference, relative_residual};
     use crate::{FactorKind, MultifrontalLu};
 
     fn pool(threads: usize) -> rayon::ThreadPool {
