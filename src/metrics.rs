@@ -395,15 +395,18 @@ fn check_band_inputs(positions: &[[f64; 2]], eps_q: &[f64], h: f64, l_s: f64) ->
     Ok(())
 }
 
+/// A material point's position and εq.
+type PointStrain = ([f64; 2], f64);
+
 /// The finite points (position, εq) inside `region`, and how many points
 /// were skipped as not finite.
 fn selected_points(
     positions: &[[f64; 2]],
     eps_q: &[f64],
     region: impl Fn([f64; 2]) -> bool,
-) -> Result<(Vec<([f64; 2], f64)>, usize)> {
+) -> Result<(Vec<PointStrain>, usize)> {
     let mut n_skipped = 0usize;
-    let mut pts: Vec<([f64; 2], f64)> = Vec::with_capacity(positions.len());
+    let mut pts: Vec<PointStrain> = Vec::with_capacity(positions.len());
     for (&x, &e) in positions.iter().zip(eps_q) {
         if !(x[0].is_finite() && x[1].is_finite() && e.is_finite()) {
             n_skipped += 1;
@@ -435,7 +438,7 @@ struct BandLine {
 
 /// M4 step 1: the band points (εq ≥ ½ max εq) and the centroid and major
 /// axis of their covariance.
-fn band_line(pts: &[([f64; 2], f64)], max_eps: f64, h: f64) -> Result<BandLine> {
+fn band_line(pts: &[PointStrain], max_eps: f64, h: f64) -> Result<BandLine> {
     let band: Vec<[f64; 2]> = pts
         .iter()
         .filter(|p| p.1 >= 0.5 * max_eps)
@@ -503,7 +506,7 @@ type ProfileSums = std::collections::BTreeMap<i64, (f64, f64, usize)>;
 /// bins of width h/2 in d = (x − m)·n centred on d = k·h/2; and how many
 /// MPs the slab holds.
 fn slab_bins(
-    pts: &[([f64; 2], f64)],
+    pts: &[PointStrain],
     line: &BandLine,
     m: [f64; 2],
     half_len: f64,

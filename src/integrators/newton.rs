@@ -296,18 +296,7 @@ pub fn solve(
             kappa_settled,
         )? {
             usage.stagnated_steps += usize::from(stagnated);
-            let history = convergence.history;
-            system
-                .check_motion(du)
-                .map_err(|cause| NewtonError::failed(cause, &history))?;
-            return Ok(Solution {
-                du: std::mem::take(&mut current.du),
-                travel,
-                trial: std::mem::take(&mut current.trial),
-                residual: std::mem::take(&mut current.residual),
-                iterations: iteration,
-                history,
-            });
+            return converged(system, current, iteration, convergence.history);
         }
         if iteration >= CONTACT_HOLD_ITERATION && !system.model.friction.is_empty() {
             system.hold_sticks(du);
@@ -343,23 +332,55 @@ pub fn solve(
         convergence.line_search(&correction, reference_norm, slots, |alpha, slot| {
             let step = (alpha, &correction[..], travel_correction);
             corrected_increment(slot, system, (&du[..], travel), step);
-            let Candidate {
-                du,
-                trial,
-                residual,
-                travel,
-                ..
-            } = slot;
-            let nl = nonlocal.as_deref();
-            match system.evaluate_into((du, *travel), nl, trial, scratch, residual, profile) {
-                Ok(()) => Ok(residual.norm.is_finite()),
-                // a failed stress update at a too-long step: shorten it
-                Err(NewtonError::Constitutive(..)) => Ok(false),
-                Err(e) => Err(e),
-            }
+            evaluate_candidate(system, slot, nonlocal.as_deref(), scratch, profile)
         })?;
         std::mem::swap(current, best);
         iteration += 1;
+    }
+}
+
+/// The converged iterate `current` as the step's solution, after the motion
+/// limit of theory §3 is checked.
+fn converged(
+    system: &StepSystem,
+    current: &mut Candidate,
+    iteration: usize,
+    history: Vec<f64>,
+) -> Result<Solution, NewtonError> {
+    system
+        .check_motion(&current.du)
+        .map_err(|cause| NewtonError::failed(cause, &history))?;
+    Ok(Solution {
+        du: std::mem::take(&mut current.du),
+        travel: current.travel,
+        trial: std::mem::take(&mut current.trial),
+        residual: std::mem::take(&mut current.residual),
+        iterations: iteration,
+        history,
+    })
+}
+
+/// Stress update and residual at the line search's candidate `slot`: whether
+/// its ‖R‖ is finite; a failed stress update (at a too-long step) counts as
+/// not finite, so that the line search shortens the step.
+fn evaluate_candidate(
+    system: &StepSystem,
+    slot: &mut Candidate,
+    nonlocal: Option<&NonlocalStep>,
+    scratch: &mut ResidualScratch,
+    profile: &Profile,
+) -> Result<bool, NewtonError> {
+    let Candidate {
+        du,
+        trial,
+        residual,
+        travel,
+        ..
+    } = slot;
+    match system.evaluate_into((du, *travel), nonlocal, trial, scratch, residual, profile) {
+        Ok(()) => Ok(residual.norm.is_finite()),
+        Err(NewtonError::Constitutive(..)) => Ok(false),
+        Err(e) => Err(e),
     }
 }
 
