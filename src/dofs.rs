@@ -77,15 +77,8 @@ impl DofMap {
     }
 }
 
-/// The free-dof entries of a nodal field, in system order.
-pub fn gather_free(dofs: &DofMap, nodal: &[[f64; 2]]) -> Vec<f64> {
-    let mut out = Vec::new();
-    gather_free_into(dofs, nodal, &mut out);
-    out
-}
-
-/// [`gather_free`] into `out` (resized to the unknowns; no allocation once
-/// it has grown).
+/// The free-dof entries of a nodal field, in system order, into `out`
+/// (resized to the unknowns; no allocation once it has grown).
 pub fn gather_free_into(dofs: &DofMap, nodal: &[[f64; 2]], out: &mut Vec<f64>) {
     out.clear();
     out.resize(dofs.n_free, 0.0);

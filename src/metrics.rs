@@ -333,6 +333,54 @@ pub fn shear_band_width_in(
     l_s: f64,
     region: impl Fn([f64; 2]) -> bool,
 ) -> Result<BandWidth> {
+    check_band_inputs(positions, eps_q, h, l_s)?;
+    let (pts, n_skipped) = selected_points(positions, eps_q, region)?;
+    let max_eps = pts.iter().map(|p| p.1).fold(f64::NEG_INFINITY, f64::max);
+    if max_eps <= 0.0 {
+        return Err(MetricsError::Degenerate("max εq is not positive"));
+    }
+    let line = band_line(&pts, max_eps, h)?;
+    let m = band_midpoint(&line);
+    let half_len = 2.0 * h.max(0.25 * l_s);
+    let (bins, n_slab) = slab_bins(&pts, &line, m, half_len, h);
+    let profile: Vec<ProfileBin> = bins
+        .values()
+        .map(|&(sd, se, cnt)| ProfileBin {
+            d: sd / cnt as f64,
+            eps_q: se / cnt as f64,
+            count: cnt,
+        })
+        .collect();
+    if profile.len() < 3 {
+        return Err(MetricsError::Degenerate("fewer than 3 profile bins"));
+    }
+    let (background, n_background_bins) = background_level(&bins, &profile, h, l_s);
+    let (peak, (left, right)) = half_maximum_crossings(&profile, background)?;
+    let (t, n) = (line.direction, line.normal);
+    let dc = 0.5 * (left + right);
+    Ok(BandWidth {
+        width: right - left,
+        centre: [m[0] + dc * n[0], m[1] + dc * n[1]],
+        direction: t,
+        normal: n,
+        midpoint: m,
+        max_eps_q: max_eps,
+        n_band: line.band.len(),
+        aspect: line.aspect,
+        slab_half_length: half_len,
+        n_slab,
+        background,
+        n_background_bins,
+        peak,
+        crossings: (left, right),
+        profile,
+        n_skipped,
+    })
+}
+
+/// The inputs of [`shear_band_width_in`]: as many strains as points, h
+/// positive and finite, l_s non-negative and finite.
+fn check_band_inputs(positions: &[[f64; 2]], eps_q: &[f64], h: f64, l_s: f64) -> Result<()> {
     if positions.len() != eps_q.len() {
         return Err(MetricsError::LengthMismatch("positions vs eps_q"));
     }
@@ -344,9 +392,21 @@ pub fn shear_band_width_in(
             "l_s must be non-negative and finite",
         ));
     }
-    // selected, finite points
+    Ok(())
+}
+
+/// A material point's position and εq.
+type PointStrain = ([f64; 2], f64);
+
+/// The finite points (position, εq) inside `region`, and how many points
+/// were skipped as not finite.
+fn selected_points(
+    positions: &[[f64; 2]],
+    eps_q: &[f64],
+    region: impl Fn([f64; 2]) -> bool,
+) -> Result<(Vec<PointStrain>, usize)> {
     let mut n_skipped = 0usize;
-    let mut pts: Vec<([f64; 2], f64)> = Vec::with_capacity(positions.len());
+    let mut pts: Vec<PointStrain> = Vec::with_capacity(positions.len());
     for (&x, &e) in positions.iter().zip(eps_q) {
         if !(x[0].is_finite() && x[1].is_finite() && e.is_finite()) {
             n_skipped += 1;
@@ -359,12 +419,26 @@ pub fn shear_band_width_in(
     if pts.is_empty() {
         return Err(MetricsError::Empty("material points"));
     }
-    let max_eps = pts.iter().map(|p| p.1).fold(f64::NEG_INFINITY, f64::max);
-    if max_eps <= 0.0 {
-        return Err(MetricsError::Degenerate("max εq is not positive"));
-    }
+    Ok((pts, n_skipped))
+}
 
-    // 1. band points and PCA line fit
+/// The band points of M4 step 1 and their principal-component line.
+struct BandLine {
+    /// Points with εq ≥ ½ max εq.
+    band: Vec<[f64; 2]>,
+    /// Their centroid.
+    centroid: [f64; 2],
+    /// The major axis t (t_x > 0, or t_y > 0 when t_x = 0).
+    direction: [f64; 2],
+    /// The normal n = t rotated by +90°.
+    normal: [f64; 2],
+    /// Minor over major eigenvalue of the band points' covariance.
+    aspect: f64,
+}
+
+/// M4 step 1: the band points (εq ≥ ½ max εq) and the centroid and major
+/// axis of their covariance.
+fn band_line(pts: &[PointStrain], max_eps: f64, h: f64) -> Result<BandLine> {
     let band: Vec<[f64; 2]> = pts
         .iter()
         .filter(|p| p.1 >= 0.5 * max_eps)
@@ -403,23 +477,46 @@ pub fn shear_band_width_in(
     }
     let n = [-t[1], t[0]];
     let aspect = (l2.max(0.0)) / l1;
+    Ok(BandLine {
+        band,
+        centroid: c,
+        direction: t,
+        normal: n,
+        aspect,
+    })
+}
 
-    // 2. midpoint: middle of the extent of the band points along t
+/// M4 step 2: the midpoint m, the middle of the band points' extent along t.
+fn band_midpoint(line: &BandLine) -> [f64; 2] {
+    let (band, c, t) = (&line.band, line.centroid, line.direction);
     let (mut smin, mut smax) = (f64::INFINITY, f64::NEG_INFINITY);
-    for x in &band {
+    for x in band {
         let s = (x[0] - c[0]) * t[0] + (x[1] - c[1]) * t[1];
         smin = smin.min(s);
         smax = smax.max(s);
     }
     let sm = 0.5 * (smin + smax);
-    let m = [c[0] + sm * t[0], c[1] + sm * t[1]];
+    [c[0] + sm * t[0], c[1] + sm * t[1]]
+}
 
-    // 3. slab, 4. bins
-    let half_len = 2.0 * h.max(0.25 * l_s);
+/// Per bin k of the profile: Σ d, Σ εq and the count of its points.
+type ProfileSums = std::collections::BTreeMap<i64, (f64, f64, usize)>;
+
+/// M4 steps 3–4: the MPs of the slab |(x − m)·t| ≤ `half_len`, summed into
+/// bins of width h/2 in d = (x − m)·n centred on d = k·h/2; and how many
+/// MPs the slab holds.
+fn slab_bins(
+    pts: &[PointStrain],
+    line: &BandLine,
+    m: [f64; 2],
+    half_len: f64,
+    h: f64,
+) -> (ProfileSums, usize) {
+    let (t, n) = (line.direction, line.normal);
     let bw = 0.5 * h;
-    let mut bins: std::collections::BTreeMap<i64, (f64, f64, usize)> = Default::default();
+    let mut bins: ProfileSums = Default::default();
     let mut n_slab = 0usize;
-    for &(x, e) in &pts {
+    for &(x, e) in pts {
         let (dx, dy) = (x[0] - m[0], x[1] - m[1]);
         let s = dx * t[0] + dy * t[1];
         if s.abs() > half_len {
@@ -436,19 +533,14 @@ pub fn shear_band_width_in(
         b.1 += e;
         b.2 += 1;
     }
-    let profile: Vec<ProfileBin> = bins
-        .values()
-        .map(|&(sd, se, cnt)| ProfileBin {
-            d: sd / cnt as f64,
-            eps_q: se / cnt as f64,
-            count: cnt,
-        })
-        .collect();
-    if profile.len() < 3 {
-        return Err(MetricsError::Degenerate("fewer than 3 profile bins"));
-    }
+    (bins, n_slab)
+}
 
-    // 5. background
+/// M4 step 5: the background εq, the median of the bins with
+/// |d_bin| > 1.5·w_guess, w_guess = max(l_s, 4h) (the profile minimum if
+/// there are none); and how many bins it is the median of.
+fn background_level(bins: &ProfileSums, profile: &[ProfileBin], h: f64, l_s: f64) -> (f64, usize) {
+    let bw = 0.5 * h;
     let w_guess = l_s.max(4.0 * h);
     let mut tail: Vec<f64> = bins
         .iter()
@@ -464,8 +556,12 @@ pub fn shear_band_width_in(
     } else {
         median(&mut tail)
     };
+    (background, n_background_bins)
+}
 
-    // 6. FWHM
+/// M4 step 6: the profile's peak above `background` and its half-maximum
+/// crossings on either side, linearly interpolated between adjacent bins.
+fn half_maximum_crossings(profile: &[ProfileBin], background: f64) -> Result<(f64, (f64, f64))> {
     let v: Vec<f64> = profile.iter().map(|b| b.eps_q - background).collect();
     let (kmax, &peak) = v
         .iter()
@@ -496,25 +592,7 @@ pub fn shear_band_width_in(
         .ok_or(MetricsError::Degenerate(
             "profile does not fall below half maximum on the positive side",
         ))?;
-    let dc = 0.5 * (left + right);
-    Ok(BandWidth {
-        width: right - left,
-        centre: [m[0] + dc * n[0], m[1] + dc * n[1]],
-        direction: t,
-        normal: n,
-        midpoint: m,
-        max_eps_q: max_eps,
-        n_band: band.len(),
-        aspect,
-        slab_half_length: half_len,
-        n_slab,
-        background,
-        n_background_bins,
-        peak,
-        crossings: (left, right),
-        profile,
-        n_skipped,
-    })
+    Ok((peak, (left, right)))
 }
 
 /// Median of finite values (the slice is reordered). Empty → NaN.

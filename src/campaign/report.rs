@@ -445,20 +445,38 @@ pub(super) fn write_outputs(
     benchmark: Benchmark,
     window: Bounds,
 ) -> Result<(), CampaignError> {
-    let (unit, scale) = benchmark.length_unit();
-    let io = |p: &Path, e: &dyn std::fmt::Display| {
-        CampaignError::Output(p.display().to_string(), e.to_string())
-    };
-    std::fs::create_dir_all(out).map_err(|e| io(out, &e))?;
-    // combined curves
+    std::fs::create_dir_all(out).map_err(|e| output_error(out, &e))?;
+    write_combined_curves(out, runs)?;
+    let m = compute_metrics(runs, benchmark);
+    let (csv, md) = metrics_and_report(runs, &m, benchmark);
+    let metrics_path = out.join("metrics.csv");
+    write_atomic(&metrics_path, csv).map_err(|e| output_error(&metrics_path, &e))?;
+    let report = out.join("report.md");
+    write_atomic(&report, md).map_err(|e| output_error(&report, &e))?;
+    plot_load_curves(out, runs, benchmark)?;
+    plot_strain_fields(out, runs, benchmark, window)
+}
+
+/// The campaign's output error for `p`.
+fn output_error(p: &Path, e: &dyn std::fmt::Display) -> CampaignError {
+    CampaignError::Output(p.display().to_string(), e.to_string())
+}
+
+/// The runs' family: `nonlocal` with a length scale, else `local`.
+fn family(r: &CampaignRun) -> &'static str {
+    if r.length_scale.is_some() {
+        "nonlocal"
+    } else {
+        "local"
+    }
+}
+
+/// `curves.csv`: every run's load curve, one row a step.
+fn write_combined_curves(out: &Path, runs: &[CampaignRun]) -> Result<(), CampaignError> {
     let combined = out.join("curves.csv");
     let mut text = String::from("run,family,cell_size_m,step_1,delta_m,load_kN_per_m\n");
     for r in runs {
-        let family = if r.length_scale.is_some() {
-            "nonlocal"
-        } else {
-            "local"
-        };
+        let family = family(r);
         for (step, (d, f)) in r.curve.iter().enumerate() {
             let _ = writeln!(
                 text,
@@ -470,18 +488,21 @@ pub(super) fn write_outputs(
             );
         }
     }
-    write_atomic(&combined, text).map_err(|e| io(&combined, &e))?;
-    // metrics
-    let m = compute_metrics(runs, benchmark);
-    let metrics_path = out.join("metrics.csv");
+    write_atomic(&combined, text).map_err(|e| output_error(&combined, &e))
+}
+
+/// The text of `metrics.csv` (one row a run) and of `report.md` (the metrics
+/// table of theory §9 and the sections and notes after it).
+fn metrics_and_report(
+    runs: &[CampaignRun],
+    m: &[RunMetrics],
+    benchmark: Benchmark,
+) -> (String, String) {
+    let (unit, scale) = benchmark.length_unit();
     let mut csv = String::from(METRICS_HEADER);
     let mut md = format!("# Mesh-objectivity report\n\nReference of each family: its finest completed mesh (theory §9). h and δ in {unit}, loads in kN/m, band width w (M4 on εq) and w_κ̄ (M4 on the nonlocal variable κ̄) in {unit}.\n\n| run | h ({unit}) | status | wall (s) | slope (kN/m/m) | peak F | δ_peak | F_end | β (M3) | M1 e_h | M2 | w ({unit}) | w/l_s | w_κ̄ ({unit}) | D (kJ/m, M5) |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
-    for (r, mm) in runs.iter().zip(&m) {
-        let family = if r.length_scale.is_some() {
-            "nonlocal"
-        } else {
-            "local"
-        };
+    for (r, mm) in runs.iter().zip(m) {
+        let family = family(r);
         let status = if r.error.is_some() {
             "stopped"
         } else {
@@ -516,8 +537,20 @@ pub(super) fn write_outputs(
         );
     }
     if m.iter().any(|mm| mm.corner_band.is_some()) {
-        md.push_str(&footing_section(runs, &m));
+        md.push_str(&footing_section(runs, m));
     }
+    md.push_str(&energy_balance_section(runs));
+    md.push_str(&lost_points_notes(runs));
+    md.push_str(&no_curve_notes(runs));
+    md.push_str(&stopped_notes(runs));
+    md.push_str(&profiles_section(runs));
+    (csv, md)
+}
+
+/// The report's energy balance table (M5), at the last step of each run
+/// that has one; empty when no run has.
+fn energy_balance_section(runs: &[CampaignRun]) -> String {
+    let mut md = String::new();
     if runs.iter().any(|r| r.energy.is_some()) {
         md.push_str("\n## Energy balance (M5)\n\nAt the last step, kJ/m: W work of the loads on the soil (pressures, rigid bodies, gravity), W_int work of the stresses on the strain increments (elastic energy stored + dissipation D), K kinetic energy, B kinetic energy removed at the fixed dofs (monitor `boundary_work`, explicit runs; 0 without it). The loss (W − W_int − K − B)/W is the energy the time integration removed (Newmark γ > ½ damping a dynamic snap, MUSL's velocity remap; about 2e-5 in an elastic biaxial run and 5e-3 in an elastic explicit cut, tests/energy_balance.rs); a negative loss is energy the run created.\n\n| run | W | W_int | D | K | B | loss |\n|---|---|---|---|---|---|---|\n");
         for r in runs {
@@ -536,7 +569,12 @@ pub(super) fn write_outputs(
             }
         }
     }
-    md.push_str(&lost_points_notes(runs));
+    md
+}
+
+/// The report's notes on the runs without a load curve.
+fn no_curve_notes(runs: &[CampaignRun]) -> String {
+    let mut md = String::new();
     for r in runs.iter().filter(|r| r.curve_columns.is_none()) {
         let _ = writeln!(
             md,
@@ -544,13 +582,17 @@ pub(super) fn write_outputs(
             r.name
         );
     }
-    md.push_str(&stopped_notes(runs));
-    md.push_str(&profiles_section(runs));
-    write_atomic(&metrics_path, csv).map_err(|e| io(&metrics_path, &e))?;
-    let report = out.join("report.md");
-    write_atomic(&report, md).map_err(|e| io(&report, &e))?;
-    // plots
-    // one colour per cell size (local dashed, nonlocal solid), coarse to fine
+    md
+}
+
+/// `curves.png`: the load curves, one colour per cell size (local dashed,
+/// nonlocal solid), coarse to fine.
+fn plot_load_curves(
+    out: &Path,
+    runs: &[CampaignRun],
+    benchmark: Benchmark,
+) -> Result<(), CampaignError> {
+    let (unit, scale) = benchmark.length_unit();
     let mut sizes: Vec<f64> = runs.iter().map(|r| r.cell_size).collect();
     sizes.sort_by(|a, b| b.total_cmp(a));
     sizes.dedup();
@@ -579,8 +621,20 @@ pub(super) fn write_outputs(
             "F (kN/m)",
             &series,
         )
-        .map_err(|e| io(&path, &e))?;
+        .map_err(|e| output_error(&path, &e))?;
     }
+    Ok(())
+}
+
+/// `fields_local.png` and `fields_nonlocal.png`: the deviatoric strain εq at
+/// the last step, one panel per run of the family, coarse to fine.
+fn plot_strain_fields(
+    out: &Path,
+    runs: &[CampaignRun],
+    benchmark: Benchmark,
+    window: Bounds,
+) -> Result<(), CampaignError> {
+    let (unit, scale) = benchmark.length_unit();
     for (family, nonlocal) in [("local", false), ("nonlocal", true)] {
         let members: Vec<&CampaignRun> = runs
             .iter()
@@ -610,7 +664,7 @@ pub(super) fn write_outputs(
             None,
             "εq (1)",
         )
-        .map_err(|e| io(&path, &e))?;
+        .map_err(|e| output_error(&path, &e))?;
     }
     Ok(())
 }

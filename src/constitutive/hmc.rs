@@ -971,19 +971,37 @@ impl Hmc {
     ) -> Result<(StressUpdate, u32), ConstitutiveError> {
         let kappa_n = state_n.plastic_strain_eq;
         let arg = StrengthArg::new(strength, kappa_n);
-        if stress_rotated
-            .iter()
-            .chain(strain_increment.iter())
-            .any(|x| !x.is_finite())
-            || !kappa_n.is_finite()
-            || !arg.is_finite()
-        {
-            return Err(ConstitutiveError::NonFinite(format!(
-                "input stress {stress_rotated:?}, strain increment {strain_increment:?}, κ = {kappa_n}, strength variable {strength:?}",
-            )));
-        }
+        check_input(stress_rotated, strain_increment, kappa_n, arg, strength)?;
         let d_eps = mat4_mul_vec(&self.stiffness, strain_increment);
         let trial: Voigt = std::array::from_fn(|i| stress_rotated[i] + d_eps[i]);
+        let start = (stress_rotated, strain_increment, kappa_n, arg);
+        let (mut result, substeps) = self.substepped_or_tip(start, &trial, want_tangent)?;
+        if substeps > 1 && self.has_symmetric_tangent() {
+            symmetrise(&mut result.tangent);
+        }
+        let state = updated_state(state_n, &result, strength);
+        self.check_returned(&result, substeps, arg, (&trial, kappa_n))?;
+        Ok((
+            StressUpdate {
+                stress: result.stress,
+                state,
+                tangent: result.tangent,
+                yielded: result.yielded,
+            },
+            substeps,
+        ))
+    }
+
+    /// The integration with 1, 2, 4, … sub-steps, the first that succeeds
+    /// (up to 2^[`MAX_SUBSTEP_LEVEL`]), and its number of sub-steps; or the
+    /// tip return (0 sub-steps) where the trial mean stress lies beyond the
+    /// tensile strength and the integration failed or ended at the apex.
+    fn substepped_or_tip(
+        &self,
+        (stress_rotated, strain_increment, kappa_n, arg): (&Voigt, &Voigt, f64, StrengthArg),
+        trial: &Voigt,
+        want_tangent: bool,
+    ) -> Result<(Integrated, u32), ConstitutiveError> {
         let trial_mean = -(trial[0] + trial[1] + trial[2]) / 3.0;
         let tip_applies = |kappa: f64| trial_mean < -self.strength(arg.at(kappa)).tensile_strength;
         let mut outcome = None;
@@ -1005,7 +1023,7 @@ impl Hmc {
                 Err(reason) => failure = reason,
             }
         }
-        let (mut result, substeps) = match outcome {
+        Ok(match outcome {
             Some((result, substeps)) => {
                 let at_tip = result.yielded
                     && Invariants::of(&result.stress, 0.0).j < TIP_J_FRACTION * self.strength_scale
@@ -1026,31 +1044,22 @@ impl Hmc {
             None => {
                 return Err(ConstitutiveError::ReturnMappingFailed {
                     reason: format!("{failure} after {} sub-steps", 1 << MAX_SUBSTEP_LEVEL),
-                    trial_stress: trial,
+                    trial_stress: *trial,
                     kappa: kappa_n,
                 })
             }
-        };
-        if substeps > 1 && self.has_symmetric_tangent() {
-            // The chained tangent of several sub-steps is not exactly symmetric even for associated
-            // perfect plasticity; keep the promise of has_symmetric_tangent (Cholesky) with its
-            // symmetric part (an approximation only in sub-stepped updates).
-            for i in 0..4 {
-                for j in 0..i {
-                    let mean = 0.5 * (result.tangent[i][j] + result.tangent[j][i]);
-                    result.tangent[i][j] = mean;
-                    result.tangent[j][i] = mean;
-                }
-            }
-        }
-        let mut state = *state_n;
-        state.plastic_strain_eq = result.kappa;
-        if strength == StrengthVariable::Local {
-            state.plastic_strain_eq_nonlocal = result.kappa;
-        }
-        for i in 0..4 {
-            state.plastic_strain[i] += result.plastic_strain_increment[i];
-        }
+        })
+    }
+
+    /// The returned stress and tangent are finite and the stress is not outside
+    /// the surface (`trial`: the trial stress and κ_n, for the error).
+    fn check_returned(
+        &self,
+        result: &Integrated,
+        substeps: u32,
+        arg: StrengthArg,
+        (trial, kappa_n): (&Voigt, f64),
+    ) -> Result<(), ConstitutiveError> {
         let finite = result
             .stress
             .iter()
@@ -1079,20 +1088,66 @@ impl Hmc {
         if f > 1e-6 * scale {
             return Err(ConstitutiveError::ReturnMappingFailed {
                 reason: format!("returned stress violates the yield condition (f = {f} kPa)"),
-                trial_stress: trial,
+                trial_stress: *trial,
                 kappa: kappa_n,
             });
         }
-        Ok((
-            StressUpdate {
-                stress: result.stress,
-                state,
-                tangent: result.tangent,
-                yielded: result.yielded,
-            },
-            substeps,
-        ))
+        Ok(())
     }
+}
+
+/// The inputs of a return mapping are finite.
+fn check_input(
+    stress_rotated: &Voigt,
+    strain_increment: &Voigt,
+    kappa_n: f64,
+    arg: StrengthArg,
+    strength: StrengthVariable,
+) -> Result<(), ConstitutiveError> {
+    if stress_rotated
+        .iter()
+        .chain(strain_increment.iter())
+        .any(|x| !x.is_finite())
+        || !kappa_n.is_finite()
+        || !arg.is_finite()
+    {
+        return Err(ConstitutiveError::NonFinite(format!(
+            "input stress {stress_rotated:?}, strain increment {strain_increment:?}, κ = {kappa_n}, strength variable {strength:?}",
+        )));
+    }
+    Ok(())
+}
+
+/// The symmetric part of a sub-stepped tangent. The chained tangent of several
+/// sub-steps is not exactly symmetric even for associated perfect plasticity;
+/// this keeps the promise of `has_symmetric_tangent` (Cholesky) (an
+/// approximation only in sub-stepped updates).
+fn symmetrise(tangent: &mut Mat4) {
+    for i in 0..4 {
+        for j in 0..i {
+            let mean = 0.5 * (tangent[i][j] + tangent[j][i]);
+            tangent[i][j] = mean;
+            tangent[j][i] = mean;
+        }
+    }
+}
+
+/// The point's state after the update: κ (and κ̄ of a local run) and the
+/// plastic strain increment added.
+fn updated_state(
+    state_n: &PointState,
+    result: &Integrated,
+    strength: StrengthVariable,
+) -> PointState {
+    let mut state = *state_n;
+    state.plastic_strain_eq = result.kappa;
+    if strength == StrengthVariable::Local {
+        state.plastic_strain_eq_nonlocal = result.kappa;
+    }
+    for i in 0..4 {
+        state.plastic_strain[i] += result.plastic_strain_increment[i];
+    }
+    state
 }
 
 impl ConstitutiveModel for Hmc {

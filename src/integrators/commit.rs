@@ -6,7 +6,7 @@
 
 use rayon::prelude::*;
 
-use super::stresses::ConvergedStresses;
+use super::converged_stresses::ConvergedStresses;
 use super::{StepSetup, TrialStresses};
 use crate::constitutive::Voigt;
 use crate::error::StepError;

@@ -20,8 +20,8 @@ use rayon::prelude::*;
 
 use super::boundary_work::fixed_dof_kinetic_energy;
 use super::commit::{commit_swapping, NodalResults};
+use super::converged_stresses::{converged_stresses_taking, ConvergedStresses};
 use super::g2p::{g2p, GridMotion, VelocityUpdate};
-use super::stresses::{converged_stresses_taking, ConvergedStresses};
 use super::time_step::StableTimeStep;
 use super::{
     evaluate_stresses_without_tangent, NonlocalStep, SolverUsage, StepReport, StepSetup,

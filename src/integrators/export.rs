@@ -10,7 +10,7 @@ use std::path::PathBuf;
 use mpm_solvers::{mm, SolverStats, SparseMatrix, Used};
 use serde_json::json;
 
-use super::newton::StepSystem;
+use super::step_system::StepSystem;
 use crate::transfer::NONE;
 
 /// Where and what to export.

@@ -8,18 +8,17 @@ use mpm_solvers::{SolverStats, SparseMatrix};
 
 use super::boundary_work::fixed_dof_kinetic_energy;
 use super::commit::{commit, NodalResults};
+use super::converged_stresses::converged_stresses;
 use super::g2p::{g2p, GridMotion, VelocityUpdate};
-use super::newton::{
-    self, Newmark, NewtonBuffers, NewtonError, NodalKinematics, Solution, StepSystem,
-};
+use super::newton::{self, NewtonBuffers, Solution};
 use super::p2g::{external_force, nodal_kinematics, KinematicsBuffers};
 use super::path::{PathConstraint, PathRecord, MAX_RELEARNED};
 use super::step_control::{LocalError, StepControlRecord, StepController};
-use super::stresses::converged_stresses;
+use super::step_system::{Newmark, NewtonError, NodalKinematics, StepSystem};
 use super::tangent::{background_block, Tangent};
 use super::{NonlocalStep, SolverUsage, StepReport, StepSetup, TrialStresses};
 use crate::bc::DofConstraint;
-use crate::dofs::{gather_free, DofMap};
+use crate::dofs::{gather_free_into, DofMap};
 use crate::error::StepError;
 use crate::model::Model;
 use crate::profile::{Profile, Stage, Work};
@@ -561,7 +560,9 @@ impl ImplicitIntegrator {
             .map_err(|e| e.into_step_error(0))?;
         self.tangent.begin_step();
         let matrix = self.tangent.assemble(&system, &trial, &profile)?;
-        Ok((gather_free(&system.dofs, &res.residual), matrix))
+        let mut free_residual = Vec::new();
+        gather_free_into(&system.dofs, &res.residual, &mut free_residual);
+        Ok((free_residual, matrix))
     }
 
     /// Number of unknowns of the next step.
@@ -576,7 +577,7 @@ impl ImplicitIntegrator {
 /// same amount (theory eq. AS4). Adaptive steps end at each jump, so that the
 /// next step starts from the acceleration after it and its error estimate
 /// sees no load discontinuity.
-fn restart_at_gravity_jump(model: &mut Model, newmark: Option<super::newton::Newmark>) {
+fn restart_at_gravity_jump(model: &mut Model, newmark: Option<Newmark>) {
     let jump = model.scene.loads.gravity_jump_at(model.time);
     if jump == 0.0 || newmark.is_none() {
         return;

@@ -9,7 +9,7 @@
 //! | solve | [`newton`] on Δu (stress update, tangent, factorisation) | [`time_step`], nodal momentum update |
 //! | G2P | [`g2p`] (Newmark) | [`g2p`] (forward) |
 //! | remap | — | MUSL re-map, stress update |
-//! | stresses | [`stresses`]: energies, κ̄(n+1), double mapping | the same |
+//! | stresses | [`converged_stresses`]: energies, κ̄(n+1), double mapping | the same |
 //! | commit | [`commit`]: F, V, σ, boundary points, lost points | the same |
 //!
 //! Both use the same transfer kernels ([`crate::transfer`]), the same
@@ -17,6 +17,7 @@
 
 pub mod boundary_work;
 pub mod commit;
+pub mod converged_stresses;
 pub mod explicit;
 mod export;
 pub mod g2p;
@@ -27,8 +28,8 @@ pub mod path;
 mod regularisation;
 pub mod setup;
 pub mod step_control;
-mod stress;
-pub mod stresses;
+pub mod step_system;
+mod stress_update;
 pub mod tangent;
 pub mod time_step;
 
@@ -36,7 +37,9 @@ pub use explicit::ExplicitIntegrator;
 pub use implicit::ImplicitIntegrator;
 pub(crate) use regularisation::NonlocalStep;
 pub use setup::StepSetup;
-pub(crate) use stress::{evaluate_stresses, evaluate_stresses_without_tangent, TrialStresses};
+pub(crate) use stress_update::{
+    evaluate_stresses, evaluate_stresses_without_tangent, TrialStresses,
+};
 
 use mpm_solvers::SolverStats;
 

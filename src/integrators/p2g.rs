@@ -4,7 +4,7 @@
 
 use rayon::prelude::*;
 
-use super::newton::NodalKinematics;
+use super::step_system::NodalKinematics;
 use super::StepSetup;
 use crate::grid::ShapeAt;
 use crate::model::Model;

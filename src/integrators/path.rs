@@ -28,7 +28,7 @@
 //! onto an elastic branch measures the body's present unloading stiffness,
 //! which replaces K_e from then on (PF6).
 
-use super::newton::StepSystem;
+use super::step_system::StepSystem;
 use super::tangent::Border;
 use crate::bc::TravelDerivatives;
 

@@ -4,7 +4,7 @@
 //! the record of what the control did (written to `run.json`, kept in
 //! checkpoints).
 
-use super::newton::{Newmark, StepSystem};
+use super::step_system::{Newmark, StepSystem};
 use crate::scene::Scene;
 use crate::transfer::NONE;
 

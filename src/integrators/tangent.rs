@@ -8,7 +8,7 @@ use rayon::prelude::*;
 use mpm_solvers::{Assembler, FactorKind, LinearSolver, SolverStats, SparseMatrix, Used};
 
 use super::export::SystemExport;
-use super::newton::StepSystem;
+use super::step_system::StepSystem;
 use super::{SolverUsage, TrialStresses};
 use crate::constitutive::LinearElastic;
 use crate::dofs::DofMap;

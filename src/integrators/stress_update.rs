@@ -119,26 +119,8 @@ fn evaluate<S: Support>(
 ) -> UpdateTally {
     let (particles, materials) = (&model.particles, &model.materials);
     let compliances = (tangents == Tangents::WithSpinTerm).then_some(model.compliances.as_slice());
-    let b_bar = model.b_bar().then_some(&setup.bins);
     let n = particles.len();
-    trial.stress.resize(n, [0.0; 4]);
-    trial.state.resize(n, PointState::default());
-    trial.rotated.resize(n, [0.0; 4]);
-    trial.gradient.resize(n, [0.0; 4]);
-    // B-bar: the cell-averaged dilatation of every point ([B1]–[B2]), from
-    // all the gradients first
-    trial.volumetric_correction = match b_bar {
-        Some(bins) => {
-            trial
-                .gradient
-                .par_iter_mut()
-                .zip(shapes)
-                .for_each(|(l, s)| *l = transfer::gradient(s, du));
-            volumetric::dilatation_corrections(bins, &particles.volume, &trial.gradient)
-        }
-        None => Vec::new(),
-    };
-    let gradient_known = b_bar.is_some();
+    let gradient_known = prepare_trial(model, setup, shapes, du, trial);
     let correction = &trial.volumetric_correction;
     // Each task takes a run of points in two passes: the gradients and the
     // rotated stresses first (a loop without calls, so the divisions of
@@ -224,8 +206,47 @@ fn evaluate<S: Support>(
             )
             .reduce(UpdateTally::default, UpdateTally::merge)
     };
+    spin_sensitivities(model, compliances, trial);
+    tally
+}
+
+/// The trial arrays sized for every point and, with B-bar, the gradients of
+/// all points and their cell-averaged dilatations ([B1]–[B2]), which every
+/// update needs first. Returns whether the gradients are formed already.
+fn prepare_trial<S: Support>(
+    model: &Model,
+    setup: &StepSetup,
+    shapes: &[S],
+    du: &[[f64; 2]],
+    trial: &mut TrialStresses,
+) -> bool {
+    let particles = &model.particles;
+    let b_bar = model.b_bar().then_some(&setup.bins);
+    let n = particles.len();
+    trial.stress.resize(n, [0.0; 4]);
+    trial.state.resize(n, PointState::default());
+    trial.rotated.resize(n, [0.0; 4]);
+    trial.gradient.resize(n, [0.0; 4]);
+    trial.volumetric_correction = match b_bar {
+        Some(bins) => {
+            trial
+                .gradient
+                .par_iter_mut()
+                .zip(shapes)
+                .for_each(|(l, s)| *l = transfer::gradient(s, du));
+            volumetric::dilatation_corrections(bins, &particles.volume, &trial.gradient)
+        }
+        None => Vec::new(),
+    };
+    b_bar.is_some()
+}
+
+/// The spin term's sensitivities dσ/dω = D_alg C (dσ_J/dω) of every point
+/// (with `compliances`: unsymmetric tangents with the spin term), else none.
+fn spin_sensitivities(model: &Model, compliances: Option<&[Mat4]>, trial: &mut TrialStresses) {
+    let particles = &model.particles;
     if let Some(compliances) = compliances {
-        trial.spin_sensitivity.resize(n, [0.0; 4]);
+        trial.spin_sensitivity.resize(particles.len(), [0.0; 4]);
         trial
             .spin_sensitivity
             .par_iter_mut()
@@ -239,7 +260,6 @@ fn evaluate<S: Support>(
     } else {
         trial.spin_sensitivity.clear();
     }
-    tally
 }
 
 /// Points of one run of [`evaluate`]: their gradients and rotated stresses
