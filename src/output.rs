@@ -44,11 +44,7 @@ impl OutputError {
     }
 }
 
-/// The step column of `curve.csv` (the step number).
-pub const STEP_COLUMN: &str = "step_1";
-/// The time column of `curve.csv`, s (with path following, the travel per
-/// unit velocity).
-pub const TIME_COLUMN: &str = "time_s";
+pub use crate::simulation::{STEP_COLUMN, TIME_COLUMN};
 
 /// `curve.csv`: columns `step_1, time_s`, the step's own columns
 /// ([`crate::simulation::Simulation::step_column_names`]) and one per monitor

@@ -17,7 +17,7 @@ use serde_json::json;
 use crate::checkpoint::Checkpointer;
 use crate::error::RunError;
 use crate::integrators::StepReport;
-use crate::interrupt::Interruption;
+use crate::interrupt::{self, Interruption};
 use crate::manifest::{self, Manifest, SNAPSHOTS_AHEAD};
 use crate::output::{
     deviatoric_hencky_strain, write_json, write_pvd, write_vtu, CurveWriter, OutputError,
@@ -488,6 +488,10 @@ impl Observer for OutputObserver {
         self.stop
     }
 
+    fn interruption(&self) -> Option<Interruption> {
+        interrupt::requested()
+    }
+
     fn on_interrupt(
         &mut self,
         sim: &Simulation,
@@ -830,7 +834,7 @@ pub fn write_run_json(
     let (error, error_id) = match status {
         RunStatus::Failed(e) => (
             Some(e.to_string()),
-            Some(crate::error_id::Identified::error_id(e).name()),
+            Some(mpm_physics::error_id::Identified::error_id(e).name()),
         ),
         _ => (None, None),
     };

@@ -154,13 +154,13 @@ pub enum CheckpointError {
 impl CheckpointError {
     /// Stable identifier of the refusal (docs/guide.md §11 lists what to do about each).
     pub fn id(&self) -> &'static str {
-        crate::error_id::Identified::error_id(self).name()
+        mpm_physics::error_id::Identified::error_id(self).name()
     }
 }
 
-impl crate::error_id::Identified for CheckpointError {
-    fn error_id(&self) -> crate::error_id::ErrorId {
-        use crate::error_id::ErrorId;
+impl mpm_physics::error_id::Identified for CheckpointError {
+    fn error_id(&self) -> mpm_physics::error_id::ErrorId {
+        use mpm_physics::error_id::ErrorId;
         match self {
             Self::Missing { .. } => ErrorId::CheckpointMissing,
             Self::NotACheckpoint { .. } => ErrorId::CheckpointNotACheckpoint,

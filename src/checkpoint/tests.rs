@@ -172,8 +172,8 @@ fn every_checkpoint_error_has_a_listed_checkpoint_identifier() {
         },
     ];
     for e in errors {
-        let id = crate::error_id::Identified::error_id(&e);
-        assert!(crate::error_id::ErrorId::ALL.contains(&id));
+        let id = mpm_physics::error_id::Identified::error_id(&e);
+        assert!(mpm_physics::error_id::ErrorId::ALL.contains(&id));
         assert!(
             e.id().starts_with("CHECKPOINT_") && e.id() == id.name(),
             "{e}"

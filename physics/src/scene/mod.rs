@@ -305,5 +305,21 @@ impl Scene {
     }
 }
 
+use crate::error_id::{ErrorId, Identified};
+
+impl Identified for SceneError {
+    fn error_id(&self) -> ErrorId {
+        match self {
+            SceneError::Io { .. } => ErrorId::SceneRead,
+            SceneError::Parse { .. } | SceneError::Located { .. } => ErrorId::SceneSyntax,
+            SceneError::Override { .. } => ErrorId::SceneOverride,
+            SceneError::Invalid { .. } => ErrorId::SceneInvalid,
+            SceneError::NonFinite { .. } => ErrorId::SceneNonFinite,
+            SceneError::MemoryLimit { .. } => ErrorId::SceneMemoryLimit,
+            SceneError::StepLimit { .. } => ErrorId::SceneStepLimit,
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests;

@@ -6,8 +6,8 @@ use std::fmt;
 
 use super::schema::*;
 use crate::constitutive::ConstitutiveModel;
-use crate::output::{STEP_COLUMN, TIME_COLUMN};
 use crate::simulation::STEP_COLUMNS;
+use crate::simulation::{STEP_COLUMN, TIME_COLUMN};
 
 /// One problem found in a scene: the field path (`grid.cell_size`,
 /// `body[0].box`, …) and what is wrong with it.
