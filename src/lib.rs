@@ -20,8 +20,8 @@
 //!   [`output`] (the CSV and VTK writers), [`csv_columns`] (units and
 //!   fields of every CSV column, a physics module: the monitors' columns
 //!   are named there), [`provenance`] (where a run came from,
-//!   what it found), [`progress_lines`], [`checkpoint`] (saving and
-//!   resuming a run);
+//!   what it found), [`progress_lines`], [`checkpoint`] (saving a run's
+//!   state and checking it can resume), [`resume`] (continuing it);
 //! - many runs: [`campaign`] (mesh studies), [`paper`] (the three
 //!   campaigns in one command), [`study`] (error against run time),
 //!   [`plot`];
@@ -55,6 +55,7 @@ pub mod plot;
 pub mod point_command;
 pub mod progress_lines;
 pub mod provenance;
+pub mod resume;
 pub mod run;
 pub mod study;
 

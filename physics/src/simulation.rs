@@ -88,21 +88,7 @@ impl Observer for NullObserver {
     }
 }
 
-/// The step column of `curve.csv` (the step number).
-pub const STEP_COLUMN: &str = "step_1";
-/// The time column of `curve.csv`, s (with path following, the travel per
-/// unit velocity).
-pub const TIME_COLUMN: &str = "time_s";
-
-/// The step's columns of `curve.csv` ([`Simulation::step_column_names`]):
-/// the step `dt_s`, then, with adaptive steps, its relative error estimate
-/// and the attempts redone for their error and for Newton failures.
-pub const STEP_COLUMNS: [&str; 4] = [
-    "dt_s",
-    "error_estimate_1",
-    "rejected_error_1",
-    "rejected_newton_1",
-];
+pub use crate::scene::{STEP_COLUMN, STEP_COLUMNS, TIME_COLUMN};
 
 /// A run in progress.
 pub struct Simulation {

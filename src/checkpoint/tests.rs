@@ -2,7 +2,7 @@
 //! damaged file refused with its identifier.
 
 use super::*;
-use crate::run::OutputCursor;
+use crate::output::OutputCursor;
 
 const BAR: &str = include_str!("../../validation/elastic/bar_explicit.toml");
 

@@ -5,9 +5,8 @@
 use std::fmt;
 
 use super::schema::*;
+use super::{STEP_COLUMN, STEP_COLUMNS, TIME_COLUMN};
 use crate::constitutive::ConstitutiveModel;
-use crate::simulation::STEP_COLUMNS;
-use crate::simulation::{STEP_COLUMN, TIME_COLUMN};
 
 /// One problem found in a scene: the field path (`grid.cell_size`,
 /// `body[0].box`, …) and what is wrong with it.
