@@ -400,7 +400,7 @@ impl CurveTracker {
     }
 }
 
-/// Writes a run's checkpoints (held by the [`OutputObserver`]).
+/// Writes a run's checkpoints (held by the [`OutputObserver`](crate::run::OutputObserver)).
 pub struct Checkpointer {
     pub(crate) dir: PathBuf,
     pub(crate) every: usize,
