@@ -21,6 +21,7 @@ fn main() {
         ".git/refs/heads",
         ".git/packed-refs",
         "src",
+        "physics",
         "solvers",
         "Cargo.toml",
     ] {

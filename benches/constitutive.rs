@@ -6,9 +6,9 @@
 use std::hint::black_box;
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
-use mpm_geo::constitutive::hmc::{Hmc, HmcParameters};
-use mpm_geo::constitutive::{ConstitutiveModel, PointState, StrengthVariable, Voigt};
-use mpm_geo::point_driver::run_biaxial;
+use mpm_physics::constitutive::hmc::{Hmc, HmcParameters};
+use mpm_physics::constitutive::{ConstitutiveModel, PointState, StrengthVariable, Voigt};
+use mpm_physics::point_driver::run_biaxial;
 
 /// (stress σ_n, strain increment Δε, state_n) triples.
 type Cases = Vec<(Voigt, Voigt, PointState)>;
@@ -49,8 +49,8 @@ fn elastic_cases(n: usize) -> Cases {
 }
 
 fn bench(c: &mut Criterion) {
-    // the loops run on this thread, as in `mpm-geo` (mpm_geo::parallel)
-    mpm_geo::parallel::join_global_pool();
+    // the loops run on this thread, as in `mpm-geo` (mpm_physics::parallel)
+    mpm_physics::parallel::join_global_pool();
     let model = Hmc::new(HmcParameters::table1()).expect("Table 1");
     let plastic = softening_cases(&model);
     assert!(plastic.iter().all(|(s, e, st)| model

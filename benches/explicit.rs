@@ -19,10 +19,10 @@ use std::time::Duration;
 use criterion::{
     criterion_group, criterion_main, BenchmarkId, Criterion, SamplingMode, Throughput,
 };
-use mpm_geo::integrators::Integrator;
-use mpm_geo::model::Model;
-use mpm_geo::profile::Profile;
-use mpm_geo::scene::Scene;
+use mpm_physics::integrators::Integrator;
+use mpm_physics::model::Model;
+use mpm_physics::profile::Profile;
+use mpm_physics::scene::Scene;
 
 /// Cell sizes and the points they give.
 const SIZES: [(f64, &str); 4] = [
@@ -44,8 +44,8 @@ fn block(h: f64) -> Scene {
 }
 
 fn bench_explicit(c: &mut Criterion) {
-    // the loops run on this thread, as in `mpm-geo` (mpm_geo::parallel)
-    mpm_geo::parallel::join_global_pool();
+    // the loops run on this thread, as in `mpm-geo` (mpm_physics::parallel)
+    mpm_physics::parallel::join_global_pool();
     let mut group = c.benchmark_group("explicit_step");
     group.sample_size(10);
     group.sampling_mode(SamplingMode::Flat);

@@ -17,7 +17,7 @@
 //! * `brute_force`: the O(N²) reference pass (sparse field).
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
-use mpm_geo::nonlocal::{NonlocalAverager, NonlocalParameters};
+use mpm_physics::nonlocal::{NonlocalAverager, NonlocalParameters};
 use std::hint::black_box;
 use std::time::Duration;
 
@@ -105,8 +105,8 @@ fn biaxial_lattice() -> Scene {
 }
 
 fn bench_nonlocal(c: &mut Criterion) {
-    // the loops run on this thread, as in `mpm-geo` (mpm_geo::parallel)
-    mpm_geo::parallel::join_global_pool();
+    // the loops run on this thread, as in `mpm-geo` (mpm_physics::parallel)
+    mpm_physics::parallel::join_global_pool();
     let mut group = c.benchmark_group("nonlocal");
     group.sample_size(10);
     group.warm_up_time(Duration::from_millis(500));

@@ -45,12 +45,12 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, SamplingMode};
-use mpm_geo::dofs::DofMap;
-use mpm_geo::integrators::tangent::background_block;
-use mpm_geo::integrators::StepSetup;
-use mpm_geo::scene::Scene;
-use mpm_geo::simulation::Simulation;
-use mpm_geo::stiffness;
+use mpm_physics::dofs::DofMap;
+use mpm_physics::integrators::tangent::background_block;
+use mpm_physics::integrators::StepSetup;
+use mpm_physics::scene::Scene;
+use mpm_physics::simulation::Simulation;
+use mpm_physics::stiffness;
 use mpm_solvers::{Assembler, DirectSolver, MultifrontalLu, SolverPolicy};
 
 fn manifest(path: &str) -> PathBuf {
@@ -93,8 +93,8 @@ fn cases() -> Vec<(&'static str, Simulation)> {
 }
 
 fn bench_assembly(c: &mut Criterion) {
-    // the loops run on this thread, as in `mpm-geo` (mpm_geo::parallel)
-    mpm_geo::parallel::join_global_pool();
+    // the loops run on this thread, as in `mpm-geo` (mpm_physics::parallel)
+    mpm_physics::parallel::join_global_pool();
     let mut group = c.benchmark_group("assembly");
     group.sample_size(10);
     group.sampling_mode(SamplingMode::Flat);

@@ -25,12 +25,12 @@ use std::time::Duration;
 use criterion::{
     criterion_group, criterion_main, BatchSize, BenchmarkId, Criterion, SamplingMode, Throughput,
 };
-use mpm_geo::integrators::Integrator;
-use mpm_geo::model::Model;
-use mpm_geo::nonlocal::{NonlocalAverager, NonlocalParameters};
-use mpm_geo::profile::Profile;
-use mpm_geo::scene::Scene;
-use mpm_geo::simulation::Simulation;
+use mpm_physics::integrators::Integrator;
+use mpm_physics::model::Model;
+use mpm_physics::nonlocal::{NonlocalAverager, NonlocalParameters};
+use mpm_physics::profile::Profile;
+use mpm_physics::scene::Scene;
+use mpm_physics::simulation::Simulation;
 
 /// Implicit steps taken before the second benchmarked state.
 const ADVANCED: usize = 150;
@@ -139,8 +139,8 @@ fn print_profile(profile: &Profile, steps: u64, kind: &str, state: &str) {
 }
 
 fn bench_step(c: &mut Criterion) {
-    // the loops run on this thread, as in `mpm-geo` (mpm_geo::parallel)
-    mpm_geo::parallel::join_global_pool();
+    // the loops run on this thread, as in `mpm-geo` (mpm_physics::parallel)
+    mpm_physics::parallel::join_global_pool();
     let scene = load();
     let twin = scene.explicit_twin().expect("explicit twin");
     let mut sim = Simulation::new(scene.clone()).expect("setup");

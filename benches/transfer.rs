@@ -12,9 +12,9 @@
 use std::time::Duration;
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
-use mpm_geo::grid::ShapeAt;
-use mpm_geo::grid::{Grid, ShapeFunctions};
-use mpm_geo::transfer::{self, ParticleBins};
+use mpm_physics::grid::ShapeAt;
+use mpm_physics::grid::{Grid, ShapeFunctions};
+use mpm_physics::transfer::{self, ParticleBins};
 use rayon::prelude::*;
 
 struct Cloud {

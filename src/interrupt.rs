@@ -1,6 +1,7 @@
 //! SIGINT and SIGTERM as a request to stop: once [`install`]ed, the first
-//! signal only sets a flag that the time loop reads after each step
-//! ([`crate::simulation::Simulation::run`]); the run then finishes that
+//! signal only sets a flag that the run's observer reads after each step
+//! ([`requested`], through `Observer::interruption` of
+//! [`mpm_physics::simulation`]); the run then finishes that
 //! step's outputs, writes `run.json` with status `interrupted` and the CLI
 //! exits with 128 + the signal number (130 for SIGINT, 143 for SIGTERM). A
 //! campaign's runs (threads of the process) each stop so and the campaign
@@ -12,29 +13,7 @@
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{Arc, OnceLock};
 
-/// A signal that asked the run to stop.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Interruption {
-    /// The signal number (2 = SIGINT, 15 = SIGTERM).
-    pub signal: i32,
-}
-
-impl Interruption {
-    /// `SIGINT`, `SIGTERM` or `signal N`.
-    pub fn name(&self) -> String {
-        match self.signal {
-            2 => "SIGINT".into(),
-            15 => "SIGTERM".into(),
-            n => format!("signal {n}"),
-        }
-    }
-
-    /// The process exit code of an interrupted run: 128 + the signal number,
-    /// the shells' convention (130 for SIGINT, 143 for SIGTERM).
-    pub fn exit_code(&self) -> u8 {
-        u8::try_from(128 + self.signal).unwrap_or(255)
-    }
-}
+pub use mpm_physics::simulation::Interruption;
 
 struct Flags {
     /// Set by the first signal (makes a second one end the process).

@@ -157,7 +157,7 @@ enum Command {
         dir: PathBuf,
     },
     /// Homogeneous test on one material point (biaxial, triaxial, simple shear) → CSV.
-    Point(mpm_geo::point_driver::PointArgs),
+    Point(mpm_geo::point_command::PointArgs),
     /// Print the table of error identifiers (docs/guide.md §11).
     Errors,
     /// Validate a scene without running it (exit 0 when valid) and print its
@@ -420,7 +420,7 @@ fn main() -> ExitCode {
             print!("{}", mpm_geo::error_id::markdown_table());
             ExitCode::SUCCESS
         }
-        Command::Point(args) => match mpm_geo::point_driver::run(&args) {
+        Command::Point(args) => match mpm_geo::point_command::run(&args) {
             Ok(()) => ExitCode::SUCCESS,
             Err(e) => fail_with(1, &e),
         },

@@ -44,11 +44,58 @@ impl OutputError {
     }
 }
 
-/// The step column of `curve.csv` (the step number).
-pub const STEP_COLUMN: &str = "step_1";
-/// The time column of `curve.csv`, s (with path following, the travel per
-/// unit velocity).
-pub const TIME_COLUMN: &str = "time_s";
+pub use crate::simulation::{STEP_COLUMN, TIME_COLUMN};
+
+/// Name of the snapshots' ParaView collection in the output directory.
+pub const PVD_FILE: &str = "particles.pvd";
+
+/// Where a run's outputs stood after a step: what a checkpoint stores so a
+/// resumed run writes on exactly as the uninterrupted one would.
+#[derive(Clone, Debug, Default)]
+pub struct OutputCursor {
+    /// Step of the last `curve.csv` row (`None` before the first).
+    pub last_row_step: Option<usize>,
+    /// `[output] snapshot_times` not reached yet, latest first.
+    pub pending_times: Vec<f64>,
+    /// The fields at the snapshot times reached so far.
+    pub fields: Vec<FieldSnapshot>,
+    /// The snapshots written so far, (time, file name), as in the `.pvd`.
+    pub snapshots: Vec<(f64, String)>,
+    /// Length of `curve.csv` then, bytes.
+    pub curve_bytes: u64,
+    /// CRC-32 of those bytes.
+    pub curve_checksum: u32,
+}
+
+/// The material points' positions and strains at one snapshot time (what the
+/// campaigns plot as the paper's Fig. 10).
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+pub struct FieldSnapshot {
+    /// The snapshot time asked for in `[output] snapshot_times`, s.
+    pub requested_time: f64,
+    /// The time of the step written, s (the first step reaching it).
+    pub time: f64,
+    /// Positions x_p, m.
+    pub positions: Vec<[f64; 2]>,
+    /// Deviatoric Hencky strain εq per point (theory D8).
+    pub eps_q: Vec<f64>,
+    /// Current volume V_p, m³ per m.
+    pub volumes: Vec<f64>,
+}
+
+impl FieldSnapshot {
+    /// The fields of `sim` now, for the requested time `requested_time`.
+    pub fn of(sim: &crate::simulation::Simulation, requested_time: f64) -> Self {
+        let p = &sim.model.particles;
+        Self {
+            requested_time,
+            time: sim.model.time,
+            positions: p.position.clone(),
+            eps_q: p.def_grad.iter().map(deviatoric_hencky_strain).collect(),
+            volumes: p.volume.clone(),
+        }
+    }
+}
 
 /// `curve.csv`: columns `step_1, time_s`, the step's own columns
 /// ([`crate::simulation::Simulation::step_column_names`]) and one per monitor

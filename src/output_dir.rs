@@ -355,6 +355,20 @@ fn first_few(mut names: Vec<String>) -> Vec<String> {
     names
 }
 
+use mpm_physics::error_id::{ErrorId, Identified};
+
+impl Identified for OutputDirError {
+    fn error_id(&self) -> ErrorId {
+        match self {
+            OutputDirError::Locked { .. } => ErrorId::OutputLocked,
+            OutputDirError::InUse { .. } => ErrorId::OutputReused,
+            OutputDirError::Unlisted { .. } => ErrorId::OutputUnlisted,
+            OutputDirError::Foreign { .. } => ErrorId::OutputForeign,
+            OutputDirError::Io { .. } => ErrorId::OutputDirectory,
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

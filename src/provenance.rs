@@ -142,6 +142,16 @@ pub fn monitor_summaries(
     (rows > 0).then_some(out)
 }
 
+/// FNV-1a (64 bit) of `text`, in hex: the fingerprint of a run's inputs.
+pub fn fingerprint_text(text: &str) -> String {
+    let mut hash: u64 = 0xcbf2_9ce4_8422_2325;
+    for byte in text.bytes() {
+        hash ^= u64::from(byte);
+        hash = hash.wrapping_mul(0x0100_0000_01b3);
+    }
+    format!("{hash:016x}")
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

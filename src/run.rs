@@ -17,19 +17,16 @@ use serde_json::json;
 use crate::checkpoint::Checkpointer;
 use crate::error::RunError;
 use crate::integrators::StepReport;
-use crate::interrupt::Interruption;
+use crate::interrupt::{self, Interruption};
 use crate::manifest::{self, Manifest, SNAPSHOTS_AHEAD};
-use crate::output::{
-    deviatoric_hencky_strain, write_json, write_pvd, write_vtu, CurveWriter, OutputError,
-};
+use crate::output::{write_json, write_pvd, write_vtu, CurveWriter, OutputError};
 use crate::output_dir;
 use crate::profile::Stage;
 use crate::provenance::{monitor_summaries, Provenance};
 use crate::scene::{AnalysisKind, Scene};
 use crate::simulation::{Observer, RunEnd, Simulation};
 
-/// Name of the snapshots' ParaView collection in the output directory.
-pub const PVD_FILE: &str = "particles.pvd";
+pub use crate::output::{FieldSnapshot, OutputCursor, PVD_FILE};
 
 /// The run error of an output failure at `sim`'s current step and time.
 fn at(sim: &Simulation) -> impl Fn(OutputError) -> RunError + '_ {
@@ -64,54 +61,6 @@ pub struct OutputObserver {
     /// Where the run comes from, for the `run.json` it rewrites (set by
     /// [`drive`]).
     provenance: Option<Provenance>,
-}
-
-/// Where a run's outputs stood after a step: what a checkpoint stores so a
-/// resumed run writes on exactly as the uninterrupted one would.
-#[derive(Clone, Debug, Default)]
-pub struct OutputCursor {
-    /// Step of the last `curve.csv` row (`None` before the first).
-    pub last_row_step: Option<usize>,
-    /// `[output] snapshot_times` not reached yet, latest first.
-    pub pending_times: Vec<f64>,
-    /// The fields at the snapshot times reached so far.
-    pub fields: Vec<FieldSnapshot>,
-    /// The snapshots written so far, (time, file name), as in the `.pvd`.
-    pub snapshots: Vec<(f64, String)>,
-    /// Length of `curve.csv` then, bytes.
-    pub curve_bytes: u64,
-    /// CRC-32 of those bytes.
-    pub curve_checksum: u32,
-}
-
-/// The material points' positions and strains at one snapshot time (what the
-/// campaigns plot as the paper's Fig. 10).
-#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
-pub struct FieldSnapshot {
-    /// The snapshot time asked for in `[output] snapshot_times`, s.
-    pub requested_time: f64,
-    /// The time of the step written, s (the first step reaching it).
-    pub time: f64,
-    /// Positions x_p, m.
-    pub positions: Vec<[f64; 2]>,
-    /// Deviatoric Hencky strain εq per point (theory D8).
-    pub eps_q: Vec<f64>,
-    /// Current volume V_p, m³ per m.
-    pub volumes: Vec<f64>,
-}
-
-impl FieldSnapshot {
-    /// The fields of `sim` now, for the requested time `requested_time`.
-    pub fn of(sim: &Simulation, requested_time: f64) -> Self {
-        let p = &sim.model.particles;
-        Self {
-            requested_time,
-            time: sim.model.time,
-            positions: p.position.clone(),
-            eps_q: p.def_grad.iter().map(deviatoric_hencky_strain).collect(),
-            volumes: p.volume.clone(),
-        }
-    }
 }
 
 impl OutputObserver {
@@ -488,6 +437,10 @@ impl Observer for OutputObserver {
         self.stop
     }
 
+    fn interruption(&self) -> Option<Interruption> {
+        interrupt::requested()
+    }
+
     fn on_interrupt(
         &mut self,
         sim: &Simulation,
@@ -830,7 +783,7 @@ pub fn write_run_json(
     let (error, error_id) = match status {
         RunStatus::Failed(e) => (
             Some(e.to_string()),
-            Some(crate::error_id::Identified::error_id(e).name()),
+            Some(mpm_physics::error_id::Identified::error_id(e).name()),
         ),
         _ => (None, None),
     };
@@ -952,7 +905,7 @@ fn provenance_record(
         None => serde_json::to_value(Provenance::now(None, &[])).unwrap_or_default(),
     };
     let scene = serde_json::to_string(&sim.model.scene).unwrap_or_default();
-    record["scene_fingerprint"] = crate::campaign::fingerprint_text(&scene).into();
+    record["scene_fingerprint"] = crate::provenance::fingerprint_text(&scene).into();
     record["ended_at"] = match status {
         RunStatus::Running => serde_json::Value::Null,
         _ => crate::provenance::timestamp().into(),

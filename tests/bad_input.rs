@@ -506,7 +506,7 @@ fn initial_stress_far_outside_the_yield_surface_is_refused() {
 /// stops it naming the monitor.
 #[test]
 fn non_finite_state_during_a_run_stops_it_with_point_and_step() {
-    use mpm_geo::error::{RunError, StepError};
+    use mpm_physics::error::{RunError, StepError};
     // a NaN in a variable only the outputs read (the deformation gradient)
     let mut sim = common::simulation("elastic/bar_explicit.toml", &[]);
     sim.step_once().unwrap();

@@ -11,8 +11,8 @@
 
 mod common;
 
-use mpm_geo::error::StepError;
-use mpm_geo::scene::SceneError;
+use mpm_physics::error::StepError;
+use mpm_physics::scene::SceneError;
 
 const PERIOD: f64 = 0.04;
 
@@ -34,7 +34,7 @@ fn period_from_crossings(history: &[(f64, Vec<f64>)], col: usize) -> f64 {
     2.0 * (crossings[crossings.len() - 1] - crossings[0]) / (crossings.len() - 1) as f64
 }
 
-fn energies(sim: &mpm_geo::simulation::Simulation, history: &[(f64, Vec<f64>)]) -> Vec<f64> {
+fn energies(sim: &mpm_physics::simulation::Simulation, history: &[(f64, Vec<f64>)]) -> Vec<f64> {
     let (k, s) = (
         common::column(sim, "kinetic_energy"),
         common::column(sim, "strain_energy"),
@@ -106,9 +106,11 @@ fn explicit_period_at_cfl_half_and_stability_at_cfl_09() {
 fn explicit_time_step_above_the_limit_is_refused_before_the_run() {
     // h / c = 0.05 / 100 = 5e-4 s
     let overrides = vec!["scene.dt=6.0e-4".to_string()];
-    let err =
-        mpm_geo::scene::Scene::load(&common::validation("elastic/bar_explicit.toml"), &overrides)
-            .unwrap_err();
+    let err = mpm_physics::scene::Scene::load(
+        &common::validation("elastic/bar_explicit.toml"),
+        &overrides,
+    )
+    .unwrap_err();
     let SceneError::Invalid { errors, .. } = &err else {
         panic!("expected a validation error, got {err}")
     };

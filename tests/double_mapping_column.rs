@@ -5,7 +5,7 @@
 
 mod common;
 
-use mpm_geo::simulation::Simulation;
+use mpm_physics::simulation::Simulation;
 
 const SCENE: &str = "elastic/soft_column.toml";
 

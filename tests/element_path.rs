@@ -14,9 +14,9 @@
 
 mod common;
 
-use mpm_geo::constitutive::hmc::{Hmc, HmcParameters};
-use mpm_geo::constitutive::LinearElastic;
-use mpm_geo::point_driver::run_biaxial;
+use mpm_physics::constitutive::hmc::{Hmc, HmcParameters};
+use mpm_physics::constitutive::LinearElastic;
+use mpm_physics::point_driver::run_biaxial;
 
 #[test]
 fn engine_reproduces_the_driver_and_first_yield() {
@@ -54,12 +54,13 @@ fn engine_reproduces_the_driver_and_first_yield() {
     assert!(worst <= 5e-3 * peak);
     // M5 (theory D43): the engine's dissipation equals the driver's path integral
     // Σ_n V(n) σ_{n+1}·(Δε − C Δσ) with the engine's volumes, within 0.5 %.
-    let compliance = mpm_geo::constitutive::invert4(&LinearElastic::new(20000.0, 0.2).stiffness());
+    let compliance =
+        mpm_physics::constitutive::invert4(&LinearElastic::new(20000.0, 0.2).stiffness());
     let mut dissipation = 0.0;
     for n in 0..driver.len() - 1 {
         let (a, b) = (&driver[n], &driver[n + 1]);
         let ds: [f64; 4] = std::array::from_fn(|k| b.stress[k] - a.stress[k]);
-        let elastic = mpm_geo::constitutive::mat4_mul_vec(&compliance, &ds);
+        let elastic = mpm_physics::constitutive::mat4_mul_vec(&compliance, &ds);
         let work: f64 = (0..4)
             .map(|k| b.stress[k] * (b.strain[k] - a.strain[k] - elastic[k]))
             .sum();

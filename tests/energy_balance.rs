@@ -66,7 +66,7 @@ fn gravity_work_balances_internal_work_and_kinetic_energy_in_an_elastic_explicit
     )
     .explicit_twin()
     .unwrap();
-    let mut sim = mpm_geo::simulation::Simulation::new(scene).unwrap();
+    let mut sim = mpm_physics::simulation::Simulation::new(scene).unwrap();
     let history = common::run_history(&mut sim);
     let (time, last) = history.last().unwrap();
     assert!((time - 0.3).abs() < 1e-9, "ended at t = {time}");
@@ -85,9 +85,9 @@ fn gravity_work_balances_internal_work_and_kinetic_energy_in_an_elastic_explicit
     assert!(imbalance.abs() < 0.01, "relative imbalance {imbalance}");
 }
 
-/// The energy budget of a finished simulation ([`mpm_geo::energy`] E1, E2).
-fn budget(sim: &mpm_geo::simulation::Simulation) -> mpm_geo::energy::EnergyBudget {
-    mpm_geo::energy::EnergyBudget::of(&sim.model)
+/// The energy budget of a finished simulation ([`mpm_physics::energy`] E1, E2).
+fn budget(sim: &mpm_physics::simulation::Simulation) -> mpm_physics::energy::EnergyBudget {
+    mpm_physics::energy::EnergyBudget::of(&sim.model)
 }
 
 /// Implicit Newmark with the trapezoidal rule (γ = ½) conserves the energy
@@ -151,7 +151,8 @@ fn vibrating_bar_budget_implicit_and_explicit() {
         )
     };
     let mut implicit =
-        mpm_geo::simulation::Simulation::new(scene("scene.analysis=\"implicit_dynamic\"")).unwrap();
+        mpm_physics::simulation::Simulation::new(scene("scene.analysis=\"implicit_dynamic\""))
+            .unwrap();
     common::run_history(&mut implicit);
     let e = budget(&implicit);
     println!("implicit: {e:?}");
@@ -168,7 +169,7 @@ fn vibrating_bar_budget_implicit_and_explicit() {
     let twin = scene("scene.analysis=\"implicit_dynamic\"")
         .explicit_twin()
         .unwrap();
-    let mut explicit = mpm_geo::simulation::Simulation::new(twin).unwrap();
+    let mut explicit = mpm_physics::simulation::Simulation::new(twin).unwrap();
     common::run_history(&mut explicit);
     let e = budget(&explicit);
     println!("explicit: {e:?}");

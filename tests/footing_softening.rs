@@ -20,7 +20,7 @@
 
 mod common;
 
-use mpm_geo::metrics::{interpolate, peak, post_peak_discrepancy};
+use mpm_physics::metrics::{interpolate, peak, post_peak_discrepancy};
 
 /// (δ, F) of a footing scene with `overrides`, δ = −(footing displacement).
 fn load_curve(file: &str, overrides: &[&str]) -> Vec<(f64, f64)> {

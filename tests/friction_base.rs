@@ -1,4 +1,4 @@
-//! Coulomb friction on the grid's base (`[[bc.friction]]`, `src/friction.rs`
+//! Coulomb friction on the grid's base (`[[bc.friction]]`, `physics/src/friction.rs`
 //! FR1–FR4) on `validation/friction/sliding_block.toml`: an elastic block
 //! launched at v0 = 2 m/s on a base with μ = 0.4 under g = 10 decelerates by
 //! μ g and slides v0²/(2 μ g) = 0.5 m. Measured (final slide): implicit
@@ -110,7 +110,7 @@ fn friction_work_closes_the_budget() {
 fn friction_budget_closes(overrides: &[&str], tolerance: f64) {
     let mut sim = common::simulation("friction/sliding_block.toml", overrides);
     common::run_history(&mut sim);
-    let e = mpm_geo::energy::EnergyBudget::of(&sim.model);
+    let e = mpm_physics::energy::EnergyBudget::of(&sim.model);
     let k0 = e.initial_kinetic_energy;
     println!("{e:?}");
     assert!((k0 - 2.0).abs() < 1e-9, "K0 = {k0}");

@@ -6,7 +6,7 @@
 //! with GIMP it converges to the large-strain solution.
 //!
 //! Exact (1-D, hypoelastic with the Jaumann rate = logarithmic strain,
-//! [`mpm_geo::closed_form::Column::settlement`], theory §8.4): the top settles
+//! [`mpm_physics::closed_form::Column::settlement`], theory §8.4): the top settles
 //! H − (M/ρ0 g)(1 − exp(−ρ0 g H/M)) = 0.11219 m.
 
 mod common;

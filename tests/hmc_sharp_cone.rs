@@ -12,9 +12,9 @@
 
 mod common;
 
-use mpm_geo::constitutive::hmc::Hmc;
-use mpm_geo::point_driver::run_biaxial;
-use mpm_geo::scene::MaterialSpec;
+use mpm_physics::constitutive::hmc::Hmc;
+use mpm_physics::point_driver::run_biaxial;
+use mpm_physics::scene::MaterialSpec;
 
 const SCENE: &str = "prandtl/hmc_sharp_cone.toml";
 const FOOTING_WIDTH: f64 = 1.5;

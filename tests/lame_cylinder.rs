@@ -1,7 +1,7 @@
 //! Thick-walled cylinder under internal pressure (issue 13, check 4): the
 //! plane-strain quarter annulus of `validation/elastic/lame_cylinder.toml`
 //! against Lamé's radial displacement, with and without the B-bar remedy
-//! ([`mpm_geo::volumetric`]), for ν from 0.3 to 0.4999.
+//! ([`mpm_physics::volumetric`]), for ν from 0.3 to 0.4999.
 //!
 //! The error is the volume-weighted relative L2 norm of u_r − u_r^Lamé
 //! (theory §8.4, [`LameCylinder`]) over the material points. Both point
@@ -18,7 +18,7 @@
 
 mod common;
 
-use mpm_geo::closed_form::LameCylinder;
+use mpm_physics::closed_form::LameCylinder;
 
 /// Lamé's plane-strain cylinder of the scene (a = 1, b = 2, p = 100 kPa, E = 1e6 kPa).
 fn lame(nu: f64) -> LameCylinder {

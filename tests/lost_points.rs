@@ -6,7 +6,7 @@
 
 mod common;
 
-use mpm_geo::error::{RunError, StepError};
+use mpm_physics::error::{RunError, StepError};
 
 const SCENE: &str = "lost_points/block_leaves_grid.toml";
 const SPEED: f64 = 1.0;

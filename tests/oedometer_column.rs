@@ -1,6 +1,6 @@
 //! Oedometric column under self-weight (theory §8.4), quasi-static implicit.
 //!
-//! Exact answer (1D, confined, [`mpm_geo::closed_form::Column`]):
+//! Exact answer (1D, confined, [`mpm_physics::closed_form::Column`]):
 //! u_y(y) = −(ρg/M)(H y − y²/2), M = K + 4G/3, σyy(y) = −ρg(H − y). With
 //! material points at the 2×2 Gauss positions the first step integrates
 //! exactly like a Q4 FE mesh, whose nodal values are exact for this 1D

@@ -4,7 +4,7 @@
 
 mod common;
 
-use mpm_geo::constitutive::{mat4_mul_vec, LinearElastic};
+use mpm_physics::constitutive::{mat4_mul_vec, LinearElastic};
 
 fn check_patch(overrides: &[&str]) {
     let mut sim = common::simulation("elastic/patch.toml", overrides);

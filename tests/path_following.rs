@@ -8,7 +8,7 @@
 mod common;
 
 use common::{column, simulation};
-use mpm_geo::simulation::Simulation;
+use mpm_physics::simulation::Simulation;
 
 const SCENE: &str = "biaxial/local_h300.toml";
 
@@ -149,7 +149,7 @@ fn local_biaxial_passes_its_peak_and_follows_the_snap_back() {
 fn path_following_is_refused_where_it_cannot_apply() {
     let try_with = |extra: &[&str]| {
         let overrides: Vec<String> = PATH.iter().chain(extra).map(|s| s.to_string()).collect();
-        mpm_geo::scene::Scene::load(&common::validation(SCENE), &overrides)
+        mpm_physics::scene::Scene::load(&common::validation(SCENE), &overrides)
     };
     assert!(try_with(&[]).is_ok());
     for (extra, field) in [

@@ -70,8 +70,8 @@ fn top_point_contact_stiffens_the_coarse_mesh() {
 /// the same points, the others.
 #[test]
 fn tied_points_over_emptied_cells_carry_neither_force_nor_stiffness() {
-    use mpm_geo::bc::DrivenPoints;
-    use mpm_geo::integrators::setup::StepSetup;
+    use mpm_physics::bc::DrivenPoints;
+    use mpm_physics::integrators::setup::StepSetup;
     let mut sim = common::simulation("footing/local_h250.toml", &["grid.cell_size=0.5"]);
     let model = &mut sim.model;
     let first = StepSetup::new(model).unwrap();
@@ -130,7 +130,7 @@ fn tied_points_over_emptied_cells_carry_neither_force_nor_stiffness() {
     );
 
     // Σ_ab k N_a N_b = k per direction and point
-    let dofs = mpm_geo::stiffness::patch_dofs(&model.grid);
+    let dofs = mpm_physics::stiffness::patch_dofs(&model.grid);
     let mut blocks = vec![0.0; setup.bins.active_cells.len() * dofs * dofs];
     driven.add_stiffness(&setup.driven_shapes, &setup.bins, dofs, &mut blocks);
     let stiffness: f64 = blocks.iter().sum();

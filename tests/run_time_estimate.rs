@@ -1,6 +1,6 @@
 //! Issue 41, item 5 (second half): a scene whose run would take hours is told
 //! so by `check` and at the start of `run`, from an estimate of the step
-//! count times the cost of a step (`src/scene/run_time.rs`). These tests
+//! count times the cost of a step (`physics/src/scene/run_time.rs`). These tests
 //! check the model's behaviour, not a measured time: the estimate grows in
 //! proportion to the steps, grows with the size, and puts the issue's
 //! example (the biaxial test with E = 10¹² kPa, measured at 16 s of CPU time
@@ -10,7 +10,7 @@ mod common;
 
 use std::process::Command;
 
-use mpm_geo::scene::LONG_RUN_SECONDS;
+use mpm_physics::scene::LONG_RUN_SECONDS;
 
 /// The estimated run time of a validation scene with `overrides`, s.
 fn estimate(path: &str, overrides: &[&str]) -> f64 {

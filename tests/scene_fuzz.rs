@@ -19,9 +19,9 @@ use std::path::{Path, PathBuf};
 use std::sync::mpsc;
 use std::time::Duration;
 
-use mpm_geo::error::RunError;
-use mpm_geo::scene::{ResourceLimits, Scene, SceneError};
-use mpm_geo::simulation::Simulation;
+use mpm_physics::error::RunError;
+use mpm_physics::scene::{ResourceLimits, Scene, SceneError};
+use mpm_physics::simulation::Simulation;
 
 /// Mutants per scene file.
 const MUTANTS: usize = 200;

@@ -9,7 +9,7 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
-use mpm_geo::scene::Scene;
+use mpm_physics::scene::Scene;
 
 /// Every `.toml` under `dir` that is a scene (has `[scene]` and `[grid]`).
 fn scene_files(dir: &Path, found: &mut Vec<PathBuf>) {

@@ -27,7 +27,7 @@
 
 mod common;
 
-use mpm_geo::metrics::interpolate;
+use mpm_physics::metrics::interpolate;
 
 /// A driven scene of `validation/`: its file, rigid body, step and monitors.
 struct Driven {
@@ -223,12 +223,12 @@ fn prescribed_lines_started_over_a_ramp_impose_the_ramped_strain() {
     overrides.extend(["scene.dt=1.0", "scene.steps=3"]);
     let mut sim = common::simulation("elastic/patch.toml", &overrides);
     common::run_history(&mut sim);
-    let factor = mpm_geo::start_ramp::StartRamp::new(4.0).displacement(3.0);
+    let factor = mpm_physics::start_ramp::StartRamp::new(4.0).displacement(3.0);
     assert!((factor - 4.0 * (0.75f64.powi(3) - 0.5 * 0.75f64.powi(4))).abs() < 1e-15);
     // ε of the scene's gradients: u_x = 1e-3 x + 0.75e-3 y, u_y = 0.75e-3 x − 2e-3 y
     let strain = [1.0e-3, -2.0e-3, 0.0, 1.5e-3].map(|e| factor * e);
-    let stiffness = mpm_geo::constitutive::LinearElastic::new(20000.0, 0.2).stiffness();
-    let expected = mpm_geo::constitutive::mat4_mul_vec(&stiffness, &strain);
+    let stiffness = mpm_physics::constitutive::LinearElastic::new(20000.0, 0.2).stiffness();
+    let expected = mpm_physics::constitutive::mat4_mul_vec(&stiffness, &strain);
     let scale = expected.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     for s in &sim.model.particles.stress {
         for k in 0..4 {

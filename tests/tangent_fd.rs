@@ -56,7 +56,7 @@ fn dynamic_tangent_with_mass_term_matches_finite_differences() {
     );
 }
 
-/// B-bar ([`mpm_geo::volumetric`] B3): the tangent Σ_p V_p B̄_pᵀ D B̄_p with
+/// B-bar ([`mpm_physics::volumetric`] B3): the tangent Σ_p V_p B̄_pᵀ D B̄_p with
 /// the penalty, against the residual of the averaged-mean-stress force (B4),
 /// nearly incompressible (ν = 0.49), bilinear and GIMP (where B̄ couples the
 /// whole 4 × 4 node patch).

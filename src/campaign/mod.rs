@@ -224,5 +224,21 @@ impl EnergyBalance {
     }
 }
 
+use mpm_physics::error_id::{ErrorId, Identified};
+
+impl Identified for CampaignError {
+    fn error_id(&self) -> ErrorId {
+        match self {
+            CampaignError::Directory(..) => ErrorId::CampaignDirectory,
+            CampaignError::Scene(_) => ErrorId::CampaignScene,
+            CampaignError::Output(..) => ErrorId::CampaignOutput,
+            CampaignError::Unfinished(_) => ErrorId::CampaignUnfinished,
+            CampaignError::Curve { .. } => ErrorId::CampaignCurve,
+            CampaignError::Locked(_) => ErrorId::OutputLocked,
+            CampaignError::Interrupted { .. } => ErrorId::Interrupted,
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests;

@@ -25,6 +25,7 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use super::{CampaignError, Effort};
+pub use crate::provenance::fingerprint_text;
 use crate::run::FieldSnapshot;
 use crate::scene::Scene;
 
@@ -81,16 +82,6 @@ fn curve_checksum(path: &Path) -> std::io::Result<(u64, u32)> {
 pub fn fingerprint(scene: &Scene, step_factor: usize) -> String {
     let text = serde_json::to_string(scene).unwrap_or_default();
     fingerprint_text(&format!("{text}|{step_factor}|{RECORD_FORMAT}"))
-}
-
-/// FNV-1a (64 bit) of `text`, in hex: the fingerprint of a run's inputs.
-pub fn fingerprint_text(text: &str) -> String {
-    let mut hash: u64 = 0xcbf2_9ce4_8422_2325;
-    for byte in text.bytes() {
-        hash ^= u64::from(byte);
-        hash = hash.wrapping_mul(0x0100_0000_01b3);
-    }
-    format!("{hash:016x}")
 }
 
 impl RunRecord {

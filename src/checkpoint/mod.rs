@@ -36,7 +36,6 @@ mod state;
 
 use std::io::{Read, Seek, Write};
 use std::path::{Path, PathBuf};
-use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
 
@@ -44,7 +43,7 @@ pub use state::{Misfit, SavedState};
 
 use crate::error::RunError;
 use crate::manifest::Manifest;
-use crate::run::{OutputCursor, OutputObserver, RunOutcome};
+use crate::output::OutputCursor;
 use crate::scene::{Scene, SceneError};
 use crate::simulation::Simulation;
 use codec::{fnv1a64, Reader, Writer};
@@ -154,13 +153,13 @@ pub enum CheckpointError {
 impl CheckpointError {
     /// Stable identifier of the refusal (docs/guide.md §11 lists what to do about each).
     pub fn id(&self) -> &'static str {
-        crate::error_id::Identified::error_id(self).name()
+        mpm_physics::error_id::Identified::error_id(self).name()
     }
 }
 
-impl crate::error_id::Identified for CheckpointError {
-    fn error_id(&self) -> crate::error_id::ErrorId {
-        use crate::error_id::ErrorId;
+impl mpm_physics::error_id::Identified for CheckpointError {
+    fn error_id(&self) -> mpm_physics::error_id::ErrorId {
+        use mpm_physics::error_id::ErrorId;
         match self {
             Self::Missing { .. } => ErrorId::CheckpointMissing,
             Self::NotACheckpoint { .. } => ErrorId::CheckpointNotACheckpoint,
@@ -200,7 +199,7 @@ impl CheckpointError {
     }
 }
 
-fn io_error(path: &Path, e: impl std::fmt::Display) -> CheckpointError {
+pub(crate) fn io_error(path: &Path, e: impl std::fmt::Display) -> CheckpointError {
     CheckpointError::Io {
         path: path.display().to_string(),
         message: e.to_string(),
@@ -376,7 +375,7 @@ pub fn decode(path: &Path, bytes: &[u8], fingerprint: u64) -> Result<SavedState,
 
 /// CRC-32 and length of `curve.csv` as far as a checkpoint has seen it
 /// (the file only grows between checkpoints, so each reads the new bytes).
-struct CurveTracker {
+pub(crate) struct CurveTracker {
     bytes: u64,
     crc: crc32fast::Hasher,
 }
@@ -401,12 +400,12 @@ impl CurveTracker {
     }
 }
 
-/// Writes a run's checkpoints (held by the [`OutputObserver`]).
+/// Writes a run's checkpoints (held by the [`OutputObserver`](crate::run::OutputObserver)).
 pub struct Checkpointer {
-    dir: PathBuf,
-    every: usize,
-    fingerprint: u64,
-    curve: CurveTracker,
+    pub(crate) dir: PathBuf,
+    pub(crate) every: usize,
+    pub(crate) fingerprint: u64,
+    pub(crate) curve: CurveTracker,
 }
 
 impl Checkpointer {
@@ -476,18 +475,18 @@ pub struct ResumeOptions {
 
 /// A checkpointed run directory, locked, checked and ready to continue.
 pub struct Resumable {
-    _lock: crate::output_dir::DirLock,
-    dir: PathBuf,
-    source: SceneSource,
-    every: usize,
-    simulation: Simulation,
-    state: SavedState,
-    curve: CurveTracker,
+    pub(crate) _lock: crate::output_dir::DirLock,
+    pub(crate) dir: PathBuf,
+    pub(crate) source: SceneSource,
+    pub(crate) every: usize,
+    pub(crate) simulation: Simulation,
+    pub(crate) state: SavedState,
+    pub(crate) curve: CurveTracker,
     /// The run's `run.json` as found (put back if the resume fails before
     /// its time loop), if there is one.
-    earlier: Option<Vec<u8>>,
+    pub(crate) earlier: Option<Vec<u8>>,
     /// The run's files as its `run.json` records them.
-    manifest: Manifest,
+    pub(crate) manifest: Manifest,
 }
 
 impl Resumable {
@@ -600,69 +599,6 @@ impl Resumable {
     pub fn step(&self) -> usize {
         self.state.step
     }
-
-    /// Continue the run to its end: `run.json` says `running` (its manifest
-    /// naming this process's temporary files too), the temporary files the
-    /// earlier processes left are removed, `curve.csv` is cut back to the
-    /// checkpoint's rows, later snapshots are removed and written again,
-    /// checkpoints go on, and `run.json` is written at the end. A resume
-    /// that fails before its time loop puts the earlier `run.json` back.
-    pub fn run(
-        self,
-        show_progress: bool,
-        options: &ResumeOptions,
-    ) -> Result<RunOutcome, Box<dyn std::error::Error + Send + Sync>> {
-        let start = Instant::now();
-        let Self {
-            _lock,
-            dir,
-            source,
-            every,
-            mut simulation,
-            state,
-            curve,
-            earlier,
-            mut manifest,
-        } = self;
-        let left_behind = manifest.temporary_prefixes.clone();
-        manifest.add_own_temporary_prefix();
-        for name in &options.extra_files {
-            manifest.add(name);
-        }
-        let cursor = state.restore(&mut simulation);
-        let checkpoints = Checkpointer {
-            dir: dir.clone(),
-            every: options.checkpoint_every.unwrap_or(every),
-            fingerprint: source.fingerprint(),
-            curve,
-        };
-        let stop_after = options.stop_after;
-        let lines = crate::run::progress_lines_every(show_progress, options.progress_every);
-        let drive = crate::run::Drive {
-            start,
-            lock: _lock,
-            manifest,
-            earlier,
-            written_later: options.extra_files.clone(),
-            provenance: crate::provenance::Provenance::now(
-                Some(Path::new(&source.origin)),
-                &source.overrides,
-            ),
-        };
-        crate::run::drive(simulation, &dir, drive, |sim, mut manifest| {
-            manifest
-                .remove_temporaries(&dir, &left_behind)
-                .map_err(|(path, e)| io_error(&path, e).at(sim.model.step, sim.model.time))?;
-            manifest
-                .temporary_prefixes
-                .retain(|p| !left_behind.contains(p));
-            manifest.add_own_temporary_prefix();
-            let observer = OutputObserver::resume(&dir, sim, cursor, show_progress, manifest)?;
-            Ok(observer
-                .with_checkpoints(Some(checkpoints), stop_after)
-                .with_progress_lines(sim, lines))
-        })
-    }
 }
 
 /// The `run.json` of `dir` (its bytes) and the files it records, if it is
@@ -693,7 +629,7 @@ fn unlisted_run_files(cursor: &OutputCursor) -> Manifest {
     for name in [
         "run.json",
         "curve.csv",
-        crate::run::PVD_FILE,
+        crate::output::PVD_FILE,
         CHECKPOINT_FILE,
         SOURCE_FILE,
     ] {
@@ -703,15 +639,6 @@ fn unlisted_run_files(cursor: &OutputCursor) -> Manifest {
         manifest.add(name);
     }
     manifest
-}
-
-/// `mpm-geo resume DIR`: check `dir`'s checkpoint and continue the run.
-pub fn resume_run(
-    dir: &Path,
-    show_progress: bool,
-    options: &ResumeOptions,
-) -> Result<RunOutcome, Box<dyn std::error::Error + Send + Sync>> {
-    Resumable::open(dir)?.run(show_progress, options)
 }
 
 #[cfg(test)]

@@ -17,9 +17,9 @@ use crate::integrators::path::PathRecord;
 use crate::integrators::step_control::StepControlRecord;
 use crate::integrators::{Integrator, SolverUsage};
 use crate::model::LostPoint;
+use crate::output::{FieldSnapshot, OutputCursor};
 use crate::particles::Particles;
 use crate::profile::Work;
-use crate::run::{FieldSnapshot, OutputCursor};
 use crate::simulation::Simulation;
 
 use super::codec::{Codec, DecodeError, Reader, Writer};

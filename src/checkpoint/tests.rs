@@ -2,7 +2,7 @@
 //! damaged file refused with its identifier.
 
 use super::*;
-use crate::run::OutputCursor;
+use crate::output::OutputCursor;
 
 const BAR: &str = include_str!("../../validation/elastic/bar_explicit.toml");
 
@@ -172,8 +172,8 @@ fn every_checkpoint_error_has_a_listed_checkpoint_identifier() {
         },
     ];
     for e in errors {
-        let id = crate::error_id::Identified::error_id(&e);
-        assert!(crate::error_id::ErrorId::ALL.contains(&id));
+        let id = mpm_physics::error_id::Identified::error_id(&e);
+        assert!(mpm_physics::error_id::ErrorId::ALL.contains(&id));
         assert!(
             e.id().starts_with("CHECKPOINT_") && e.id() == id.name(),
             "{e}"

@@ -427,7 +427,7 @@ const MEASURED_FILE: &str = "measured.json";
 /// them measures it again).
 pub fn fingerprint(planned: &PlannedRun, repeats: usize, timeout: Option<f64>) -> String {
     let scene = toml::to_string(&planned.scene).unwrap_or_default();
-    crate::campaign::fingerprint_text(&format!("{scene}|{repeats}|{timeout:?}"))
+    crate::provenance::fingerprint_text(&format!("{scene}|{repeats}|{timeout:?}"))
 }
 
 /// Estimated cost of a run, to balance shards: steps (1000 when the

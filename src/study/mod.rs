@@ -347,5 +347,20 @@ fn with_overrides(scene: &Scene, overrides: &[String]) -> Result<Scene, StudyErr
         .map_err(|e| StudyError::Scene(e.to_string()))
 }
 
+use mpm_physics::error_id::{ErrorId, Identified};
+
+impl Identified for StudyError {
+    fn error_id(&self) -> ErrorId {
+        match self {
+            StudyError::Spec { .. } => ErrorId::StudySpec,
+            StudyError::Scene(_) => ErrorId::StudyScene,
+            StudyError::Io { .. } => ErrorId::StudyIo,
+            StudyError::Unfinished(_) => ErrorId::StudyUnfinished,
+            StudyError::Reference { .. } => ErrorId::StudyReference,
+            StudyError::Interrupted { .. } => ErrorId::Interrupted,
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests;

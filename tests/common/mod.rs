@@ -7,9 +7,9 @@ use std::path::{Path, PathBuf};
 use std::process::Child;
 use std::time::{Duration, Instant};
 
-use mpm_geo::closed_form::{constrained_modulus, Column};
-use mpm_geo::scene::{MaterialSpec, Scene};
-use mpm_geo::simulation::Simulation;
+use mpm_physics::closed_form::{constrained_modulus, Column};
+use mpm_physics::scene::{MaterialSpec, Scene};
+use mpm_physics::simulation::Simulation;
 
 /// Path of a file under `validation/`.
 pub fn validation(path: &str) -> PathBuf {

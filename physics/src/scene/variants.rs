@@ -98,7 +98,7 @@ impl Scene {
 mod tests {
     use super::*;
 
-    const CUT: &str = include_str!("../../validation/vertical_cut/nonlocal_h100.toml");
+    const CUT: &str = include_str!("../../../validation/vertical_cut/nonlocal_h100.toml");
 
     #[test]
     fn explicit_twin_ends_at_the_implicit_end_time() {
@@ -114,7 +114,7 @@ mod tests {
 
     #[test]
     fn quasi_static_scene_has_no_explicit_twin() {
-        let text = include_str!("../../validation/footing_nosoft/footing_nosoft_h250.toml");
+        let text = include_str!("../../../validation/footing_nosoft/footing_nosoft_h250.toml");
         let scene = Scene::from_str_with_overrides(text, "footing", &[]).unwrap();
         let message = scene.explicit_twin().unwrap_err().to_string();
         assert!(message.contains("scene.analysis"), "{message}");
@@ -137,7 +137,7 @@ mod tests {
 
     #[test]
     fn paper_formulation_drops_b_bar() {
-        let text = include_str!("../../validation/footing/nonlocal_h250.toml");
+        let text = include_str!("../../../validation/footing/nonlocal_h250.toml");
         let b_bar = ["grid.volumetric=\"b_bar\"".to_string()];
         let scene = Scene::from_str_with_overrides(text, "footing", &b_bar).unwrap();
         assert_eq!(scene.grid.volumetric, VolumetricTreatment::BBar);

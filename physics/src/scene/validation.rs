@@ -5,9 +5,8 @@
 use std::fmt;
 
 use super::schema::*;
+use super::{STEP_COLUMN, STEP_COLUMNS, TIME_COLUMN};
 use crate::constitutive::ConstitutiveModel;
-use crate::output::{STEP_COLUMN, TIME_COLUMN};
-use crate::simulation::STEP_COLUMNS;
 
 /// One problem found in a scene: the field path (`grid.cell_size`,
 /// `body[0].box`, …) and what is wrong with it.

@@ -7,7 +7,6 @@ use mpm_solvers::SparseMatrix;
 
 use crate::error::{RunError, StepError};
 use crate::integrators::{ImplicitIntegrator, Integrator, StepReport};
-use crate::interrupt::{self, Interruption};
 use crate::model::Model;
 use crate::monitor::Monitor;
 use crate::profile::{Profile, Stage};
@@ -24,6 +23,13 @@ pub trait Observer {
     fn stop_requested(&self) -> bool {
         false
     }
+    /// A request to stop the run after the step just reported (a signal the
+    /// application caught), checked after every step that did not end the
+    /// run; `Some` ends it as [`RunEnd::Interrupted`] after
+    /// [`Observer::on_interrupt`]. The default never asks.
+    fn interruption(&self) -> Option<Interruption> {
+        None
+    }
     /// Called once when a signal stops the run, after the `on_step` of the
     /// last completed step: the place to finish that step's outputs and to
     /// leave a checkpoint to resume from. The default does nothing.
@@ -36,12 +42,37 @@ pub trait Observer {
     }
 }
 
+/// A signal that asked the run to stop.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Interruption {
+    /// The signal number (2 = SIGINT, 15 = SIGTERM).
+    pub signal: i32,
+}
+
+impl Interruption {
+    /// `SIGINT`, `SIGTERM` or `signal N`.
+    pub fn name(&self) -> String {
+        match self.signal {
+            2 => "SIGINT".into(),
+            15 => "SIGTERM".into(),
+            n => format!("signal {n}"),
+        }
+    }
+
+    /// The process exit code of an interrupted run: 128 + the signal number,
+    /// the shells' convention (130 for SIGINT, 143 for SIGTERM).
+    pub fn exit_code(&self) -> u8 {
+        u8::try_from(128 + self.signal).unwrap_or(255)
+    }
+}
+
 /// How [`Simulation::run`] ended without an error.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum RunEnd {
     /// The last step / end time was reached.
     Completed,
-    /// A signal stopped the run after a completed step ([`crate::interrupt`]).
+    /// A signal stopped the run after a completed step
+    /// ([`Observer::interruption`]).
     Interrupted(Interruption),
 }
 
@@ -57,15 +88,7 @@ impl Observer for NullObserver {
     }
 }
 
-/// The step's columns of `curve.csv` ([`Simulation::step_column_names`]):
-/// the step `dt_s`, then, with adaptive steps, its relative error estimate
-/// and the attempts redone for their error and for Newton failures.
-pub const STEP_COLUMNS: [&str; 4] = [
-    "dt_s",
-    "error_estimate_1",
-    "rejected_error_1",
-    "rejected_newton_1",
-];
+pub use crate::scene::{STEP_COLUMN, STEP_COLUMNS, TIME_COLUMN};
 
 /// A run in progress.
 pub struct Simulation {
@@ -183,14 +206,15 @@ impl Simulation {
 
     /// Run to the end, reporting every step to `observer`. On a failure the
     /// error names step, time and cause; everything the observer wrote stays.
-    /// A signal caught by [`crate::interrupt`] stops the run after the step
-    /// in progress and its outputs ([`Observer::on_interrupt`]).
+    /// A stop the observer requests ([`Observer::interruption`]) ends the
+    /// run after the step in progress and its outputs
+    /// ([`Observer::on_interrupt`]).
     pub fn run(&mut self, observer: &mut dyn Observer) -> Result<RunEnd, RunError> {
         observer.on_start(self)?;
         while !self.finished() && !observer.stop_requested() {
             let report = self.step_once()?;
             observer.on_step(self, &report)?;
-            if let Some(interruption) = interrupt::requested().filter(|_| !self.finished()) {
+            if let Some(interruption) = observer.interruption().filter(|_| !self.finished()) {
                 observer.on_interrupt(self, interruption)?;
                 return Ok(RunEnd::Interrupted(interruption));
             }

@@ -219,7 +219,7 @@ mod tests {
     use super::*;
     use crate::scene::Scene;
 
-    const CUT: &str = include_str!("../validation/vertical_cut/local_h100.toml");
+    const CUT: &str = include_str!("../../validation/vertical_cut/local_h100.toml");
 
     /// The coarse cut (h = 0.25 m, four points per cell) with a neighbourhood
     /// monitor of `quantity` around B, radius `radius`.

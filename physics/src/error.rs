@@ -319,3 +319,43 @@ pub enum StepError {
         expected: usize,
     },
 }
+
+use crate::error_id::{ErrorId, Identified};
+
+impl Identified for RunError {
+    fn error_id(&self) -> ErrorId {
+        match self {
+            RunError::Step { cause, .. } => cause.error_id(),
+            RunError::Output { .. } => ErrorId::OutputWrite,
+        }
+    }
+}
+
+impl Identified for StepError {
+    fn error_id(&self) -> ErrorId {
+        match self {
+            StepError::ParticleLeftGrid { .. } => ErrorId::RunPointLeftGrid,
+            StepError::BoundaryPointLeftGrid { .. } => ErrorId::RunBoundaryPointLeftGrid,
+            StepError::NewtonFailed { .. } => ErrorId::RunNewtonFailed,
+            StepError::PathBudget { .. } => ErrorId::RunPathBudget,
+            StepError::PathJump { .. } => ErrorId::RunPathLost,
+            StepError::Constitutive { .. } => ErrorId::RunStressUpdate,
+            StepError::NonFiniteStress { .. }
+            | StepError::NonFinitePoint { .. }
+            | StepError::NonFiniteNode { .. }
+            | StepError::NonFiniteMonitor { .. } => ErrorId::RunNonFinite,
+            StepError::InvalidTimeStep { .. } | StepError::UnstableTimeStep { .. } => {
+                ErrorId::RunTimeStep
+            }
+            StepError::Solver(_) | StepError::DoubleMapping(_) => ErrorId::RunLinearSolver,
+            StepError::Nonlocal(_) => ErrorId::RunNonlocal,
+            StepError::NotAvailable(_) | StepError::WrongLength { .. } => ErrorId::RunInternal,
+        }
+    }
+}
+
+impl Identified for SolverError {
+    fn error_id(&self) -> ErrorId {
+        ErrorId::RunLinearSolver
+    }
+}

@@ -135,7 +135,7 @@ mod tests {
     use super::*;
     use crate::scene::Scene;
 
-    const BIAXIAL: &str = include_str!("../../validation/biaxial/local_h300.toml");
+    const BIAXIAL: &str = include_str!("../../../validation/biaxial/local_h300.toml");
 
     /// The biaxial specimen (follower pressures on two sides) under gravity,
     /// its points given velocities and accelerations that vary from point to

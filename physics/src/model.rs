@@ -99,7 +99,7 @@ pub struct Model {
     pub external_work: f64,
     /// Σ_p m_p y_p of the committed points (t·m/m), from which a step's
     /// gravity work follows; recomputed from the positions on a restore.
-    pub(crate) mass_height: f64,
+    pub mass_height: f64,
     /// Work of the stresses on the strain increments so far (theory D43 with the
     /// total strain increment), kJ per metre run: elastic energy stored plus
     /// plastic dissipation.
@@ -115,7 +115,7 @@ pub struct Model {
     /// Points removed after leaving the grid (`[grid] lost_points = "remove"`).
     pub lost_points: Vec<LostPoint>,
     /// Force of every rigid body on the soil at the end of the last step, kN/m.
-    pub(crate) rigid_force: Vec<[f64; 2]>,
+    pub rigid_force: Vec<[f64; 2]>,
 }
 
 /// Build a material law from its scene entry; the problems of an invalid

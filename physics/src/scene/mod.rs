@@ -39,6 +39,22 @@ pub use variants::Formulation;
 
 use validation::whole_cells;
 
+/// The step column of `curve.csv` (the step number); monitors may not take
+/// its name.
+pub const STEP_COLUMN: &str = "step_1";
+/// The time column of `curve.csv`, s (with path following, the travel per
+/// unit velocity); monitors may not take its name.
+pub const TIME_COLUMN: &str = "time_s";
+/// The step's columns of `curve.csv` ([`crate::simulation::Simulation::step_column_names`]):
+/// the step `dt_s`, then, with adaptive steps, its relative error estimate
+/// and the attempts redone for their error and for Newton failures.
+pub const STEP_COLUMNS: [&str; 4] = [
+    "dt_s",
+    "error_estimate_1",
+    "rejected_error_1",
+    "rejected_newton_1",
+];
+
 /// Why a scene could not be loaded.
 #[derive(Debug, thiserror::Error)]
 pub enum SceneError {
@@ -301,6 +317,22 @@ impl Scene {
                 .iter()
                 .enumerate()
                 .position(|(i, b)| b.name_or_default(i) == n),
+        }
+    }
+}
+
+use crate::error_id::{ErrorId, Identified};
+
+impl Identified for SceneError {
+    fn error_id(&self) -> ErrorId {
+        match self {
+            SceneError::Io { .. } => ErrorId::SceneRead,
+            SceneError::Parse { .. } | SceneError::Located { .. } => ErrorId::SceneSyntax,
+            SceneError::Override { .. } => ErrorId::SceneOverride,
+            SceneError::Invalid { .. } => ErrorId::SceneInvalid,
+            SceneError::NonFinite { .. } => ErrorId::SceneNonFinite,
+            SceneError::MemoryLimit { .. } => ErrorId::SceneMemoryLimit,
+            SceneError::StepLimit { .. } => ErrorId::SceneStepLimit,
         }
     }
 }

@@ -53,7 +53,7 @@ fn overrides_change_values_and_reject_unknown_paths() {
 /// element cannot be removed.
 #[test]
 fn empty_override_removes_a_key() {
-    let biaxial = include_str!("../../validation/biaxial/local_h300.toml");
+    let biaxial = include_str!("../../../validation/biaxial/local_h300.toml");
     let scene = |overrides: &[&str]| {
         let overrides: Vec<String> = overrides.iter().map(|o| o.to_string()).collect();
         Scene::from_str_with_overrides(biaxial, "biaxial", &overrides)
@@ -602,7 +602,7 @@ fn monitor_columns_must_be_distinct() {
 /// (10 × the nominal steps by default), not at its nominal step count.
 #[test]
 fn a_path_following_run_is_estimated_at_its_step_budget() {
-    let biaxial = include_str!("../../validation/biaxial/local_h300.toml");
+    let biaxial = include_str!("../../../validation/biaxial/local_h300.toml");
     let path = |extra: &[&str]| {
         let overrides: Vec<String> = [
             "scene.analysis=\"quasi_static\"",
