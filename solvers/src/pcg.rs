@@ -192,19 +192,7 @@ impl Pcg {
     /// [`SolverError::NotConverged`] at the iteration limit.
     pub fn solve(&self, k: &SparseMatrix, b: &[f64]) -> Result<PcgOutcome, SolverError> {
         let n = k.n();
-        if b.len() != n {
-            return Err(SolverError::RhsMismatch {
-                expected: n,
-                found: b.len(),
-            });
-        }
-        if let Some(index) = b.iter().position(|v| !v.is_finite()) {
-            return Err(SolverError::NonFinite {
-                what: "right-hand side",
-                index,
-            });
-        }
-        let norm_b = norm(b);
+        let norm_b = checked_rhs_norm(n, b)?;
         let mut x = vec![0.0; n];
         if norm_b == 0.0 {
             return Ok(PcgOutcome {
@@ -347,4 +335,22 @@ fn ic0(k: &SparseMatrix) -> Result<Built, SolverError> {
         row_idx,
         values,
     })
+}
+
+/// ‖b‖ of a right-hand side `b` for a system of `n` unknowns, refused when
+/// its length is not `n` or an entry is not finite.
+pub(crate) fn checked_rhs_norm(n: usize, b: &[f64]) -> Result<f64, SolverError> {
+    if b.len() != n {
+        return Err(SolverError::RhsMismatch {
+            expected: n,
+            found: b.len(),
+        });
+    }
+    if let Some(index) = b.iter().position(|v| !v.is_finite()) {
+        return Err(SolverError::NonFinite {
+            what: "right-hand side",
+            index,
+        });
+    }
+    Ok(norm(b))
 }

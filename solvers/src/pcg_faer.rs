@@ -10,7 +10,8 @@ use faer::matrix_free::{InitialGuessStatus, LinOp, Precond};
 use faer::reborrow::ReborrowMut;
 use faer::{Mat, MatMut, MatRef, Par};
 
-use crate::norms::{norm, true_residual};
+use crate::norms::true_residual;
+use crate::pcg::checked_rhs_norm;
 use crate::{Pcg, PcgOutcome, SolverError, SparseMatrix};
 
 impl Pcg {
@@ -26,19 +27,7 @@ impl Pcg {
     /// `rᵀM⁻¹r < 0`, [`SolverError::NotConverged`] at the iteration limit.
     pub fn solve_faer(&self, k: &SparseMatrix, b: &[f64]) -> Result<PcgOutcome, SolverError> {
         let n = k.n();
-        if b.len() != n {
-            return Err(SolverError::RhsMismatch {
-                expected: n,
-                found: b.len(),
-            });
-        }
-        if let Some(index) = b.iter().position(|v| !v.is_finite()) {
-            return Err(SolverError::NonFinite {
-                what: "right-hand side",
-                index,
-            });
-        }
-        let norm_b = norm(b);
+        let norm_b = checked_rhs_norm(n, b)?;
         if norm_b == 0.0 {
             return Ok(PcgOutcome {
                 x: vec![0.0; n],
