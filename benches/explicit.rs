@@ -58,7 +58,7 @@ fn bench_explicit(c: &mut Criterion) {
         for _ in 0..WARM_UP_STEPS {
             integrator.step(&mut model, &profile).expect("step");
         }
-        let points = model.particles.len();
+        let points = model.state.particles.len();
         println!("explicit_step/{name}: {points} points, h = {h} m");
         group.throughput(Throughput::Elements(points as u64));
         group.bench_function(BenchmarkId::new("block", name), |b| {

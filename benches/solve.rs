@@ -107,6 +107,7 @@ fn bench_assembly(c: &mut Criterion) {
         let dofs = DofMap::new(&setup.bins, &model.constraints);
         let element_dofs = dofs.element_dofs(grid, &setup.bins);
         let tangent: Vec<_> = model
+            .state
             .particles
             .material
             .iter()
@@ -118,7 +119,7 @@ fn bench_assembly(c: &mut Criterion) {
                 grid,
                 &setup.bins,
                 &setup.shapes,
-                &model.particles.volume,
+                &model.state.particles.volume,
                 &tangent,
                 None,
                 None,
@@ -141,7 +142,7 @@ fn bench_assembly(c: &mut Criterion) {
         });
         println!(
             "assembly/{label}: {} points, {} active + {} reached cells, {} elements, {} unknowns, nnz {}",
-            model.particles.len(),
+            model.state.particles.len(),
             setup.bins.active_cells.len(),
             setup.bins.reached_cells.len(),
             element_dofs.len(),

@@ -64,19 +64,19 @@ fn bench_one(c: &mut Criterion, sim: Simulation, kind: &str, state: &str) {
         profile,
         ..
     } = sim;
-    let points = model.particles.len();
+    let points = model.state.particles.len();
     let mut probe = model.clone();
     let report = integrator.step(&mut probe, &profile).expect("step");
     println!(
         "step/{kind}/{state}: step {} → {}, {points} points, Δt {:.4e} s, {} Newton iterations, {} sub-steps",
-        model.step,
-        probe.step,
+        model.state.step,
+        probe.state.step,
         report.dt,
         report.iterations,
         report.substeps
     );
     if let Some(limit) = integrator.usage().time_step_limited_by {
-        let p = &model.particles;
+        let p = &model.state.particles;
         let wave = (0..p.len())
             .map(|i| {
                 let c = model.materials[p.material[i] as usize].p_wave_modulus() * p.volume[i]
@@ -159,14 +159,14 @@ fn bench_step(c: &mut Criterion) {
             length_scale: spec.length_scale,
             cutoff_factor: spec.cutoff_factor,
         };
-        let p = &model.particles;
+        let p = &model.state.particles;
         let averager =
             NonlocalAverager::new(&params, &p.position, &p.volume, &p.material).expect("averager");
         let (min, mean, max) = averager.neighbour_count_stats();
         println!(
             "step/{state}: t = {:.4} s, {} points, {n} unknowns, nnz {}; nonlocal neighbours \
              (R_c = {} l_s = {} m) min {min} mean {mean:.0} max {max}",
-            model.time,
+            model.state.time,
             p.len(),
             k.nnz(),
             spec.cutoff_factor,

@@ -86,9 +86,9 @@ fn share_done(sim: &Simulation) -> f64 {
         AnalysisKind::QuasiStatic => false,
     };
     let share = if by_time {
-        model.time / scene.end_time_or_steps()
+        model.state.time / scene.end_time_or_steps()
     } else {
-        model.step as f64 / scene.steps.unwrap_or(0) as f64
+        model.state.step as f64 / scene.steps.unwrap_or(0) as f64
     };
     if share.is_finite() {
         share.clamp(0.0, 1.0)

@@ -30,7 +30,7 @@ pub use crate::output::{FieldSnapshot, OutputCursor, PVD_FILE};
 
 /// The run error of an output failure at `sim`'s current step and time.
 fn at(sim: &Simulation) -> impl Fn(OutputError) -> RunError + '_ {
-    |e| e.at(sim.model.step, sim.model.time)
+    |e| e.at(sim.model.state.step, sim.model.state.time)
 }
 
 /// Writes a run's outputs as it goes.
@@ -77,7 +77,7 @@ impl OutputObserver {
                 path: dir.to_path_buf(),
                 source: e,
             }
-            .at(sim.model.step, sim.model.time)
+            .at(sim.model.state.step, sim.model.state.time)
         })?;
         let mut columns = sim.step_column_names();
         columns.extend(sim.monitor_columns().into_iter().map(|(_, column)| column));
@@ -116,7 +116,7 @@ impl OutputObserver {
     ) -> Result<Self, RunError> {
         let curve =
             CurveWriter::reopen(&dir.join("curve.csv"), cursor.curve_bytes).map_err(at(sim))?;
-        remove_snapshots_after(dir, sim.model.step, &manifest).map_err(at(sim))?;
+        remove_snapshots_after(dir, sim.model.state.step, &manifest).map_err(at(sim))?;
         if !cursor.snapshots.is_empty() {
             write_pvd(&dir.join(PVD_FILE), &cursor.snapshots).map_err(at(sim))?;
         }
@@ -186,7 +186,7 @@ impl OutputObserver {
         match self.checkpoints.as_mut() {
             Some(checkpoints) => checkpoints
                 .write(sim, cursor)
-                .map_err(|e| e.at(sim.model.step, sim.model.time)),
+                .map_err(|e| e.at(sim.model.state.step, sim.model.state.time)),
             None => Ok(()),
         }
     }
@@ -199,7 +199,7 @@ impl OutputObserver {
     /// Capture the fields for every snapshot time the run has now reached
     /// (within a relative 1e-9 of the time); true if any.
     fn capture_due_times(&mut self, sim: &Simulation) -> bool {
-        let time = sim.model.time;
+        let time = sim.model.state.time;
         let mut any = false;
         while let Some(&t) = self.pending_times.last() {
             if time < t - 1e-9 * t.abs().max(1.0) {
@@ -214,7 +214,7 @@ impl OutputObserver {
 
     fn snapshot_due(sim: &Simulation) -> bool {
         let o = &sim.model.scene.output;
-        let step = sim.model.step;
+        let step = sim.model.state.step;
         o.snapshots.contains(&step)
             || (o.snapshot_every > 0 && step.is_multiple_of(o.snapshot_every))
     }
@@ -223,9 +223,9 @@ impl OutputObserver {
     /// name `run.json` does not list yet is recorded there first, with the
     /// next ones that can be foreseen.
     fn write_snapshot(&mut self, sim: &Simulation) -> Result<(), RunError> {
-        let name = manifest::snapshot_name(sim.model.step);
+        let name = manifest::snapshot_name(sim.model.state.step);
         if !self.manifest.contains(&name) {
-            foresee_snapshots(&mut self.manifest, sim, sim.model.step);
+            foresee_snapshots(&mut self.manifest, sim, sim.model.state.step);
             self.manifest.add(&name);
             self.manifest.add(PVD_FILE);
             write_run_json(
@@ -238,8 +238,8 @@ impl OutputObserver {
             )
             .map_err(at(sim))?;
         }
-        write_vtu(&self.dir.join(&name), &sim.model.particles).map_err(at(sim))?;
-        self.snapshots.push((sim.model.time, name));
+        write_vtu(&self.dir.join(&name), &sim.model.state.particles).map_err(at(sim))?;
+        self.snapshots.push((sim.model.state.time, name));
         write_pvd(&self.dir.join(PVD_FILE), &self.snapshots).map_err(at(sim))
     }
 
@@ -253,9 +253,9 @@ impl OutputObserver {
         let mut values = sim.step_column_values();
         values.extend(sim.monitor_values());
         self.curve
-            .row(model.step, model.time, &values)
+            .row(model.state.step, model.state.time, &values)
             .map_err(at(sim))?;
-        self.last_row_step = model.step;
+        self.last_row_step = model.state.step;
         Ok(())
     }
 
@@ -263,7 +263,7 @@ impl OutputObserver {
     pub fn finish(&mut self, sim: &Simulation) -> Result<(), RunError> {
         sim.profile.time(Stage::Output, || {
             self.progress.finish_and_clear();
-            if self.last_row_step != sim.model.step {
+            if self.last_row_step != sim.model.state.step {
                 self.write_row(sim)?;
             }
             Ok(())
@@ -276,7 +276,7 @@ impl OutputObserver {
             AnalysisKind::ImplicitDynamic if adaptive => {
                 let end = sim.model.scene.scene.end_time_or_steps();
                 self.progress
-                    .set_position((1000.0 * sim.model.time / end) as u64);
+                    .set_position((1000.0 * sim.model.state.time / end) as u64);
                 self.progress.set_message(format!(
                     "step {} t={:.4e} s dt={:.2e} s Newton {} it",
                     report.step, report.time, report.dt, report.iterations
@@ -285,14 +285,14 @@ impl OutputObserver {
             AnalysisKind::Explicit => {
                 let end = sim.model.scene.scene.end_time.unwrap_or(1.0);
                 self.progress
-                    .set_position((1000.0 * sim.model.time / end) as u64);
+                    .set_position((1000.0 * sim.model.state.time / end) as u64);
                 self.progress.set_message(format!(
                     "step {} t={:.4e} s dt={:.2e} s",
                     report.step, report.time, report.dt
                 ));
             }
             _ => {
-                self.progress.set_position(sim.model.step as u64);
+                self.progress.set_position(sim.model.state.step as u64);
                 self.progress.set_message(format!(
                     "t={:.4e} Newton {} it{}",
                     report.time,
@@ -340,9 +340,9 @@ fn progress_position(sim: &Simulation) -> u64 {
     match sim.model.analysis() {
         AnalysisKind::Explicit => {
             let end = sim.model.scene.scene.end_time.unwrap_or(1.0);
-            (1000.0 * sim.model.time / end) as u64
+            (1000.0 * sim.model.state.time / end) as u64
         }
-        _ => sim.model.step as u64,
+        _ => sim.model.state.step as u64,
     }
 }
 
@@ -412,7 +412,7 @@ impl Observer for OutputObserver {
     fn on_step(&mut self, sim: &Simulation, report: &StepReport) -> Result<(), RunError> {
         sim.profile.time(Stage::Output, || {
             let every = sim.model.scene.output.curve_every.max(1);
-            if sim.model.step.is_multiple_of(every) || sim.finished() {
+            if sim.model.state.step.is_multiple_of(every) || sim.finished() {
                 self.write_row(sim)?;
             }
             let at_time = self.capture_due_times(sim);
@@ -425,7 +425,7 @@ impl Observer for OutputObserver {
             }
             Ok::<_, RunError>(())
         })?;
-        self.stop = self.stop_after == Some(sim.model.step);
+        self.stop = self.stop_after == Some(sim.model.state.step);
         if !self.stop && self.checkpoints.as_ref().is_some_and(|c| c.due(sim)) {
             sim.profile
                 .time(Stage::Output, || self.write_checkpoint(sim))?;
@@ -451,7 +451,7 @@ impl Observer for OutputObserver {
             // row below (which an uninterrupted run would not have)
             self.write_checkpoint(sim)?;
             // the interrupted step's row, even if `curve_every` skips it
-            if self.last_row_step != sim.model.step {
+            if self.last_row_step != sim.model.state.step {
                 self.write_row(sim)?;
             }
             Ok(())
@@ -559,7 +559,7 @@ pub fn run_scene_with(
         let checkpoints = match &options.checkpoint {
             Some((source, every)) => Some(
                 Checkpointer::start(out, source, *every)
-                    .map_err(|e| e.at(sim.model.step, sim.model.time))?,
+                    .map_err(|e| e.at(sim.model.state.step, sim.model.state.time))?,
             ),
             None => None,
         };
@@ -595,7 +595,7 @@ fn planned_manifest(sim: &Simulation, options: &RunOptions) -> Manifest {
             steps: systems.clone(),
         });
     }
-    foresee_snapshots(&mut manifest, sim, sim.model.step);
+    foresee_snapshots(&mut manifest, sim, sim.model.state.step);
     manifest
 }
 
@@ -696,7 +696,7 @@ pub(crate) fn drive(
     if let Err(e) = written {
         // the first error is the one reported; run.json keeps its last
         // whole version (`running`) if even this fails
-        error.get_or_insert(e.at(sim.model.step, sim.model.time));
+        error.get_or_insert(e.at(sim.model.state.step, sim.model.state.time));
     }
     Ok(RunOutcome {
         simulation: sim,
@@ -828,10 +828,10 @@ pub fn write_run_json(
         "error": error,
         "error_id": error_id,
         "interrupted": interrupted,
-        "steps_completed": model.step,
-        "time": model.time,
-        "particles": model.particles.len(),
-        "lost_points": model.lost_points,
+        "steps_completed": model.state.step,
+        "time": model.state.time,
+        "particles": model.state.particles.len(),
+        "lost_points": model.state.lost_points,
         "point_volumes": point_volume_summary(model),
         "energy": energy,
         "grid_cells": model.grid.cells,
@@ -926,8 +926,8 @@ fn run_summary(run_json: &Path, sim: &Simulation, status: RunStatus<'_>) -> serd
     let pvd = dir.join(PVD_FILE);
     json!({
         "status": status.name(),
-        "steps": sim.model.step,
-        "time": sim.model.time,
+        "steps": sim.model.state.step,
+        "time": sim.model.state.time,
         "monitors": monitors,
         "outputs": dir.display().to_string(),
         "paraview": pvd.exists().then(|| pvd.display().to_string()),
@@ -945,10 +945,18 @@ fn run_summary(run_json: &Path, sim: &Simulation, status: RunStatus<'_>) -> serd
 /// at 0.25).
 fn point_volume_summary(model: &crate::model::Model) -> serde_json::Value {
     let cell_area = model.grid.cell_size.powi(2);
-    let largest = model.particles.volume.iter().copied().fold(0.0, f64::max) / cell_area;
+    let largest = model
+        .state
+        .particles
+        .volume
+        .iter()
+        .copied()
+        .fold(0.0, f64::max)
+        / cell_area;
     let at_bound = model.scene.grid.max_point_volume.map(|cells| {
         let bound = cells * cell_area;
         model
+            .state
             .particles
             .volume
             .iter()
@@ -986,7 +994,7 @@ pub struct JacobianRange {
 
 /// J = V/V0 over the points of `model` (`None` without points).
 pub fn jacobian_range(model: &crate::model::Model) -> Option<JacobianRange> {
-    let p = &model.particles;
+    let p = &model.state.particles;
     let density: Vec<f64> = model
         .material_names
         .iter()

@@ -35,7 +35,7 @@ fn run(cells_per_metre: usize) -> Outcome {
     let l_s = sim.model.scene.nonlocal.as_ref().unwrap().length_scale;
     assert_eq!(l_s, LENGTH_SCALE);
     let h = sim.model.grid.cell_size;
-    let p = &sim.model.particles;
+    let p = &sim.model.state.particles;
     let kappa_bar: Vec<f64> = p
         .state
         .iter()

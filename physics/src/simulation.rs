@@ -122,7 +122,7 @@ impl Simulation {
                 .iter()
                 .map(|m| Monitor::resolve(m, &model))
                 .collect();
-            model.pinned_points = monitors.iter().filter_map(Monitor::particle).collect();
+            model.state.pinned_points = monitors.iter().filter_map(Monitor::particle).collect();
             Ok::<_, SceneError>((model, integrator, monitors))
         })?;
         Ok(Self {
@@ -142,13 +142,13 @@ impl Simulation {
     /// Advance one step with the scene's integrator; a failure carries the
     /// step and the time reached.
     pub fn step_once(&mut self) -> Result<StepReport, RunError> {
-        let start = self.model.time;
+        let start = self.model.state.time;
         let report = self
             .integrator
             .step(&mut self.model, &self.profile)
             .map_err(|cause| RunError::Step {
-                step: self.model.step + 1,
-                time: self.model.time,
+                step: self.model.state.step + 1,
+                time: self.model.state.time,
                 cause,
             })?;
         self.model.account_rigid_work(start);
@@ -229,8 +229,8 @@ impl Simulation {
             let value = m.value(&self.model);
             if !value.is_finite() {
                 return Err(RunError::Step {
-                    step: self.model.step,
-                    time: self.model.time,
+                    step: self.model.state.step,
+                    time: self.model.state.time,
                     cause: StepError::NonFiniteMonitor {
                         name: m.name.clone(),
                         value,
@@ -253,8 +253,8 @@ impl Simulation {
         free_increment: &[f64],
     ) -> Result<(Vec<f64>, SparseMatrix), RunError> {
         let step_error = |model: &Model, cause| RunError::Step {
-            step: model.step + 1,
-            time: model.time,
+            step: model.state.step + 1,
+            time: model.state.time,
             cause,
         };
         match self.integrator.implicit_mut() {
@@ -271,8 +271,8 @@ impl Simulation {
     /// Number of unknowns of the next implicit step.
     pub fn unknowns(&self) -> Result<usize, RunError> {
         ImplicitIntegrator::unknowns(&self.model).map_err(|cause| RunError::Step {
-            step: self.model.step + 1,
-            time: self.model.time,
+            step: self.model.state.step + 1,
+            time: self.model.state.time,
             cause,
         })
     }

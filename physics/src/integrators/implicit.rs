@@ -150,16 +150,16 @@ impl ImplicitIntegrator {
         if model.scene.solver.follows_path() {
             return self.path_step(model, profile);
         }
-        let (t0, dt) = (model.time, self.dt);
+        let (t0, dt) = (model.state.time, self.dt);
         let mut report = StepReport {
-            step: model.step + 1,
+            step: model.state.step + 1,
             dt,
             ..Default::default()
         };
         self.advance(model, profile, t0, dt, 0, &mut report)?;
-        model.step += 1;
-        model.time = t0 + dt;
-        report.time = model.time;
+        model.state.step += 1;
+        model.state.time = t0 + dt;
+        report.time = model.state.time;
         Ok(report)
     }
 
@@ -176,11 +176,11 @@ impl ImplicitIntegrator {
         profile: &Profile,
         control: StepController,
     ) -> Result<StepReport, StepError> {
-        let t0 = model.time;
+        let t0 = model.state.time;
         restart_at_gravity_jump(model, self.newmark);
         let mut record = self.usage.step_control.take().unwrap_or_default();
         let mut report = StepReport {
-            step: model.step + 1,
+            step: model.state.step + 1,
             ..Default::default()
         };
         let mut proposal = record.next_dt;
@@ -189,7 +189,7 @@ impl ImplicitIntegrator {
             let judge = ErrorControl {
                 controller: control,
                 velocity_scale: record.velocity_scale,
-                keep_any: model.step == 0 || dt <= control.dt_min * (1.0 + 1e-9),
+                keep_any: model.state.step == 0 || dt <= control.dt_min * (1.0 + 1e-9),
             };
             match self.substep(model, profile, t0, dt, Control::Error(judge), &mut report) {
                 Ok(Attempt::Committed(iterations, local)) => {
@@ -227,8 +227,8 @@ impl ImplicitIntegrator {
         };
         self.usage.step_control = Some(record);
         result?;
-        model.step += 1;
-        report.time = model.time;
+        model.state.step += 1;
+        report.time = model.state.time;
         Ok(report)
     }
 
@@ -241,19 +241,19 @@ impl ImplicitIntegrator {
         let scene = &model.scene;
         let end = scene.scene.end_time_or_steps();
         let budget = scene.solver.path_step_budget(scene.scene.steps);
-        if model.step >= budget {
+        if model.state.step >= budget {
             return Err(StepError::PathBudget {
-                steps: model.step,
-                reached: model.time,
+                steps: model.state.step,
+                reached: model.state.time,
                 end,
             });
         }
         let max_cuts = scene.solver.max_halvings;
-        let (t, dt) = (model.time, self.dt);
+        let (t, dt) = (model.state.time, self.dt);
         let mut record = self.usage.path.take().unwrap_or_default();
-        let load_before = model.driven.committed_load(&model.particles, t);
+        let load_before = model.state.driven.committed_load(&model.state.particles, t);
         let mut report = StepReport {
-            step: model.step + 1,
+            step: model.state.step + 1,
             ..Default::default()
         };
         let mut shrink = 1.0;
@@ -273,8 +273,11 @@ impl ImplicitIntegrator {
                     report.iterations += iterations;
                     report.substeps += 1;
                     self.usage.newton_iterations += iterations;
-                    let load = model.driven.committed_load(&model.particles, model.time);
-                    record.advance(dt, model.time - t, load - load_before, iterations);
+                    let load = model
+                        .state
+                        .driven
+                        .committed_load(&model.state.particles, model.state.time);
+                    record.advance(dt, model.state.time - t, load - load_before, iterations);
                     break Ok(());
                 }
                 // a jump onto an elastic branch measures the body's present
@@ -308,9 +311,9 @@ impl ImplicitIntegrator {
         };
         self.usage.path = Some(record);
         result?;
-        model.step += 1;
-        report.dt = model.time - t;
-        report.time = model.time;
+        model.state.step += 1;
+        report.dt = model.state.time - t;
+        report.time = model.state.time;
         Ok(report)
     }
 
@@ -461,7 +464,7 @@ impl ImplicitIntegrator {
         let mut motion = grid.motion(dt, self.newmark);
         motion.velocity_removed = (!removed_velocity.is_empty()).then_some(&removed_velocity[..]);
         profile.time(Stage::G2P, || {
-            g2p(&mut model.particles, &setup.shapes, &motion)
+            g2p(&mut model.state.particles, &setup.shapes, &motion)
         });
         let converged = profile.time(Stage::Stresses, || {
             converged_stresses(model, setup, &grid.trial, nonlocal.as_mut(), profile)
@@ -479,7 +482,7 @@ impl ImplicitIntegrator {
             commit(model, setup, &grid.trial, converged, nodal)
         })?;
         report.removed_points.extend(removed);
-        model.time = t + dt;
+        model.state.time = t + dt;
         self.newton_buffers.recycle(grid.trial);
         Ok(Attempt::Committed(grid.iterations, local))
     }
@@ -541,7 +544,7 @@ impl ImplicitIntegrator {
         model: &Model,
         free_increment: &[f64],
     ) -> Result<(Vec<f64>, SparseMatrix), StepError> {
-        let (t, dt) = (model.time, self.dt);
+        let (t, dt) = (model.state.time, self.dt);
         let profile = Profile::default();
         let (setup, dofs) = step_setup(model)?;
         if free_increment.len() != dofs.n_free {
@@ -578,11 +581,11 @@ impl ImplicitIntegrator {
 /// next step starts from the acceleration after it and its error estimate
 /// sees no load discontinuity.
 fn restart_at_gravity_jump(model: &mut Model, newmark: Option<Newmark>) {
-    let jump = model.scene.loads.gravity_jump_at(model.time);
+    let jump = model.scene.loads.gravity_jump_at(model.state.time);
     if jump == 0.0 || newmark.is_none() {
         return;
     }
-    let p = &mut model.particles;
+    let p = &mut model.state.particles;
     p.acceleration.iter_mut().for_each(|a| a[1] -= jump);
     if newmark.is_some_and(|n| n.is_generalised_alpha()) {
         p.force_per_mass.iter_mut().for_each(|q| q[1] -= jump);
@@ -718,7 +721,7 @@ fn open_at_start(model: &Model, setup: &StepSetup, mapped: &NodalKinematics, dt:
     }
     edges.open_at_start(
         |node| setup.bins.node_active[node],
-        |c| model.reaction[c.node][c.normal] * c.inward,
+        |c| model.state.reaction[c.node][c.normal] * c.inward,
         |c| mapped.velocity[c.node][c.normal] * c.inward * dt - LIFT_OFF * model.grid.cell_size,
     )
 }

@@ -277,7 +277,7 @@ pub fn solve(
         let kappa_settled = || match nonlocal.as_deref_mut() {
             Some(nl) => Ok(profile.time(Stage::Nonlocal, || {
                 nl.iterate(
-                    &model.particles,
+                    &model.state.particles,
                     |p| trial.state[p].plastic_strain_eq,
                     profile,
                 )

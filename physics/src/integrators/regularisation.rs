@@ -62,7 +62,7 @@ impl NonlocalStep {
             return Ok(None);
         };
         let step = profile.time(Stage::Nonlocal, || {
-            Self::new(spec, &model.particles, step_update)
+            Self::new(spec, &model.state.particles, step_update)
         })?;
         profile.count(Work::NeighbourLists, 1);
         Ok(Some(step))

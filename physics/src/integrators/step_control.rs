@@ -120,7 +120,7 @@ impl StepController {
 }
 
 /// What the step control did so far (`run.json` → `usage.step_control`).
-#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct StepControlRecord {
     /// The step the controller proposes next, s.
     pub next_dt: f64,

@@ -354,11 +354,16 @@ fn fill_cell_blocks(system: &StepSystem, trial: &TrialStresses, blocks: &mut Vec
     let spin = (!trial.spin_sensitivity.is_empty()).then_some(trial.spin_sensitivity.as_slice());
     let places = grid.patch_side() * grid.patch_side();
     let b_bar = model.b_bar().then(|| {
-        CellMeanGradients::new(&setup.bins, &setup.shapes, &model.particles.volume, places)
+        CellMeanGradients::new(
+            &setup.bins,
+            &setup.shapes,
+            &model.state.particles.volume,
+            places,
+        )
     });
     let points = stiffness::PointStiffness {
         shapes: &setup.shapes,
-        volume: &model.particles.volume,
+        volume: &model.state.particles.volume,
         tangent: &trial.tangent,
         spin_sensitivity: spin,
         b_bar: b_bar.as_ref(),
@@ -366,6 +371,7 @@ fn fill_cell_blocks(system: &StepSystem, trial: &TrialStresses, blocks: &mut Vec
     stiffness::cell_stiffness_blocks_into(grid, &setup.bins, &points, blocks);
     let dofs = stiffness::patch_dofs(grid);
     model
+        .state
         .driven
         .add_stiffness(&setup.driven_shapes, &setup.bins, dofs, blocks);
     let background = &system.background_block;

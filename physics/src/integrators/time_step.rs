@@ -28,7 +28,7 @@ impl StableTimeStep {
             limit: wave,
             limited_by: TimeStepLimit::WaveSpeed,
         };
-        if model.driven.is_empty() {
+        if model.state.driven.is_empty() {
             return step;
         }
         // At a node tied by springs the material and spring frequencies add,
@@ -69,7 +69,7 @@ impl StableTimeStep {
 /// one per point. In parallel over the points (a maximum: the same whatever
 /// the order).
 fn wave_limit(model: &Model, moving: bool) -> f64 {
-    let p = &model.particles;
+    let p = &model.state.particles;
     let h = model.grid.cell_size;
     let moduli: Vec<f64> = model.materials.iter().map(|m| m.p_wave_modulus()).collect();
     let fastest = (0..p.len())
@@ -95,7 +95,7 @@ fn nodal_spring_stiffness(model: &Model, nodes: usize, driven_shapes: &[ShapeAt]
     let mut spring = vec![0.0; nodes];
     for (k, s) in driven_shapes.iter().enumerate() {
         for a in s.support() {
-            spring[s.nodes[a] as usize] += model.driven.stiffness[k] * s.n[a];
+            spring[s.nodes[a] as usize] += model.state.driven.stiffness[k] * s.n[a];
         }
     }
     spring

@@ -1049,7 +1049,7 @@ pub enum MonitorKind {
     /// Total elastic strain energy Σ ½ V_p σ_pᵀ C σ_p, kJ/m.
     StrainEnergy,
     /// Work of the pressures, rigid bodies and gravity on the soil so far,
-    /// kJ/m (see `Model::external_work`).
+    /// kJ/m (see `State::external_work`).
     ExternalWork,
     /// Work of the stresses on the strain increments so far (elastic energy
     /// stored plus dissipation), kJ/m.
