@@ -113,7 +113,7 @@ fn bench_assembly(c: &mut Criterion) {
             .iter()
             .map(|&m| model.materials[m as usize].elastic_stiffness())
             .collect();
-        let background = background_block(&model.scene, grid);
+        let background = background_block(&model.settings, grid);
         let blocks = || {
             let cells = stiffness::cell_stiffness_blocks(
                 grid,

@@ -30,6 +30,7 @@ use mpm_physics::model::Model;
 use mpm_physics::nonlocal::{NonlocalAverager, NonlocalParameters};
 use mpm_physics::profile::Profile;
 use mpm_physics::scene::Scene;
+use mpm_physics::settings::Settings;
 use mpm_physics::simulation::Simulation;
 
 /// Implicit steps taken before the second benchmarked state.
@@ -44,9 +45,10 @@ fn load() -> Scene {
 /// `model` as a simulation with a fresh integrator for `scene` (no monitors).
 fn simulation(model: &Model, scene: &Scene) -> Simulation {
     let mut model = model.clone();
-    model.scene = scene.clone();
+    model.settings = Settings::of(scene);
     let integrator = Integrator::for_model(&model).expect("integrator");
     Simulation {
+        scene: scene.clone(),
         model,
         integrator,
         monitors: Vec::new(),
@@ -87,7 +89,7 @@ fn bench_one(c: &mut Criterion, sim: Simulation, kind: &str, state: &str) {
         println!(
             "step/{kind}/{state}: Δt limited by {limit}; the wave-speed limit alone (material at rest) \
              would give CFL × h/c = {:.4e} s",
-            model.scene.solver.cfl * wave
+            model.settings.solver.cfl * wave
         );
     }
     drop(probe);
@@ -154,7 +156,7 @@ fn bench_step(c: &mut Criterion) {
         let mut implicit = simulation(model, &scene);
         let n = implicit.unknowns().expect("unknowns");
         let (_, k) = implicit.linearize(&vec![0.0; n]).expect("linearize");
-        let spec = model.scene.nonlocal.as_ref().expect("a nonlocal scene");
+        let spec = model.settings.nonlocal.as_ref().expect("a nonlocal scene");
         let params = NonlocalParameters {
             length_scale: spec.length_scale,
             cutoff_factor: spec.cutoff_factor,

@@ -435,9 +435,9 @@ fn main() -> ExitCode {
                 let estimate = s.estimate_resources();
                 let run_time = s.run_time_of(&estimate);
                 match mpm_geo::simulation::Simulation::new(s) {
-                    Ok(sim) => {
-                        let sim = &sim.model;
-                        for w in sim.scene.warnings() {
+                    Ok(run) => {
+                        let sim = &run.model;
+                        for w in run.scene.warnings() {
                             eprintln!("warning: {w}");
                         }
                         println!(
@@ -611,7 +611,7 @@ fn report(
     let succeeded = outcome.error.is_none() && outcome.interrupted.is_none();
     if quiet && succeeded && outcome.simulation.finished() {
         // warnings only
-        print_warnings(sim);
+        print_warnings(&outcome.simulation);
         return ExitCode::SUCCESS;
     }
     if profile {
@@ -619,7 +619,7 @@ fn report(
         eprintln!("{}", outcome.simulation.profile.work_line());
     }
     print_run_summary(&outcome, out);
-    print_warnings(sim);
+    print_warnings(&outcome.simulation);
     let checkpoint = out.join("checkpoint.bin").exists();
     let resume = || match checkpoint {
         true => format!("; continue with `mpm-geo resume {}`", out.display()),
@@ -743,7 +743,8 @@ fn parse_memory_arg(text: &str) -> Result<f64, String> {
 
 /// The warnings of a finished or stopped run: points removed, an energy
 /// budget that does not close.
-fn print_warnings(sim: &mpm_geo::model::Model) {
+fn print_warnings(run: &mpm_geo::simulation::Simulation) {
+    let sim = &run.model;
     if let Some(first) = sim.state.lost_points.first() {
         let mass: f64 = sim.state.lost_points.iter().map(|l| l.mass).sum();
         let total: f64 = sim.state.particles.mass.iter().sum::<f64>() + mass;
@@ -755,10 +756,10 @@ fn print_warnings(sim: &mpm_geo::model::Model) {
         );
     }
     let energy = mpm_geo::energy::EnergyBudget::of(sim);
-    if let Some(w) = energy.warning(sim.scene.output.energy_remainder_warning) {
+    if let Some(w) = energy.warning(run.scene.output.energy_remainder_warning) {
         eprintln!("warning: {w}");
     }
-    if let Some(w) = mpm_geo::run::volume_warning(sim) {
+    if let Some(w) = mpm_geo::run::volume_warning(run) {
         eprintln!("warning: {w}");
     }
 }

@@ -83,7 +83,7 @@ impl OutputObserver {
         columns.extend(sim.monitor_columns().into_iter().map(|(_, column)| column));
         let curve = CurveWriter::create(&dir.join("curve.csv"), &columns).map_err(at(sim))?;
         let progress = progress_bar(sim, show_progress);
-        let mut pending_times = sim.model.scene.output.snapshot_times.clone();
+        let mut pending_times = sim.scene.output.snapshot_times.clone();
         pending_times.sort_by(|a, b| b.total_cmp(a));
         Ok(Self {
             dir: dir.to_path_buf(),
@@ -213,7 +213,7 @@ impl OutputObserver {
     }
 
     fn snapshot_due(sim: &Simulation) -> bool {
-        let o = &sim.model.scene.output;
+        let o = &sim.scene.output;
         let step = sim.model.state.step;
         o.snapshots.contains(&step)
             || (o.snapshot_every > 0 && step.is_multiple_of(o.snapshot_every))
@@ -271,10 +271,10 @@ impl OutputObserver {
     }
 
     fn show_progress(&self, sim: &Simulation, report: &StepReport) {
-        let adaptive = sim.model.scene.solver.adaptive();
+        let adaptive = sim.scene.solver.adaptive();
         match sim.model.analysis() {
             AnalysisKind::ImplicitDynamic if adaptive => {
-                let end = sim.model.scene.scene.end_time_or_steps();
+                let end = sim.scene.scene.end_time_or_steps();
                 self.progress
                     .set_position((1000.0 * sim.model.state.time / end) as u64);
                 self.progress.set_message(format!(
@@ -283,7 +283,7 @@ impl OutputObserver {
                 ));
             }
             AnalysisKind::Explicit => {
-                let end = sim.model.scene.scene.end_time.unwrap_or(1.0);
+                let end = sim.scene.scene.end_time.unwrap_or(1.0);
                 self.progress
                     .set_position((1000.0 * sim.model.state.time / end) as u64);
                 self.progress.set_message(format!(
@@ -324,8 +324,8 @@ fn progress_bar(sim: &Simulation, show: bool) -> ProgressBar {
     }
     let total = match sim.model.analysis() {
         AnalysisKind::Explicit => 1000,
-        AnalysisKind::ImplicitDynamic if sim.model.scene.solver.adaptive() => 1000,
-        _ => sim.model.scene.scene.steps.unwrap_or(0) as u64,
+        AnalysisKind::ImplicitDynamic if sim.scene.solver.adaptive() => 1000,
+        _ => sim.scene.scene.steps.unwrap_or(0) as u64,
     };
     let bar = ProgressBar::new(total);
     let template = "{bar:30} {pos}/{len} [{elapsed_precise} < {eta_precise}] {msg}";
@@ -339,7 +339,7 @@ fn progress_bar(sim: &Simulation, show: bool) -> ProgressBar {
 fn progress_position(sim: &Simulation) -> u64 {
     match sim.model.analysis() {
         AnalysisKind::Explicit => {
-            let end = sim.model.scene.scene.end_time.unwrap_or(1.0);
+            let end = sim.scene.scene.end_time.unwrap_or(1.0);
             (1000.0 * sim.model.state.time / end) as u64
         }
         _ => sim.model.state.step as u64,
@@ -371,7 +371,7 @@ fn remove_snapshots_after(dir: &Path, step: usize, manifest: &Manifest) -> Resul
 /// step when the step count is fixed). Snapshots at `snapshot_times` fall
 /// on steps known only when reached: they are recorded then.
 pub fn foresee_snapshots(manifest: &mut Manifest, sim: &Simulation, from: usize) {
-    let output = &sim.model.scene.output;
+    let output = &sim.scene.output;
     for &step in output.snapshots.iter().filter(|&&s| s >= from) {
         manifest.add(&manifest::snapshot_name(step));
     }
@@ -381,8 +381,8 @@ pub fn foresee_snapshots(manifest: &mut Manifest, sim: &Simulation, from: usize)
     }
     let fixed_steps = match sim.model.analysis() {
         AnalysisKind::Explicit => None,
-        AnalysisKind::ImplicitDynamic if sim.model.scene.solver.adaptive() => None,
-        _ => sim.model.scene.scene.steps,
+        AnalysisKind::ImplicitDynamic if sim.scene.solver.adaptive() => None,
+        _ => sim.scene.scene.steps,
     };
     let first = from.next_multiple_of(every);
     let mut last = first + (SNAPSHOTS_AHEAD - 1) * every;
@@ -411,7 +411,7 @@ impl Observer for OutputObserver {
 
     fn on_step(&mut self, sim: &Simulation, report: &StepReport) -> Result<(), RunError> {
         sim.profile.time(Stage::Output, || {
-            let every = sim.model.scene.output.curve_every.max(1);
+            let every = sim.scene.output.curve_every.max(1);
             if sim.model.state.step.is_multiple_of(every) || sim.finished() {
                 self.write_row(sim)?;
             }
@@ -537,8 +537,8 @@ pub fn run_scene_with(
     let mut sim = Simulation::new(scene)?;
     let manifest = planned_manifest(&sim, options);
     let lock = output_dir::prepare(out, options.overwrite, &manifest)?;
-    let systems = sim.model.scene.output.systems.clone();
-    let max_mb = sim.model.scene.output.systems_max_mb;
+    let systems = sim.scene.output.systems.clone();
+    let max_mb = sim.scene.output.systems_max_mb;
     if let Some(implicit) = sim.integrator.implicit_mut() {
         implicit.export_systems(out.join(manifest::SYSTEMS_FOLDER), systems, max_mb);
     }
@@ -588,7 +588,7 @@ fn planned_manifest(sim: &Simulation, options: &RunOptions) -> Manifest {
     for name in &options.extra_files {
         manifest.add(name);
     }
-    let systems = &sim.model.scene.output.systems;
+    let systems = &sim.scene.output.systems;
     if sim.integrator.implicit().is_some() && !systems.is_empty() {
         manifest.systems = Some(manifest::SystemsRecord {
             folder: manifest::SYSTEMS_FOLDER.into(),
@@ -802,12 +802,12 @@ pub fn write_run_json(
     let implicit = sim.integrator.implicit();
     let solver_warnings = implicit.map_or_else(Vec::new, |i| i.solver_warnings());
     let energy = crate::energy::EnergyBudget::of(model);
-    let energy_warning = energy.warning(model.scene.output.energy_remainder_warning);
+    let energy_warning = energy.warning(sim.scene.output.energy_remainder_warning);
     let all_warnings = [
-        model.scene.warnings(),
+        sim.scene.warnings(),
         solver_warnings.clone(),
         energy_warning.into_iter().collect(),
-        volume_warning(model).into_iter().collect(),
+        volume_warning(sim).into_iter().collect(),
     ]
     .concat();
     let newton_iterations = sim.integrator.usage().newton_iterations;
@@ -832,7 +832,7 @@ pub fn write_run_json(
         "time": model.state.time,
         "particles": model.state.particles.len(),
         "lost_points": model.state.lost_points,
-        "point_volumes": point_volume_summary(model),
+        "point_volumes": point_volume_summary(sim),
         "energy": energy,
         "grid_cells": model.grid.cells,
         "wall_seconds": wall_seconds,
@@ -840,7 +840,7 @@ pub fn write_run_json(
         "materials": materials,
         "solver": {
             "analysis": model.analysis(),
-            "linear_solver_policy": model.scene.solver.linear_solver,
+            "linear_solver_policy": sim.scene.solver.linear_solver,
             "usage": sim.integrator.usage(),
             "factorisation": {
                 "symbolic": factorisation.symbolic,
@@ -860,11 +860,11 @@ pub fn write_run_json(
             },
             "linear": {
                 "options": {
-                    "linear_solver": model.scene.solver.linear_solver,
-                    "factorization": model.scene.solver.factorization,
-                    "ordering": model.scene.solver.ordering,
-                    "pcg_preconditioner": model.scene.solver.pcg_preconditioner,
-                    "pcg_tolerance": model.scene.solver.pcg_tolerance,
+                    "linear_solver": sim.scene.solver.linear_solver,
+                    "factorization": sim.scene.solver.factorization,
+                    "ordering": sim.scene.solver.ordering,
+                    "pcg_preconditioner": sim.scene.solver.pcg_preconditioner,
+                    "pcg_tolerance": sim.scene.solver.pcg_tolerance,
                 },
                 "symbolic_seconds": factorisation.symbolic_seconds,
                 "numeric_seconds": factorisation.numeric_seconds,
@@ -887,7 +887,7 @@ pub fn write_run_json(
         "manifest": manifest,
         "provenance": provenance_record(provenance, sim, status),
         "summary": run_summary(path, sim, status),
-        "scene": model.scene,
+        "scene": sim.scene,
     });
     write_json(path, &value)
 }
@@ -904,7 +904,7 @@ fn provenance_record(
         Some(p) => serde_json::to_value(p).unwrap_or_default(),
         None => serde_json::to_value(Provenance::now(None, &[])).unwrap_or_default(),
     };
-    let scene = serde_json::to_string(&sim.model.scene).unwrap_or_default();
+    let scene = serde_json::to_string(&sim.scene).unwrap_or_default();
     record["scene_fingerprint"] = crate::provenance::fingerprint_text(&scene).into();
     record["ended_at"] = match status {
         RunStatus::Running => serde_json::Value::Null,
@@ -943,7 +943,8 @@ fn run_summary(run_json: &Path, sim: &Simulation, status: RunStatus<'_>) -> serd
 /// how many points sit at the `grid.max_point_volume` bound (null when
 /// unset): how far the motion stretched the points (a 2 × 2 layout starts
 /// at 0.25).
-fn point_volume_summary(model: &crate::model::Model) -> serde_json::Value {
+fn point_volume_summary(sim: &Simulation) -> serde_json::Value {
+    let model = &sim.model;
     let cell_area = model.grid.cell_size.powi(2);
     let largest = model
         .state
@@ -953,7 +954,7 @@ fn point_volume_summary(model: &crate::model::Model) -> serde_json::Value {
         .copied()
         .fold(0.0, f64::max)
         / cell_area;
-    let at_bound = model.scene.grid.max_point_volume.map(|cells| {
+    let at_bound = model.settings.grid.max_point_volume.map(|cells| {
         let bound = cells * cell_area;
         model
             .state
@@ -963,10 +964,10 @@ fn point_volume_summary(model: &crate::model::Model) -> serde_json::Value {
             .filter(|&&v| v >= bound * (1.0 - 1e-12))
             .count()
     });
-    let range = jacobian_range(model);
+    let range = jacobian_range(sim);
     json!({
         "largest_cells": largest,
-        "bound_cells": model.scene.grid.max_point_volume,
+        "bound_cells": model.settings.grid.max_point_volume,
         "at_bound": at_bound,
         "jacobian_range": range.map(|r| [r.smallest, r.largest]),
         "jacobian_out_of_range": range.map(|r| r.outside),
@@ -992,16 +993,17 @@ pub struct JacobianRange {
     pub outside: usize,
 }
 
-/// J = V/V0 over the points of `model` (`None` without points).
-pub fn jacobian_range(model: &crate::model::Model) -> Option<JacobianRange> {
+/// J = V/V0 over the points of the run `sim` (`None` without points).
+pub fn jacobian_range(sim: &Simulation) -> Option<JacobianRange> {
+    let model = &sim.model;
     let p = &model.state.particles;
     let density: Vec<f64> = model
         .material_names
         .iter()
-        .map(|name| model.scene.materials.get(name).map_or(0.0, |m| m.density()))
+        .map(|name| sim.scene.materials.get(name).map_or(0.0, |m| m.density()))
         .collect();
     let bound = model
-        .scene
+        .settings
         .grid
         .max_point_volume
         .map(|cells| cells * model.grid.cell_size.powi(2) * (1.0 - 1e-12));
@@ -1032,8 +1034,8 @@ pub fn jacobian_range(model: &crate::model::Model) -> Option<JacobianRange> {
 }
 
 /// The warning of a run whose points left [`JACOBIAN_RANGE`].
-pub fn volume_warning(model: &crate::model::Model) -> Option<String> {
-    let r = jacobian_range(model)?;
+pub fn volume_warning(sim: &Simulation) -> Option<String> {
+    let r = jacobian_range(sim)?;
     (r.outside > 0).then(|| {
         format!(
             "{} material point(s) end with a volume ratio V/V0 outside [{:e}, {:e}] (from {:.2e} to {:.2e}): the body was crushed or torn beyond what the grid resolves; check the loads, the time step and `grid.max_point_volume`",

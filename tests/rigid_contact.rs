@@ -188,7 +188,7 @@ fn elastic_footing_load(lo: f64, hi: f64) -> (f64, Vec<String>) {
         footprint.as_str(),
     ];
     let mut sim = common::simulation("footing/local_h250.toml", &overrides);
-    let warnings = sim.model.scene.warnings();
+    let warnings = sim.scene.warnings();
     let history = common::run_history(&mut sim);
     (history[1].1[common::column(&sim, "load")], warnings)
 }

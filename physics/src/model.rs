@@ -19,6 +19,7 @@ use crate::scene::{
     ShapeFunctionChoice,
 };
 use crate::seeding::seed_particles;
+use crate::settings::Settings;
 use crate::walls::Walls;
 
 /// A material point dropped from the run after it left the grid
@@ -51,8 +52,8 @@ pub type PointRemap = Vec<Option<usize>>;
 /// `benches/step.rs` times one step from a fixed state.
 #[derive(Clone)]
 pub struct Model {
-    /// The validated scene.
-    pub scene: Scene,
+    /// The settings the physics reads, resolved from the scene.
+    pub settings: Settings,
     /// Background grid.
     pub grid: Grid,
     /// Material laws, indexed by particle material id.
@@ -209,8 +210,8 @@ impl Model {
     /// traction and driven points. Geometry problems that only show once
     /// points are seeded (a body with no point, a platen touching none) are
     /// reported as field errors.
-    pub fn new(scene: Scene) -> Result<Self, SceneError> {
-        let grid = build_grid(&scene);
+    pub fn new(scene: &Scene) -> Result<Self, SceneError> {
+        let grid = build_grid(scene);
         let material_names: Vec<String> = scene.materials.keys().cloned().collect();
         let mut errors = Vec::new();
         let mut materials: Vec<Arc<dyn ConstitutiveModel>> = Vec::new();
@@ -223,9 +224,9 @@ impl Model {
                 }
             }
         }
-        let particles = seed_particles(&scene, &grid, &material_names, &mut errors);
-        let driven = build_driven_points(&scene, &particles, &mut errors);
-        check_initial_stresses(&scene, &materials, &particles, &mut errors);
+        let particles = seed_particles(scene, &grid, &material_names, &mut errors);
+        let driven = build_driven_points(scene, &particles, &mut errors);
+        check_initial_stresses(scene, &materials, &particles, &mut errors);
         if !errors.is_empty() {
             return Err(SceneError::Invalid {
                 path: scene.scene.name.clone(),
@@ -233,9 +234,9 @@ impl Model {
             });
         }
         let n_nodes = grid.node_count();
-        let constraints = Constraints::from_scene(&scene, &grid);
+        let constraints = Constraints::from_scene(scene, &grid);
         let state = State {
-            traction: TractionPoints::from_scene(&scene),
+            traction: TractionPoints::from_scene(scene),
             particles,
             driven,
             pinned_points: Vec::new(),
@@ -256,7 +257,7 @@ impl Model {
         let mut model = Model {
             walls: Walls::of(&grid, &constraints),
             constraints,
-            friction: crate::friction::FrictionEdges::from_scene(&scene, &grid),
+            friction: crate::friction::FrictionEdges::from_scene(scene, &grid),
             compliances: materials
                 .iter()
                 .map(|m| invert4(&m.elastic_stiffness()))
@@ -265,7 +266,7 @@ impl Model {
             materials,
             material_names,
             state,
-            scene,
+            settings: Settings::of(scene),
         };
         model.state.mass_height = model.current_mass_height();
         model.state.initial_kinetic_energy = model.kinetic_energy();
@@ -274,24 +275,24 @@ impl Model {
 
     /// The analysis type.
     pub fn analysis(&self) -> AnalysisKind {
-        self.scene.scene.analysis
+        self.settings.run.analysis
     }
 
     /// Whether the run has reached its last step / end time.
     pub fn finished(&self) -> bool {
         match self.analysis() {
             AnalysisKind::Explicit => {
-                self.state.time >= self.scene.scene.end_time.unwrap_or(0.0) * (1.0 - 1e-12)
+                self.state.time >= self.settings.run.end_time.unwrap_or(0.0) * (1.0 - 1e-12)
             }
-            AnalysisKind::ImplicitDynamic if self.scene.solver.adaptive() => {
-                self.state.time >= self.scene.scene.end_time_or_steps() * (1.0 - 1e-12)
+            AnalysisKind::ImplicitDynamic if self.settings.solver.adaptive() => {
+                self.state.time >= self.settings.run.end_time_or_steps() * (1.0 - 1e-12)
             }
             // the last path step is displacement controlled to the end (PF5)
-            AnalysisKind::QuasiStatic if self.scene.solver.follows_path() => {
-                let dt = self.scene.scene.dt.unwrap_or(1.0);
-                self.state.time >= self.scene.scene.end_time_or_steps() - 1e-6 * dt
+            AnalysisKind::QuasiStatic if self.settings.solver.follows_path() => {
+                let dt = self.settings.run.dt.unwrap_or(1.0);
+                self.state.time >= self.settings.run.end_time_or_steps() - 1e-6 * dt
             }
-            _ => self.state.step >= self.scene.scene.steps.unwrap_or(0),
+            _ => self.state.step >= self.settings.run.steps.unwrap_or(0),
         }
     }
 
@@ -322,16 +323,12 @@ impl Model {
     /// True when the scene takes each point's dilatation as its cell's
     /// average (`[grid] volumetric = "b_bar"`, [`crate::volumetric`]).
     pub fn b_bar(&self) -> bool {
-        self.scene.grid.volumetric == crate::scene::VolumetricTreatment::BBar
+        self.settings.grid.volumetric == crate::scene::VolumetricTreatment::BBar
     }
 
     /// Largest Young's modulus of the materials, kPa.
     pub fn max_youngs_modulus(&self) -> f64 {
-        self.scene
-            .materials
-            .values()
-            .map(|m| m.youngs_modulus())
-            .fold(0.0, f64::max)
+        self.settings.stiffest_material.map_or(0.0, |(e, _)| e)
     }
 
     /// The double-mapping mode in force: `auto` means `increment` with
@@ -340,8 +337,8 @@ impl Model {
     /// 27 keeps the mapping off there (it made the biaxial bands irregular,
     /// and it adds stress without work, on which an explicit run can feed).
     pub fn double_mapping(&self) -> DoubleMapping {
-        let bilinear = self.scene.grid.shape_functions == ShapeFunctionChoice::Bilinear;
-        match self.scene.smoothing.double_mapping {
+        let bilinear = self.settings.grid.shape_functions == ShapeFunctionChoice::Bilinear;
+        match self.settings.smoothing.double_mapping {
             DoubleMapping::Auto if bilinear && self.materials.iter().any(|m| m.can_soften()) => {
                 DoubleMapping::Increment
             }
@@ -352,7 +349,7 @@ impl Model {
 
     /// Material points a cell needs to carry traction points (half the seeding count).
     pub fn traction_min_points(&self) -> usize {
-        (self.scene.grid.points_per_cell.pow(2) / 2).max(1)
+        (self.settings.grid.points_per_cell.pow(2) / 2).max(1)
     }
 
     /// Σ ½ m_p |v_p|², kJ per metre run.
@@ -425,7 +422,7 @@ impl Model {
     /// point of the run: the first such point is reported as having left the
     /// grid. With `stop` this does nothing.
     pub fn drop_lost_points(&mut self) -> Result<Option<PointRemap>, StepError> {
-        if self.scene.grid.lost_points == LostPointPolicy::Stop {
+        if self.settings.grid.lost_points == LostPointPolicy::Stop {
             return Ok(None);
         }
         let p = &self.state.particles;

@@ -186,7 +186,7 @@ impl Monitor {
             (_, MonitorKind::DissipatedEnergy) => model.state.dissipated_energy,
             (_, MonitorKind::BoundaryWork) => model.state.boundary_work,
             (_, MonitorKind::EnergyRemainder) => crate::energy::remainder(model),
-            (_, MonitorKind::Gravity) => model.scene.loads.gravity_at(model.state.time),
+            (_, MonitorKind::Gravity) => model.settings.loads.gravity_at(model.state.time),
             (_, MonitorKind::RunOut) => p
                 .position
                 .iter()
@@ -228,16 +228,16 @@ mod tests {
     /// The coarse cut (h = 0.25 m, four points per cell) with a neighbourhood
     /// monitor of `quantity` around B, radius `radius`.
     fn cut_with_group(quantity: StressQuantity, radius: Option<f64>) -> (Model, Monitor) {
-        let scene =
+        let cut =
             Scene::from_str_with_overrides(CUT, "cut", &["grid.cell_size=0.25".into()]).unwrap();
-        let model = Model::new(scene).unwrap();
+        let model = Model::new(&cut).unwrap();
         let spec = MonitorSpec {
             name: "group".into(),
             kind: MonitorKind::NeighbourhoodStress,
             point: Some([2.78, 0.34]),
             quantity: Some(quantity),
             radius,
-            ..model.scene.monitor[0].clone()
+            ..cut.monitor[0].clone()
         };
         let monitor = Monitor::resolve(&spec, &model);
         (model, monitor)

@@ -92,6 +92,9 @@ pub use crate::scene::{STEP_COLUMN, STEP_COLUMNS, TIME_COLUMN};
 
 /// A run in progress.
 pub struct Simulation {
+    /// The validated scene the run was built from (its outputs record it;
+    /// the physics reads the model's [`crate::settings::Settings`]).
+    pub scene: Scene,
     /// The model and its state.
     pub model: Model,
     /// The time integrator.
@@ -114,10 +117,9 @@ impl Simulation {
         scene.check_resources(&ResourceLimits::for_scene(&scene))?;
         let profile = Profile::default();
         let (model, integrator, monitors) = profile.time(Stage::Build, || {
-            let mut model = Model::new(scene)?;
+            let mut model = Model::new(&scene)?;
             let integrator = Integrator::for_model(&model)?;
-            let monitors: Vec<Monitor> = model
-                .scene
+            let monitors: Vec<Monitor> = scene
                 .monitor
                 .iter()
                 .map(|m| Monitor::resolve(m, &model))
@@ -126,6 +128,7 @@ impl Simulation {
             Ok::<_, SceneError>((model, integrator, monitors))
         })?;
         Ok(Self {
+            scene,
             model,
             integrator,
             monitors,
@@ -201,7 +204,7 @@ impl Simulation {
     /// Whether the run's steps are error-controlled.
     fn adaptive(&self) -> bool {
         self.model.analysis() == crate::scene::AnalysisKind::ImplicitDynamic
-            && self.model.scene.solver.adaptive()
+            && self.model.settings.solver.adaptive()
     }
 
     /// Run to the end, reporting every step to `observer`. On a failure the

@@ -591,7 +591,7 @@ impl Resumable {
 
     /// The scene, as rebuilt.
     pub fn scene(&self) -> &Scene {
-        &self.simulation.model.scene
+        &self.simulation.scene
     }
 
     /// The step the checkpoint was written after.

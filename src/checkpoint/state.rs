@@ -96,11 +96,7 @@ impl SavedState {
         {
             return misfit(format!("material index {m} out of range"));
         }
-        if let Some(b) = p
-            .body
-            .iter()
-            .find(|&&b| b as usize >= model.scene.body.len())
-        {
+        if let Some(b) = p.body.iter().find(|&&b| b as usize >= sim.scene.body.len()) {
             return misfit(format!("body index {b} out of range"));
         }
         let nodes = model.grid.node_count();

@@ -42,8 +42,8 @@ pub fn run_history(sim: &mut Simulation) -> Vec<(f64, Vec<f64>)> {
 /// The closed-form column of a scene whose first body is an elastic box
 /// standing on y = 0 (`elastic/oedometer.toml`, `elastic/soft_column.toml`).
 pub fn elastic_column(sim: &Simulation) -> Column {
-    let body = &sim.model.scene.body[0];
-    let MaterialSpec::LinearElastic(elastic) = &sim.model.scene.materials[&body.material] else {
+    let body = &sim.scene.body[0];
+    let MaterialSpec::LinearElastic(elastic) = &sim.scene.materials[&body.material] else {
         panic!("material `{}` is not linear_elastic", body.material)
     };
     Column {

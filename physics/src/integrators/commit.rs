@@ -72,7 +72,7 @@ pub fn commit_swapping(
     std::mem::swap(&mut p.stress, &mut converged.stress);
     std::mem::swap(&mut p.state, &mut converged.state);
     let volume_cap = model
-        .scene
+        .settings
         .grid
         .max_point_volume
         .map_or(f64::INFINITY, |cells| cells * model.grid.cell_size.powi(2));
@@ -81,7 +81,7 @@ pub fn commit_swapping(
         return Err(non_finite_point(p, i));
     }
     check_finite_nodes(&model.grid, &nodal)?;
-    if model.scene.grid.lost_points == LostPointPolicy::Stop {
+    if model.settings.grid.lost_points == LostPointPolicy::Stop {
         if let Some(i) = first.outside {
             return Err(StepError::ParticleLeftGrid {
                 particle: i,

@@ -142,7 +142,7 @@ fn smooth(
         mass: &model.state.particles.mass,
     };
     let dofs = model
-        .scene
+        .settings
         .smoothing
         .restore_forces
         .then(|| DofMap::new(&setup.bins, &model.constraints));

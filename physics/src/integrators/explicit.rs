@@ -125,7 +125,7 @@ impl ExplicitIntegrator {
     /// limit of the material at rest in its initial configuration is refused
     /// before the run; the velocity term and later drops are checked every step.
     pub fn new(model: &Model) -> Result<Self, SceneError> {
-        if let Some(dt) = model.scene.scene.dt {
+        if let Some(dt) = model.settings.run.dt {
             let Ok(setup) = StepSetup::new(model) else {
                 return Ok(Self::default()); // points outside the grid are reported by the validation
             };
@@ -138,7 +138,7 @@ impl ExplicitIntegrator {
             let stable = StableTimeStep::of(model, &mass, &setup.driven_shapes, false);
             if dt > stable.limit {
                 return Err(SceneError::Invalid {
-                    path: model.scene.scene.name.clone(),
+                    path: model.settings.run.name.clone(),
                     errors: vec![FieldError {
                         field: "scene.dt".into(),
                         message: format!(
@@ -248,7 +248,7 @@ impl Buffers {
                 reaction: &grid.reaction,
                 increment,
                 contact_motion,
-                gravity: model.scene.loads.gravity_at(t),
+                gravity: model.settings.loads.gravity_at(t),
                 end_time: t + dt,
                 nonzero_at: Some(&setup.bins.active_nodes),
                 boundary_work,
@@ -269,7 +269,7 @@ fn time_step(
     nodal_mass: &[f64],
 ) -> Result<f64, StepError> {
     let stable = StableTimeStep::of(model, nodal_mass, &setup.driven_shapes, true);
-    let dt = match model.scene.scene.dt {
+    let dt = match model.settings.run.dt {
         Some(fixed) if fixed > stable.limit => {
             return Err(StepError::UnstableTimeStep {
                 dt: fixed,
@@ -278,14 +278,14 @@ fn time_step(
             })
         }
         Some(fixed) => fixed,
-        None => stable.with_cfl(model.scene.solver.cfl),
+        None => stable.with_cfl(model.settings.solver.cfl),
     };
     usage.explicit_time_step = Some(match usage.explicit_time_step {
         Some((lo, hi)) => (lo.min(dt), hi.max(dt)),
         None => (dt, dt),
     });
     usage.time_step_limited_by = Some(stable.limited_by);
-    let end = model.scene.scene.end_time.unwrap_or(f64::INFINITY);
+    let end = model.settings.run.end_time.unwrap_or(f64::INFINITY);
     let dt = dt.min(end - model.state.time).max(0.0);
     if dt <= 0.0 || !dt.is_finite() {
         return Err(StepError::InvalidTimeStep { dt });
@@ -307,7 +307,7 @@ impl Buffers {
     ) {
         let p = &model.state.particles;
         let stress = model.force_stresses(&setup.bins, &p.stress);
-        let g = model.scene.loads.gravity_at(t);
+        let g = model.settings.loads.gravity_at(t);
         let (mass, velocity, volume) = (&p.mass, &p.velocity, &p.volume);
         let add = |p: usize, s: &S, patch: &mut [P2gSums]| {
             let (m, v, vol, sig) = (mass[p], velocity[p], volume[p], &stress[p]);
@@ -511,7 +511,7 @@ impl UpdatedGrid {
         // a maximum: the same whatever the order
         let largest = active.par_iter().map(|&node| self.mass[node as usize]);
         self.tiny_mass = 1e-12 * largest.reduce(|| 0.0, f64::max);
-        let damping = model.scene.solver.damping;
+        let damping = model.settings.solver.damping;
         let t = model.state.time;
         let (tiny_mass, mass, momentum, force) =
             (self.tiny_mass, &self.mass, &self.momentum, &self.force);

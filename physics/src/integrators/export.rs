@@ -95,7 +95,7 @@ impl SystemExport {
             }
         }
         let meta = json!({
-            "scene": system.model.scene.scene.name,
+            "scene": system.model.settings.run.name,
             "step": step,
             "newton_solve_in_step": self.solve_in_step,
             "newton_iteration": iteration,

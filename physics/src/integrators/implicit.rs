@@ -90,16 +90,16 @@ impl ImplicitIntegrator {
     pub fn new(model: &Model) -> Result<Self, crate::scene::SceneError> {
         let dynamic = model.analysis() == AnalysisKind::ImplicitDynamic;
         Ok(Self {
-            dt: model.scene.scene.dt.unwrap_or(1.0),
-            newmark: dynamic.then(|| Newmark::from_solver(&model.scene.solver)),
+            dt: model.settings.run.dt.unwrap_or(1.0),
+            newmark: dynamic.then(|| Newmark::from_solver(&model.settings.solver)),
             tangent: Tangent::new(model)?,
-            background_block: background_block(&model.scene, &model.grid),
+            background_block: background_block(&model.settings, &model.grid),
             setup: StepSetup::default(),
             usage: SolverUsage::default(),
             last_residuals: (Vec::new(), 0.0),
             newton_buffers: NewtonBuffers::default(),
             p2g: KinematicsBuffers::default(),
-            control: StepController::of(&model.scene),
+            control: StepController::of(&model.settings),
             path_jump: None,
         })
         .map(|mut integrator| {
@@ -109,7 +109,7 @@ impl ImplicitIntegrator {
                     ..Default::default()
                 });
             }
-            if model.scene.solver.follows_path() {
+            if model.settings.solver.follows_path() {
                 integrator.usage.path = Some(PathRecord::default());
             }
             integrator
@@ -147,7 +147,7 @@ impl ImplicitIntegrator {
         if let Some(control) = self.control {
             return self.adaptive_step(model, profile, control);
         }
-        if model.scene.solver.follows_path() {
+        if model.settings.solver.follows_path() {
             return self.path_step(model, profile);
         }
         let (t0, dt) = (model.state.time, self.dt);
@@ -238,9 +238,9 @@ impl ImplicitIntegrator {
     /// `solver.max_halvings` times. The run stops with its step budget
     /// (`solver.path_max_steps`) spent.
     fn path_step(&mut self, model: &mut Model, profile: &Profile) -> Result<StepReport, StepError> {
-        let scene = &model.scene;
-        let end = scene.scene.end_time_or_steps();
-        let budget = scene.solver.path_step_budget(scene.scene.steps);
+        let settings = &model.settings;
+        let end = settings.run.end_time_or_steps();
+        let budget = settings.solver.path_step_budget(settings.run.steps);
         if model.state.step >= budget {
             return Err(StepError::PathBudget {
                 steps: model.state.step,
@@ -248,7 +248,7 @@ impl ImplicitIntegrator {
                 end,
             });
         }
-        let max_cuts = scene.solver.max_halvings;
+        let max_cuts = settings.solver.max_halvings;
         let (t, dt) = (model.state.time, self.dt);
         let mut record = self.usage.path.take().unwrap_or_default();
         let load_before = model.state.driven.committed_load(&model.state.particles, t);
@@ -320,9 +320,9 @@ impl ImplicitIntegrator {
     /// The step `proposal` cut to end at the next jump of the stepped gravity
     /// and at the end time.
     fn step_within_loads(&self, model: &Model, t: f64, proposal: f64) -> f64 {
-        let end = model.scene.scene.end_time_or_steps();
+        let end = model.settings.run.end_time_or_steps();
         let mut dt = proposal.min(end - t);
-        if let Some(jump) = model.scene.loads.next_gravity_jump(t) {
+        if let Some(jump) = model.settings.loads.next_gravity_jump(t) {
             dt = dt.min(jump - t);
         }
         dt
@@ -350,7 +350,7 @@ impl ImplicitIntegrator {
                 self.usage.newton_iterations += iterations;
                 Ok(())
             }
-            Err(e) if e.retry() && depth < model.scene.solver.max_halvings => {
+            Err(e) if e.retry() && depth < model.settings.solver.max_halvings => {
                 self.usage.halvings += 1;
                 self.advance(model, profile, t, 0.5 * dt, depth + 1, report)?;
                 self.advance(model, profile, t + 0.5 * dt, 0.5 * dt, depth + 1, report)
@@ -474,7 +474,7 @@ impl ImplicitIntegrator {
                 reaction: &grid.reaction,
                 increment: &grid.du,
                 contact_motion: &grid.du,
-                gravity: model.scene.loads.gravity_at(t + dt),
+                gravity: model.settings.loads.gravity_at(t + dt),
                 end_time: t + dt,
                 nonzero_at: None,
                 boundary_work,
@@ -581,7 +581,7 @@ impl ImplicitIntegrator {
 /// next step starts from the acceleration after it and its error estimate
 /// sees no load discontinuity.
 fn restart_at_gravity_jump(model: &mut Model, newmark: Option<Newmark>) {
-    let jump = model.scene.loads.gravity_jump_at(model.state.time);
+    let jump = model.settings.loads.gravity_jump_at(model.state.time);
     if jump == 0.0 || newmark.is_none() {
         return;
     }

@@ -15,7 +15,7 @@ use crate::transfer::{self, NodalField, NODES_PER_TASK};
 pub fn external_force(model: &Model, setup: &StepSetup, t: f64) -> Vec<[f64; 2]> {
     let grid = &model.grid;
     let p = &model.state.particles;
-    let g = model.scene.loads.gravity_at(t);
+    let g = model.settings.loads.gravity_at(t);
     let mut external = if g != 0.0 {
         transfer::body_force(grid, &setup.bins, &setup.shapes, &p.mass, [0.0, -g])
     } else {
@@ -64,7 +64,7 @@ pub fn nodal_kinematics(
     buffers: &mut KinematicsBuffers,
 ) -> NodalKinematics {
     let p = &model.state.particles;
-    let g = model.scene.loads.gravity_at(t);
+    let g = model.settings.loads.gravity_at(t);
     let (mass, velocity, acceleration) = (&p.mass, &p.velocity, &p.acceleration);
     let force_per_mass = &p.force_per_mass;
     let add = |p: usize, s: &ShapeAt, patch: &mut [KinematicSums]| {
@@ -149,7 +149,7 @@ mod tests {
             overrides.push("grid.point_layout=\"gauss\"".into());
         }
         let scene = Scene::from_str_with_overrides(BIAXIAL, "biaxial", &overrides).unwrap();
-        let mut model = Model::new(scene).unwrap();
+        let mut model = Model::new(&scene).unwrap();
         let p = &mut model.state.particles;
         for i in 0..p.mass.len() {
             let s = (i as f64 * 0.37).sin();

@@ -58,7 +58,7 @@ impl NonlocalStep {
         step_update: bool,
         profile: &Profile,
     ) -> Result<Option<Self>, NonlocalError> {
-        let Some(spec) = &model.scene.nonlocal else {
+        let Some(spec) = &model.settings.nonlocal else {
             return Ok(None);
         };
         let step = profile.time(Stage::Nonlocal, || {

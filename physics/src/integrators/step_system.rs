@@ -282,7 +282,7 @@ impl StepSystem<'_> {
     /// quasi-static run or with `predictor = "zero"` (theory D17).
     pub fn predictor(&self) -> Vec<f64> {
         let mut free = vec![0.0; self.dofs.n_free];
-        if self.newmark.is_none() || self.model.scene.solver.predictor == PredictorChoice::Zero {
+        if self.newmark.is_none() || self.model.settings.solver.predictor == PredictorChoice::Zero {
             return free;
         }
         let (dt, nodal) = (self.dt, &self.nodal);

@@ -38,7 +38,7 @@ impl StableTimeStep {
         // cycle where it opposes the velocity, so the spring frequency is
         // taken as (1 + α_d) k_i/m_i (measured: without the factor, springs
         // with α_d = 0.7 were unstable from 0.6–0.8 of the estimate).
-        let damping_factor = 1.0 + model.scene.solver.damping;
+        let damping_factor = 1.0 + model.settings.solver.damping;
         for (node, &k) in nodal_spring_stiffness(model, nodal_mass.len(), driven_shapes)
             .iter()
             .enumerate()
