@@ -27,7 +27,7 @@ use criterion::{
 };
 use mpm_physics::integrators::Integrator;
 use mpm_physics::model::Model;
-use mpm_physics::nonlocal::{NonlocalAverager, NonlocalParameters};
+use mpm_physics::nonlocal::NonlocalAverager;
 use mpm_physics::profile::Profile;
 use mpm_physics::scene::Scene;
 use mpm_physics::settings::Settings;
@@ -157,10 +157,7 @@ fn bench_step(c: &mut Criterion) {
         let n = implicit.unknowns().expect("unknowns");
         let (_, k) = implicit.linearize(&vec![0.0; n]).expect("linearize");
         let spec = model.settings.nonlocal.as_ref().expect("a nonlocal scene");
-        let params = NonlocalParameters {
-            length_scale: spec.length_scale,
-            cutoff_factor: spec.cutoff_factor,
-        };
+        let params = *spec;
         let p = &model.state.particles;
         let averager =
             NonlocalAverager::new(&params, &p.position, &p.volume, &p.material).expect("averager");

@@ -69,7 +69,7 @@ impl Settings {
                 max_point_volume: grid.max_point_volume,
             },
             smoothing: scene.smoothing.clone(),
-            nonlocal: scene.nonlocal.clone(),
+            nonlocal: scene.nonlocal,
             stiffest_material: scene
                 .materials
                 .values()

@@ -5,7 +5,7 @@
 
 use crate::constitutive::StrengthVariable;
 use crate::model::Model;
-use crate::nonlocal::{NonlocalAverager, NonlocalError, NonlocalParameters};
+use crate::nonlocal::{NonlocalAverager, NonlocalError};
 use crate::particles::Particles;
 use crate::profile::{Profile, Stage, Work};
 use crate::scene::{NonlocalSpec, NonlocalUpdate};
@@ -75,12 +75,8 @@ impl NonlocalStep {
         particles: &Particles,
         force_step_update: bool,
     ) -> Result<Self, NonlocalError> {
-        let params = NonlocalParameters {
-            length_scale: spec.length_scale,
-            cutoff_factor: spec.cutoff_factor,
-        };
         let mut averager = NonlocalAverager::new(
-            &params,
+            spec,
             &particles.position,
             &particles.volume,
             &particles.material,
