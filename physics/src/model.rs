@@ -78,9 +78,11 @@ pub struct Model {
 /// that move with them, time and step, the last step's nodal results, the
 /// energy accounts and the removed points. A checkpoint stores it whole
 /// (`src/checkpoint`), so a field added here is saved and restored without
-/// further code. The start ramps of the rigid bodies
-/// ([`DrivenPoints::ramp`]) and their bearing flags are the scene's or
-/// derived each step and are not part of the encoding.
+/// further code. Every field is stored as it is, the derived ones too
+/// ([`State::mass_height`], [`State::nodal_results_at`]), so a restored
+/// state needs no recomputation; only the rigid bodies' start ramps
+/// ([`DrivenPoints::ramp`], the scene's) and bearing flags (derived every
+/// step) are left out of the encoding.
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct State {
     /// Material points.

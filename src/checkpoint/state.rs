@@ -5,7 +5,8 @@
 //! built [`Simulation`] of the same scene.
 //!
 //! What a fresh build of the scene gives again is not stored: the grid, the
-//! materials, the Dirichlet conditions, the Newmark parameters and Δt. The
+//! materials, the Dirichlet conditions, the settings
+//! ([`crate::settings::Settings`]), the Newmark parameters and Δt. The
 //! implicit integrator's solver caches (sparsity pattern, symbolic
 //! factorisation) are rebuilt at the first step after a resume; they depend
 //! only on the pattern, so the numbers are the same.
