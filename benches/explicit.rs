@@ -52,13 +52,13 @@ fn bench_explicit(c: &mut Criterion) {
     group.warm_up_time(Duration::from_secs(1));
     group.measurement_time(Duration::from_secs(5));
     for (h, name) in SIZES {
-        let mut model = Model::new(block(h)).expect("model");
+        let mut model = Model::new(&block(h)).expect("model");
         let mut integrator = Integrator::for_model(&model).expect("integrator");
         let profile = Profile::default();
         for _ in 0..WARM_UP_STEPS {
             integrator.step(&mut model, &profile).expect("step");
         }
-        let points = model.particles.len();
+        let points = model.state.particles.len();
         println!("explicit_step/{name}: {points} points, h = {h} m");
         group.throughput(Throughput::Elements(points as u64));
         group.bench_function(BenchmarkId::new("block", name), |b| {

@@ -17,7 +17,7 @@
 //! * `brute_force`: the O(N²) reference pass (sparse field).
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
-use mpm_physics::nonlocal::{NonlocalAverager, NonlocalParameters};
+use mpm_physics::nonlocal::{NonlocalAverager, NonlocalSpec};
 use std::hint::black_box;
 use std::time::Duration;
 
@@ -27,7 +27,7 @@ struct Scene {
     grp: Vec<u16>,
     sparse: Vec<f64>,
     dense: Vec<f64>,
-    params: NonlocalParameters,
+    params: NonlocalSpec,
 }
 
 /// `n_cells × n_cells` cells of side h = 1 with 4 Gauss-point MPs each.
@@ -68,7 +68,7 @@ fn scene(n_cells: usize) -> Scene {
         pos,
         sparse,
         dense,
-        params: NonlocalParameters::new(3.0 * h),
+        params: NonlocalSpec::new(3.0 * h),
     }
 }
 
@@ -100,7 +100,7 @@ fn biaxial_lattice() -> Scene {
         pos,
         sparse,
         dense,
-        params: NonlocalParameters::new(0.01),
+        params: NonlocalSpec::new(0.01),
     }
 }
 

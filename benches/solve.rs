@@ -107,18 +107,19 @@ fn bench_assembly(c: &mut Criterion) {
         let dofs = DofMap::new(&setup.bins, &model.constraints);
         let element_dofs = dofs.element_dofs(grid, &setup.bins);
         let tangent: Vec<_> = model
+            .state
             .particles
             .material
             .iter()
             .map(|&m| model.materials[m as usize].elastic_stiffness())
             .collect();
-        let background = background_block(&model.scene, grid);
+        let background = background_block(&model.settings, grid);
         let blocks = || {
             let cells = stiffness::cell_stiffness_blocks(
                 grid,
                 &setup.bins,
                 &setup.shapes,
-                &model.particles.volume,
+                &model.state.particles.volume,
                 &tangent,
                 None,
                 None,
@@ -141,7 +142,7 @@ fn bench_assembly(c: &mut Criterion) {
         });
         println!(
             "assembly/{label}: {} points, {} active + {} reached cells, {} elements, {} unknowns, nnz {}",
-            model.particles.len(),
+            model.state.particles.len(),
             setup.bins.active_cells.len(),
             setup.bins.reached_cells.len(),
             element_dofs.len(),

@@ -27,9 +27,10 @@ use criterion::{
 };
 use mpm_physics::integrators::Integrator;
 use mpm_physics::model::Model;
-use mpm_physics::nonlocal::{NonlocalAverager, NonlocalParameters};
+use mpm_physics::nonlocal::NonlocalAverager;
 use mpm_physics::profile::Profile;
 use mpm_physics::scene::Scene;
+use mpm_physics::settings::Settings;
 use mpm_physics::simulation::Simulation;
 
 /// Implicit steps taken before the second benchmarked state.
@@ -44,9 +45,10 @@ fn load() -> Scene {
 /// `model` as a simulation with a fresh integrator for `scene` (no monitors).
 fn simulation(model: &Model, scene: &Scene) -> Simulation {
     let mut model = model.clone();
-    model.scene = scene.clone();
+    model.settings = Settings::of(scene);
     let integrator = Integrator::for_model(&model).expect("integrator");
     Simulation {
+        scene: scene.clone(),
         model,
         integrator,
         monitors: Vec::new(),
@@ -64,19 +66,19 @@ fn bench_one(c: &mut Criterion, sim: Simulation, kind: &str, state: &str) {
         profile,
         ..
     } = sim;
-    let points = model.particles.len();
+    let points = model.state.particles.len();
     let mut probe = model.clone();
     let report = integrator.step(&mut probe, &profile).expect("step");
     println!(
         "step/{kind}/{state}: step {} → {}, {points} points, Δt {:.4e} s, {} Newton iterations, {} sub-steps",
-        model.step,
-        probe.step,
+        model.state.step,
+        probe.state.step,
         report.dt,
         report.iterations,
         report.substeps
     );
     if let Some(limit) = integrator.usage().time_step_limited_by {
-        let p = &model.particles;
+        let p = &model.state.particles;
         let wave = (0..p.len())
             .map(|i| {
                 let c = model.materials[p.material[i] as usize].p_wave_modulus() * p.volume[i]
@@ -87,7 +89,7 @@ fn bench_one(c: &mut Criterion, sim: Simulation, kind: &str, state: &str) {
         println!(
             "step/{kind}/{state}: Δt limited by {limit}; the wave-speed limit alone (material at rest) \
              would give CFL × h/c = {:.4e} s",
-            model.scene.solver.cfl * wave
+            model.settings.solver.cfl * wave
         );
     }
     drop(probe);
@@ -154,19 +156,16 @@ fn bench_step(c: &mut Criterion) {
         let mut implicit = simulation(model, &scene);
         let n = implicit.unknowns().expect("unknowns");
         let (_, k) = implicit.linearize(&vec![0.0; n]).expect("linearize");
-        let spec = model.scene.nonlocal.as_ref().expect("a nonlocal scene");
-        let params = NonlocalParameters {
-            length_scale: spec.length_scale,
-            cutoff_factor: spec.cutoff_factor,
-        };
-        let p = &model.particles;
+        let spec = model.settings.nonlocal.as_ref().expect("a nonlocal scene");
+        let params = *spec;
+        let p = &model.state.particles;
         let averager =
             NonlocalAverager::new(&params, &p.position, &p.volume, &p.material).expect("averager");
         let (min, mean, max) = averager.neighbour_count_stats();
         println!(
             "step/{state}: t = {:.4} s, {} points, {n} unknowns, nnz {}; nonlocal neighbours \
              (R_c = {} l_s = {} m) min {min} mean {mean:.0} max {max}",
-            model.time,
+            model.state.time,
             p.len(),
             k.nnz(),
             spec.cutoff_factor,

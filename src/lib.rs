@@ -62,5 +62,5 @@ pub mod study;
 pub use mpm_physics::{
     bc, closed_form, constitutive, csv_columns, dofs, energy, error, friction, grid, integrators,
     metrics, model, monitor, nonlocal, parallel, particles, point_driver, profile, scene, seeding,
-    shape, simulation, smoothing, start_ramp, stiffness, transfer, volumetric, walls,
+    settings, shape, simulation, smoothing, start_ramp, stiffness, transfer, volumetric, walls,
 };

@@ -435,15 +435,15 @@ fn main() -> ExitCode {
                 let estimate = s.estimate_resources();
                 let run_time = s.run_time_of(&estimate);
                 match mpm_geo::simulation::Simulation::new(s) {
-                    Ok(sim) => {
-                        let sim = &sim.model;
-                        for w in sim.scene.warnings() {
+                    Ok(run) => {
+                        let sim = &run.model;
+                        for w in run.scene.warnings() {
                             eprintln!("warning: {w}");
                         }
                         println!(
                             "{}: valid ({} material points, {}×{} cells; {})\n{run_time}",
                             scene.display(),
-                            sim.particles.len(),
+                            sim.state.particles.len(),
                             sim.grid.cells[0],
                             sim.grid.cells[1],
                             estimate
@@ -611,7 +611,7 @@ fn report(
     let succeeded = outcome.error.is_none() && outcome.interrupted.is_none();
     if quiet && succeeded && outcome.simulation.finished() {
         // warnings only
-        print_warnings(sim);
+        print_warnings(&outcome.simulation);
         return ExitCode::SUCCESS;
     }
     if profile {
@@ -619,7 +619,7 @@ fn report(
         eprintln!("{}", outcome.simulation.profile.work_line());
     }
     print_run_summary(&outcome, out);
-    print_warnings(sim);
+    print_warnings(&outcome.simulation);
     let checkpoint = out.join("checkpoint.bin").exists();
     let resume = || match checkpoint {
         true => format!("; continue with `mpm-geo resume {}`", out.display()),
@@ -646,8 +646,8 @@ fn report(
             eprintln!(
                 "interrupted by {} after step {} (t = {:.6e} s); outputs up to it are in {}{}",
                 signal.name(),
-                sim.step,
-                sim.time,
+                sim.state.step,
+                sim.state.time,
                 out.display(),
                 resume()
             );
@@ -656,7 +656,7 @@ fn report(
         (None, None) if !outcome.simulation.finished() => {
             eprintln!(
                 "stopped after step {} (--stop-after-step); continue with `mpm-geo resume {}`",
-                sim.step,
+                sim.state.step,
                 out.display()
             );
             ExitCode::SUCCESS
@@ -684,7 +684,7 @@ fn print_run_summary(outcome: &RunOutcome, out: &Path) {
     );
     let mut effort = format!(
         "{} steps to t = {:.4e} s in {:.2} s",
-        sim.step, sim.time, outcome.wall_seconds
+        sim.state.step, sim.state.time, outcome.wall_seconds
     );
     if usage.newton_iterations > 0 {
         effort += &format!(
@@ -743,22 +743,23 @@ fn parse_memory_arg(text: &str) -> Result<f64, String> {
 
 /// The warnings of a finished or stopped run: points removed, an energy
 /// budget that does not close.
-fn print_warnings(sim: &mpm_geo::model::Model) {
-    if let Some(first) = sim.lost_points.first() {
-        let mass: f64 = sim.lost_points.iter().map(|l| l.mass).sum();
-        let total: f64 = sim.particles.mass.iter().sum::<f64>() + mass;
+fn print_warnings(run: &mpm_geo::simulation::Simulation) {
+    let sim = &run.model;
+    if let Some(first) = sim.state.lost_points.first() {
+        let mass: f64 = sim.state.lost_points.iter().map(|l| l.mass).sum();
+        let total: f64 = sim.state.particles.mass.iter().sum::<f64>() + mass;
         eprintln!(
             "warning: {} material point(s) left the grid and were removed (first at step {}, {:.2e} of the mass; listed in run.json)",
-            sim.lost_points.len(),
+            sim.state.lost_points.len(),
             first.step,
             mass / total
         );
     }
     let energy = mpm_geo::energy::EnergyBudget::of(sim);
-    if let Some(w) = energy.warning(sim.scene.output.energy_remainder_warning) {
+    if let Some(w) = energy.warning(run.scene.output.energy_remainder_warning) {
         eprintln!("warning: {w}");
     }
-    if let Some(w) = mpm_geo::run::volume_warning(sim) {
+    if let Some(w) = mpm_geo::run::volume_warning(run) {
         eprintln!("warning: {w}");
     }
 }

@@ -51,7 +51,7 @@ pub const PVD_FILE: &str = "particles.pvd";
 
 /// Where a run's outputs stood after a step: what a checkpoint stores so a
 /// resumed run writes on exactly as the uninterrupted one would.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, serde::Serialize, serde::Deserialize)]
 pub struct OutputCursor {
     /// Step of the last `curve.csv` row (`None` before the first).
     pub last_row_step: Option<usize>,
@@ -86,10 +86,10 @@ pub struct FieldSnapshot {
 impl FieldSnapshot {
     /// The fields of `sim` now, for the requested time `requested_time`.
     pub fn of(sim: &crate::simulation::Simulation, requested_time: f64) -> Self {
-        let p = &sim.model.particles;
+        let p = &sim.model.state.particles;
         Self {
             requested_time,
-            time: sim.model.time,
+            time: sim.model.state.time,
             positions: p.position.clone(),
             eps_q: p.def_grad.iter().map(deviatoric_hencky_strain).collect(),
             volumes: p.volume.clone(),

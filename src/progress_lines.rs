@@ -79,16 +79,16 @@ impl ProgressLines {
 /// runs), else steps over steps.
 fn share_done(sim: &Simulation) -> f64 {
     let model = &sim.model;
-    let scene = &model.scene.scene;
+    let run = &model.settings.run;
     let by_time = match model.analysis() {
         AnalysisKind::Explicit => true,
-        AnalysisKind::ImplicitDynamic => model.scene.solver.adaptive(),
+        AnalysisKind::ImplicitDynamic => model.settings.solver.adaptive(),
         AnalysisKind::QuasiStatic => false,
     };
     let share = if by_time {
-        model.time / scene.end_time_or_steps()
+        model.state.time / run.end_time_or_steps()
     } else {
-        model.step as f64 / scene.steps.unwrap_or(0) as f64
+        model.state.step as f64 / run.steps.unwrap_or(0) as f64
     };
     if share.is_finite() {
         share.clamp(0.0, 1.0)

@@ -61,7 +61,9 @@ impl Resumable {
         crate::run::drive(simulation, &dir, drive, |sim, mut manifest| {
             manifest
                 .remove_temporaries(&dir, &left_behind)
-                .map_err(|(path, e)| io_error(&path, e).at(sim.model.step, sim.model.time))?;
+                .map_err(|(path, e)| {
+                    io_error(&path, e).at(sim.model.state.step, sim.model.state.time)
+                })?;
             manifest
                 .temporary_prefixes
                 .retain(|p| !left_behind.contains(p));

@@ -30,7 +30,7 @@ pub use crate::output::{FieldSnapshot, OutputCursor, PVD_FILE};
 
 /// The run error of an output failure at `sim`'s current step and time.
 fn at(sim: &Simulation) -> impl Fn(OutputError) -> RunError + '_ {
-    |e| e.at(sim.model.step, sim.model.time)
+    |e| e.at(sim.model.state.step, sim.model.state.time)
 }
 
 /// Writes a run's outputs as it goes.
@@ -77,13 +77,13 @@ impl OutputObserver {
                 path: dir.to_path_buf(),
                 source: e,
             }
-            .at(sim.model.step, sim.model.time)
+            .at(sim.model.state.step, sim.model.state.time)
         })?;
         let mut columns = sim.step_column_names();
         columns.extend(sim.monitor_columns().into_iter().map(|(_, column)| column));
         let curve = CurveWriter::create(&dir.join("curve.csv"), &columns).map_err(at(sim))?;
         let progress = progress_bar(sim, show_progress);
-        let mut pending_times = sim.model.scene.output.snapshot_times.clone();
+        let mut pending_times = sim.scene.output.snapshot_times.clone();
         pending_times.sort_by(|a, b| b.total_cmp(a));
         Ok(Self {
             dir: dir.to_path_buf(),
@@ -116,7 +116,7 @@ impl OutputObserver {
     ) -> Result<Self, RunError> {
         let curve =
             CurveWriter::reopen(&dir.join("curve.csv"), cursor.curve_bytes).map_err(at(sim))?;
-        remove_snapshots_after(dir, sim.model.step, &manifest).map_err(at(sim))?;
+        remove_snapshots_after(dir, sim.model.state.step, &manifest).map_err(at(sim))?;
         if !cursor.snapshots.is_empty() {
             write_pvd(&dir.join(PVD_FILE), &cursor.snapshots).map_err(at(sim))?;
         }
@@ -186,7 +186,7 @@ impl OutputObserver {
         match self.checkpoints.as_mut() {
             Some(checkpoints) => checkpoints
                 .write(sim, cursor)
-                .map_err(|e| e.at(sim.model.step, sim.model.time)),
+                .map_err(|e| e.at(sim.model.state.step, sim.model.state.time)),
             None => Ok(()),
         }
     }
@@ -199,7 +199,7 @@ impl OutputObserver {
     /// Capture the fields for every snapshot time the run has now reached
     /// (within a relative 1e-9 of the time); true if any.
     fn capture_due_times(&mut self, sim: &Simulation) -> bool {
-        let time = sim.model.time;
+        let time = sim.model.state.time;
         let mut any = false;
         while let Some(&t) = self.pending_times.last() {
             if time < t - 1e-9 * t.abs().max(1.0) {
@@ -213,8 +213,8 @@ impl OutputObserver {
     }
 
     fn snapshot_due(sim: &Simulation) -> bool {
-        let o = &sim.model.scene.output;
-        let step = sim.model.step;
+        let o = &sim.scene.output;
+        let step = sim.model.state.step;
         o.snapshots.contains(&step)
             || (o.snapshot_every > 0 && step.is_multiple_of(o.snapshot_every))
     }
@@ -223,9 +223,9 @@ impl OutputObserver {
     /// name `run.json` does not list yet is recorded there first, with the
     /// next ones that can be foreseen.
     fn write_snapshot(&mut self, sim: &Simulation) -> Result<(), RunError> {
-        let name = manifest::snapshot_name(sim.model.step);
+        let name = manifest::snapshot_name(sim.model.state.step);
         if !self.manifest.contains(&name) {
-            foresee_snapshots(&mut self.manifest, sim, sim.model.step);
+            foresee_snapshots(&mut self.manifest, sim, sim.model.state.step);
             self.manifest.add(&name);
             self.manifest.add(PVD_FILE);
             write_run_json(
@@ -238,8 +238,8 @@ impl OutputObserver {
             )
             .map_err(at(sim))?;
         }
-        write_vtu(&self.dir.join(&name), &sim.model.particles).map_err(at(sim))?;
-        self.snapshots.push((sim.model.time, name));
+        write_vtu(&self.dir.join(&name), &sim.model.state.particles).map_err(at(sim))?;
+        self.snapshots.push((sim.model.state.time, name));
         write_pvd(&self.dir.join(PVD_FILE), &self.snapshots).map_err(at(sim))
     }
 
@@ -253,9 +253,9 @@ impl OutputObserver {
         let mut values = sim.step_column_values();
         values.extend(sim.monitor_values());
         self.curve
-            .row(model.step, model.time, &values)
+            .row(model.state.step, model.state.time, &values)
             .map_err(at(sim))?;
-        self.last_row_step = model.step;
+        self.last_row_step = model.state.step;
         Ok(())
     }
 
@@ -263,7 +263,7 @@ impl OutputObserver {
     pub fn finish(&mut self, sim: &Simulation) -> Result<(), RunError> {
         sim.profile.time(Stage::Output, || {
             self.progress.finish_and_clear();
-            if self.last_row_step != sim.model.step {
+            if self.last_row_step != sim.model.state.step {
                 self.write_row(sim)?;
             }
             Ok(())
@@ -271,28 +271,28 @@ impl OutputObserver {
     }
 
     fn show_progress(&self, sim: &Simulation, report: &StepReport) {
-        let adaptive = sim.model.scene.solver.adaptive();
+        let adaptive = sim.scene.solver.adaptive();
         match sim.model.analysis() {
             AnalysisKind::ImplicitDynamic if adaptive => {
-                let end = sim.model.scene.scene.end_time_or_steps();
+                let end = sim.scene.scene.end_time_or_steps();
                 self.progress
-                    .set_position((1000.0 * sim.model.time / end) as u64);
+                    .set_position((1000.0 * sim.model.state.time / end) as u64);
                 self.progress.set_message(format!(
                     "step {} t={:.4e} s dt={:.2e} s Newton {} it",
                     report.step, report.time, report.dt, report.iterations
                 ));
             }
             AnalysisKind::Explicit => {
-                let end = sim.model.scene.scene.end_time.unwrap_or(1.0);
+                let end = sim.scene.scene.end_time.unwrap_or(1.0);
                 self.progress
-                    .set_position((1000.0 * sim.model.time / end) as u64);
+                    .set_position((1000.0 * sim.model.state.time / end) as u64);
                 self.progress.set_message(format!(
                     "step {} t={:.4e} s dt={:.2e} s",
                     report.step, report.time, report.dt
                 ));
             }
             _ => {
-                self.progress.set_position(sim.model.step as u64);
+                self.progress.set_position(sim.model.state.step as u64);
                 self.progress.set_message(format!(
                     "t={:.4e} Newton {} it{}",
                     report.time,
@@ -324,8 +324,8 @@ fn progress_bar(sim: &Simulation, show: bool) -> ProgressBar {
     }
     let total = match sim.model.analysis() {
         AnalysisKind::Explicit => 1000,
-        AnalysisKind::ImplicitDynamic if sim.model.scene.solver.adaptive() => 1000,
-        _ => sim.model.scene.scene.steps.unwrap_or(0) as u64,
+        AnalysisKind::ImplicitDynamic if sim.scene.solver.adaptive() => 1000,
+        _ => sim.scene.scene.steps.unwrap_or(0) as u64,
     };
     let bar = ProgressBar::new(total);
     let template = "{bar:30} {pos}/{len} [{elapsed_precise} < {eta_precise}] {msg}";
@@ -339,10 +339,10 @@ fn progress_bar(sim: &Simulation, show: bool) -> ProgressBar {
 fn progress_position(sim: &Simulation) -> u64 {
     match sim.model.analysis() {
         AnalysisKind::Explicit => {
-            let end = sim.model.scene.scene.end_time.unwrap_or(1.0);
-            (1000.0 * sim.model.time / end) as u64
+            let end = sim.scene.scene.end_time.unwrap_or(1.0);
+            (1000.0 * sim.model.state.time / end) as u64
         }
-        _ => sim.model.step as u64,
+        _ => sim.model.state.step as u64,
     }
 }
 
@@ -371,7 +371,7 @@ fn remove_snapshots_after(dir: &Path, step: usize, manifest: &Manifest) -> Resul
 /// step when the step count is fixed). Snapshots at `snapshot_times` fall
 /// on steps known only when reached: they are recorded then.
 pub fn foresee_snapshots(manifest: &mut Manifest, sim: &Simulation, from: usize) {
-    let output = &sim.model.scene.output;
+    let output = &sim.scene.output;
     for &step in output.snapshots.iter().filter(|&&s| s >= from) {
         manifest.add(&manifest::snapshot_name(step));
     }
@@ -381,8 +381,8 @@ pub fn foresee_snapshots(manifest: &mut Manifest, sim: &Simulation, from: usize)
     }
     let fixed_steps = match sim.model.analysis() {
         AnalysisKind::Explicit => None,
-        AnalysisKind::ImplicitDynamic if sim.model.scene.solver.adaptive() => None,
-        _ => sim.model.scene.scene.steps,
+        AnalysisKind::ImplicitDynamic if sim.scene.solver.adaptive() => None,
+        _ => sim.scene.scene.steps,
     };
     let first = from.next_multiple_of(every);
     let mut last = first + (SNAPSHOTS_AHEAD - 1) * every;
@@ -411,8 +411,8 @@ impl Observer for OutputObserver {
 
     fn on_step(&mut self, sim: &Simulation, report: &StepReport) -> Result<(), RunError> {
         sim.profile.time(Stage::Output, || {
-            let every = sim.model.scene.output.curve_every.max(1);
-            if sim.model.step.is_multiple_of(every) || sim.finished() {
+            let every = sim.scene.output.curve_every.max(1);
+            if sim.model.state.step.is_multiple_of(every) || sim.finished() {
                 self.write_row(sim)?;
             }
             let at_time = self.capture_due_times(sim);
@@ -425,7 +425,7 @@ impl Observer for OutputObserver {
             }
             Ok::<_, RunError>(())
         })?;
-        self.stop = self.stop_after == Some(sim.model.step);
+        self.stop = self.stop_after == Some(sim.model.state.step);
         if !self.stop && self.checkpoints.as_ref().is_some_and(|c| c.due(sim)) {
             sim.profile
                 .time(Stage::Output, || self.write_checkpoint(sim))?;
@@ -451,7 +451,7 @@ impl Observer for OutputObserver {
             // row below (which an uninterrupted run would not have)
             self.write_checkpoint(sim)?;
             // the interrupted step's row, even if `curve_every` skips it
-            if self.last_row_step != sim.model.step {
+            if self.last_row_step != sim.model.state.step {
                 self.write_row(sim)?;
             }
             Ok(())
@@ -537,8 +537,8 @@ pub fn run_scene_with(
     let mut sim = Simulation::new(scene)?;
     let manifest = planned_manifest(&sim, options);
     let lock = output_dir::prepare(out, options.overwrite, &manifest)?;
-    let systems = sim.model.scene.output.systems.clone();
-    let max_mb = sim.model.scene.output.systems_max_mb;
+    let systems = sim.scene.output.systems.clone();
+    let max_mb = sim.scene.output.systems_max_mb;
     if let Some(implicit) = sim.integrator.implicit_mut() {
         implicit.export_systems(out.join(manifest::SYSTEMS_FOLDER), systems, max_mb);
     }
@@ -559,7 +559,7 @@ pub fn run_scene_with(
         let checkpoints = match &options.checkpoint {
             Some((source, every)) => Some(
                 Checkpointer::start(out, source, *every)
-                    .map_err(|e| e.at(sim.model.step, sim.model.time))?,
+                    .map_err(|e| e.at(sim.model.state.step, sim.model.state.time))?,
             ),
             None => None,
         };
@@ -588,14 +588,14 @@ fn planned_manifest(sim: &Simulation, options: &RunOptions) -> Manifest {
     for name in &options.extra_files {
         manifest.add(name);
     }
-    let systems = &sim.model.scene.output.systems;
+    let systems = &sim.scene.output.systems;
     if sim.integrator.implicit().is_some() && !systems.is_empty() {
         manifest.systems = Some(manifest::SystemsRecord {
             folder: manifest::SYSTEMS_FOLDER.into(),
             steps: systems.clone(),
         });
     }
-    foresee_snapshots(&mut manifest, sim, sim.model.step);
+    foresee_snapshots(&mut manifest, sim, sim.model.state.step);
     manifest
 }
 
@@ -696,7 +696,7 @@ pub(crate) fn drive(
     if let Err(e) = written {
         // the first error is the one reported; run.json keeps its last
         // whole version (`running`) if even this fails
-        error.get_or_insert(e.at(sim.model.step, sim.model.time));
+        error.get_or_insert(e.at(sim.model.state.step, sim.model.state.time));
     }
     Ok(RunOutcome {
         simulation: sim,
@@ -802,12 +802,12 @@ pub fn write_run_json(
     let implicit = sim.integrator.implicit();
     let solver_warnings = implicit.map_or_else(Vec::new, |i| i.solver_warnings());
     let energy = crate::energy::EnergyBudget::of(model);
-    let energy_warning = energy.warning(model.scene.output.energy_remainder_warning);
+    let energy_warning = energy.warning(sim.scene.output.energy_remainder_warning);
     let all_warnings = [
-        model.scene.warnings(),
+        sim.scene.warnings(),
         solver_warnings.clone(),
         energy_warning.into_iter().collect(),
-        volume_warning(model).into_iter().collect(),
+        volume_warning(sim).into_iter().collect(),
     ]
     .concat();
     let newton_iterations = sim.integrator.usage().newton_iterations;
@@ -828,11 +828,11 @@ pub fn write_run_json(
         "error": error,
         "error_id": error_id,
         "interrupted": interrupted,
-        "steps_completed": model.step,
-        "time": model.time,
-        "particles": model.particles.len(),
-        "lost_points": model.lost_points,
-        "point_volumes": point_volume_summary(model),
+        "steps_completed": model.state.step,
+        "time": model.state.time,
+        "particles": model.state.particles.len(),
+        "lost_points": model.state.lost_points,
+        "point_volumes": point_volume_summary(sim),
         "energy": energy,
         "grid_cells": model.grid.cells,
         "wall_seconds": wall_seconds,
@@ -840,7 +840,7 @@ pub fn write_run_json(
         "materials": materials,
         "solver": {
             "analysis": model.analysis(),
-            "linear_solver_policy": model.scene.solver.linear_solver,
+            "linear_solver_policy": sim.scene.solver.linear_solver,
             "usage": sim.integrator.usage(),
             "factorisation": {
                 "symbolic": factorisation.symbolic,
@@ -860,11 +860,11 @@ pub fn write_run_json(
             },
             "linear": {
                 "options": {
-                    "linear_solver": model.scene.solver.linear_solver,
-                    "factorization": model.scene.solver.factorization,
-                    "ordering": model.scene.solver.ordering,
-                    "pcg_preconditioner": model.scene.solver.pcg_preconditioner,
-                    "pcg_tolerance": model.scene.solver.pcg_tolerance,
+                    "linear_solver": sim.scene.solver.linear_solver,
+                    "factorization": sim.scene.solver.factorization,
+                    "ordering": sim.scene.solver.ordering,
+                    "pcg_preconditioner": sim.scene.solver.pcg_preconditioner,
+                    "pcg_tolerance": sim.scene.solver.pcg_tolerance,
                 },
                 "symbolic_seconds": factorisation.symbolic_seconds,
                 "numeric_seconds": factorisation.numeric_seconds,
@@ -887,7 +887,7 @@ pub fn write_run_json(
         "manifest": manifest,
         "provenance": provenance_record(provenance, sim, status),
         "summary": run_summary(path, sim, status),
-        "scene": model.scene,
+        "scene": sim.scene,
     });
     write_json(path, &value)
 }
@@ -904,7 +904,7 @@ fn provenance_record(
         Some(p) => serde_json::to_value(p).unwrap_or_default(),
         None => serde_json::to_value(Provenance::now(None, &[])).unwrap_or_default(),
     };
-    let scene = serde_json::to_string(&sim.model.scene).unwrap_or_default();
+    let scene = serde_json::to_string(&sim.scene).unwrap_or_default();
     record["scene_fingerprint"] = crate::provenance::fingerprint_text(&scene).into();
     record["ended_at"] = match status {
         RunStatus::Running => serde_json::Value::Null,
@@ -926,8 +926,8 @@ fn run_summary(run_json: &Path, sim: &Simulation, status: RunStatus<'_>) -> serd
     let pvd = dir.join(PVD_FILE);
     json!({
         "status": status.name(),
-        "steps": sim.model.step,
-        "time": sim.model.time,
+        "steps": sim.model.state.step,
+        "time": sim.model.state.time,
         "monitors": monitors,
         "outputs": dir.display().to_string(),
         "paraview": pvd.exists().then(|| pvd.display().to_string()),
@@ -943,22 +943,31 @@ fn run_summary(run_json: &Path, sim: &Simulation, status: RunStatus<'_>) -> serd
 /// how many points sit at the `grid.max_point_volume` bound (null when
 /// unset): how far the motion stretched the points (a 2 × 2 layout starts
 /// at 0.25).
-fn point_volume_summary(model: &crate::model::Model) -> serde_json::Value {
+fn point_volume_summary(sim: &Simulation) -> serde_json::Value {
+    let model = &sim.model;
     let cell_area = model.grid.cell_size.powi(2);
-    let largest = model.particles.volume.iter().copied().fold(0.0, f64::max) / cell_area;
-    let at_bound = model.scene.grid.max_point_volume.map(|cells| {
+    let largest = model
+        .state
+        .particles
+        .volume
+        .iter()
+        .copied()
+        .fold(0.0, f64::max)
+        / cell_area;
+    let at_bound = model.settings.grid.max_point_volume.map(|cells| {
         let bound = cells * cell_area;
         model
+            .state
             .particles
             .volume
             .iter()
             .filter(|&&v| v >= bound * (1.0 - 1e-12))
             .count()
     });
-    let range = jacobian_range(model);
+    let range = jacobian_range(sim);
     json!({
         "largest_cells": largest,
-        "bound_cells": model.scene.grid.max_point_volume,
+        "bound_cells": model.settings.grid.max_point_volume,
         "at_bound": at_bound,
         "jacobian_range": range.map(|r| [r.smallest, r.largest]),
         "jacobian_out_of_range": range.map(|r| r.outside),
@@ -984,16 +993,17 @@ pub struct JacobianRange {
     pub outside: usize,
 }
 
-/// J = V/V0 over the points of `model` (`None` without points).
-pub fn jacobian_range(model: &crate::model::Model) -> Option<JacobianRange> {
-    let p = &model.particles;
+/// J = V/V0 over the points of the run `sim` (`None` without points).
+pub fn jacobian_range(sim: &Simulation) -> Option<JacobianRange> {
+    let model = &sim.model;
+    let p = &model.state.particles;
     let density: Vec<f64> = model
         .material_names
         .iter()
-        .map(|name| model.scene.materials.get(name).map_or(0.0, |m| m.density()))
+        .map(|name| sim.scene.materials.get(name).map_or(0.0, |m| m.density()))
         .collect();
     let bound = model
-        .scene
+        .settings
         .grid
         .max_point_volume
         .map(|cells| cells * model.grid.cell_size.powi(2) * (1.0 - 1e-12));
@@ -1024,8 +1034,8 @@ pub fn jacobian_range(model: &crate::model::Model) -> Option<JacobianRange> {
 }
 
 /// The warning of a run whose points left [`JACOBIAN_RANGE`].
-pub fn volume_warning(model: &crate::model::Model) -> Option<String> {
-    let r = jacobian_range(model)?;
+pub fn volume_warning(sim: &Simulation) -> Option<String> {
+    let r = jacobian_range(sim)?;
     (r.outside > 0).then(|| {
         format!(
             "{} material point(s) end with a volume ratio V/V0 outside [{:e}, {:e}] (from {:.2e} to {:.2e}): the body was crushed or torn beyond what the grid resolves; check the loads, the time step and `grid.max_point_volume`",

@@ -510,7 +510,7 @@ fn non_finite_state_during_a_run_stops_it_with_point_and_step() {
     // a NaN in a variable only the outputs read (the deformation gradient)
     let mut sim = common::simulation("elastic/bar_explicit.toml", &[]);
     sim.step_once().unwrap();
-    sim.model.particles.def_grad[40][0] = f64::NAN;
+    sim.model.state.particles.def_grad[40][0] = f64::NAN;
     match sim.step_once() {
         Err(
             e @ RunError::Step {
@@ -533,7 +533,7 @@ fn non_finite_state_during_a_run_stops_it_with_point_and_step() {
     // naming a material point and the non-finite value
     let mut sim = common::simulation("elastic/bar_explicit.toml", &[]);
     sim.step_once().unwrap();
-    sim.model.particles.velocity[40][1] = f64::NAN;
+    sim.model.state.particles.velocity[40][1] = f64::NAN;
     let text = sim
         .step_once()
         .expect_err("the NaN stops the run")
@@ -546,7 +546,7 @@ fn non_finite_state_during_a_run_stops_it_with_point_and_step() {
     );
     // a finite state whose monitor overflows: ½ m v² · scale with scale 1e308
     let mut sim = common::simulation("elastic/bar_explicit.toml", &["monitor.1.scale=1e308"]);
-    for v in &mut sim.model.particles.velocity {
+    for v in &mut sim.model.state.particles.velocity {
         v[1] = 1e10;
     }
     match sim.step_once() {

@@ -26,6 +26,7 @@ fn run(cells_per_metre: usize) -> (f64, f64) {
     let load = sim.monitor_values()[common::column(&sim, "load")];
     let eps_q: Vec<f64> = sim
         .model
+        .state
         .particles
         .def_grad
         .iter()
@@ -33,7 +34,7 @@ fn run(cells_per_metre: usize) -> (f64, f64) {
         .collect();
     let eps_q = clip_outliers(&eps_q, 0.99);
     let band = shear_band_width(
-        &sim.model.particles.position,
+        &sim.model.state.particles.position,
         &eps_q,
         sim.model.grid.cell_size,
         0.0,

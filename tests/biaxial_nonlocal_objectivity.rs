@@ -32,10 +32,10 @@ fn run(cells_per_metre: usize) -> Outcome {
     let history = common::run_history(&mut sim);
     let (load, top) = (common::column(&sim, "load"), common::column(&sim, "top_uy"));
     let curve: Vec<(f64, f64)> = history.iter().map(|(_, v)| (-v[top], v[load])).collect();
-    let l_s = sim.model.scene.nonlocal.as_ref().unwrap().length_scale;
+    let l_s = sim.scene.nonlocal.as_ref().unwrap().length_scale;
     assert_eq!(l_s, LENGTH_SCALE);
     let h = sim.model.grid.cell_size;
-    let p = &sim.model.particles;
+    let p = &sim.model.state.particles;
     let kappa_bar: Vec<f64> = p
         .state
         .iter()

@@ -353,7 +353,7 @@ fn a_checkpoint_written_on_request_at_any_step_resumes_identically() {
         .unwrap()
         .with_checkpoints(Some(checkpoints), Some(47));
     sim.run(&mut observer).unwrap();
-    assert_eq!(sim.model.step, 47);
+    assert_eq!(sim.model.state.step, 47);
     observer.write_checkpoint(&sim).unwrap();
     observer.finish(&sim).unwrap(); // the interrupted run's last row (step 47)
     assert_eq!(last_row_step(&stopped), 47);

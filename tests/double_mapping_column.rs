@@ -14,7 +14,7 @@ fn run(overrides: &[&str]) -> (f64, f64) {
     let mut sim: Simulation = common::simulation(SCENE, overrides);
     let history = common::run_history(&mut sim);
     let settlement = history.last().unwrap().1[common::column(&sim, "top_settlement")];
-    let g = sim.model.scene.loads.gravity_ramp.as_ref().unwrap().max;
+    let g = sim.scene.loads.gravity_ramp.as_ref().unwrap().max;
     (common::column_stress_rms(&sim, g), settlement)
 }
 

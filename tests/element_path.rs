@@ -23,11 +23,11 @@ fn engine_reproduces_the_driver_and_first_yield() {
     let mut sim = common::simulation("hmc/element_path.toml", &[]);
     let mut strains = Vec::new();
     let mut stresses = Vec::new();
-    let mut volumes = vec![sim.model.particles.volume.iter().sum::<f64>()];
+    let mut volumes = vec![sim.model.state.particles.volume.iter().sum::<f64>()];
     while !sim.finished() {
         sim.step_once().unwrap_or_else(|e| panic!("{e}"));
         // all four points carry the same homogeneous state
-        let p = &sim.model.particles;
+        let p = &sim.model.state.particles;
         for i in 1..p.len() {
             assert!(
                 (p.stress[i][1] - p.stress[0][1]).abs() <= 1e-6 * p.stress[0][1].abs(),
@@ -68,10 +68,10 @@ fn engine_reproduces_the_driver_and_first_yield() {
     }
     println!(
         "element path: dissipation engine {:.6e} vs driver {dissipation:.6e} kJ/m",
-        sim.model.dissipated_energy
+        sim.model.state.dissipated_energy
     );
     assert!(dissipation > 0.0);
-    assert!((sim.model.dissipated_energy / dissipation - 1.0).abs() <= 5e-3);
+    assert!((sim.model.state.dissipated_energy / dissipation - 1.0).abs() <= 5e-3);
     let first_yield = peak - 100.0;
     println!("element path: first yield Δσyy = −{first_yield:.3} kPa (theory −552.26)");
     assert!((first_yield / 552.26 - 1.0).abs() <= 1e-3);
@@ -87,7 +87,7 @@ fn newton_converges_quadratically_on_a_softening_step() {
         sim.step_once().unwrap_or_else(|e| panic!("{e}"));
     }
     assert!(
-        sim.model.particles.state[0].plastic_strain_eq > 0.0,
+        sim.model.state.particles.state[0].plastic_strain_eq > 0.0,
         "the last step must be plastic"
     );
     let (history, reference) = sim
@@ -99,7 +99,7 @@ fn newton_converges_quadratically_on_a_softening_step() {
     let normalised: Vec<f64> = history.iter().map(|r| r / reference).collect();
     println!(
         "softening step {}: ‖R‖/F_ref per iteration {normalised:?}",
-        sim.model.step
+        sim.model.state.step
     );
     assert!(
         normalised.len() >= 3 && normalised.len() <= 7,

@@ -39,7 +39,7 @@ fn radial_error(nu: f64, volumetric: &str, layout: &[&str]) -> f64 {
     overrides.extend_from_slice(layout);
     let mut sim = common::simulation("elastic/lame_cylinder.toml", &overrides);
     common::run_history(&mut sim);
-    let p = &sim.model.particles;
+    let p = &sim.model.state.particles;
     let (mut err2, mut ref2) = (0.0, 0.0);
     for i in 0..p.len() {
         let x0 = p.position0[i];

@@ -102,7 +102,7 @@ fn exported_system_round_trips_and_resolves() {
     assert_eq!(bits(first.k.values()), bits(k.values()));
     assert_eq!(bits(&first.rhs), bits(&residual));
     assert_eq!(first.meta["dofs"].as_array().unwrap().len(), n);
-    let options = sim.model.scene.solver.linear_options();
+    let options = sim.scene.solver.linear_options();
     for json in &systems {
         let s = read_system(json).unwrap();
         let mut solver = LinearSolver::new(options).unwrap();

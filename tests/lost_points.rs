@@ -15,28 +15,28 @@ const EDGE: f64 = 0.4;
 #[test]
 fn points_crossing_the_edge_are_removed_and_the_rest_translate_rigidly() {
     let mut sim = common::simulation(SCENE, &[]);
-    let initial_mass: f64 = sim.model.particles.mass.iter().sum();
-    let initial_count = sim.model.particles.len();
+    let initial_mass: f64 = sim.model.state.particles.mass.iter().sum();
+    let initial_count = sim.model.state.particles.len();
     let history = common::run_history(&mut sim);
-    let end_time = sim.model.time;
-    let dt = end_time / sim.model.step as f64;
+    let end_time = sim.model.state.time;
+    let dt = end_time / sim.model.state.step as f64;
 
     // Ballistic prediction: a point leaves iff x0 + v t_end > 0.4, i.e. the
     // points seeded right of x = 0.2 (half of the 8 columns, 16 of 32).
     assert_eq!(initial_count, 32);
     assert_eq!(
-        sim.model.lost_points.len(),
+        sim.model.state.lost_points.len(),
         16,
         "{:?}",
-        sim.model.lost_points
+        sim.model.state.lost_points
     );
-    let lost_mass: f64 = sim.model.lost_points.iter().map(|l| l.mass).sum();
-    let kept_mass: f64 = sim.model.particles.mass.iter().sum();
+    let lost_mass: f64 = sim.model.state.lost_points.iter().map(|l| l.mass).sum();
+    let kept_mass: f64 = sim.model.state.particles.mass.iter().sum();
     assert!(((lost_mass + kept_mass) / initial_mass - 1.0).abs() < 1e-12);
     assert!((lost_mass / initial_mass - 0.5).abs() < 1e-12);
 
     // Each point is removed in the step it crosses the edge, still moving at v.
-    for lost in &sim.model.lost_points {
+    for lost in &sim.model.state.lost_points {
         let overshoot = lost.position[0] - EDGE;
         assert!(
             overshoot > 0.0 && overshoot <= SPEED * dt * (1.0 + 1e-9),
@@ -47,13 +47,13 @@ fn points_crossing_the_edge_are_removed_and_the_rest_translate_rigidly() {
     }
 
     // The points that stay translate rigidly: displacement v t_end, velocity v, no stress.
-    for p in 0..sim.model.particles.len() {
-        assert!(sim.model.particles.position0[p][0] < 0.2);
-        let u = sim.model.particles.displacement(p);
+    for p in 0..sim.model.state.particles.len() {
+        assert!(sim.model.state.particles.position0[p][0] < 0.2);
+        let u = sim.model.state.particles.displacement(p);
         assert!((u[0] - SPEED * end_time).abs() < 1e-9, "point {p}: {u:?}");
         assert!(u[1].abs() < 1e-9, "point {p}: {u:?}");
-        assert!((sim.model.particles.velocity[p][0] - SPEED).abs() < 1e-9);
-        let stress = sim.model.particles.stress[p];
+        assert!((sim.model.state.particles.velocity[p][0] - SPEED).abs() < 1e-9);
+        let stress = sim.model.state.particles.stress[p];
         assert!(stress.iter().all(|s| s.abs() < 1e-9), "{stress:?}");
     }
 
@@ -80,7 +80,7 @@ fn monitors_follow_their_points_when_earlier_points_are_removed() {
     for (velocity, overrides) in [(SPEED, &[][..]), (-SPEED, &leftward[..])] {
         let mut sim = common::simulation(SCENE, overrides);
         let history = common::run_history(&mut sim);
-        assert_eq!(sim.model.lost_points.len(), 16, "v = {velocity}");
+        assert_eq!(sim.model.state.lost_points.len(), 16, "v = {velocity}");
         for name in ["u_top_left", "u_bottom_left"] {
             let column = common::column(&sim, name);
             for (t, values) in &history {
@@ -111,7 +111,7 @@ fn with_stop_the_first_point_to_cross_ends_the_run() {
         } => {
             // first out: the right-most column, seeded at x0 = 0.275 + 0.025/√3
             let x0 = 0.275 + 0.025 / 3f64.sqrt();
-            let dt = sim.model.time / sim.model.step as f64;
+            let dt = sim.model.state.time / sim.model.state.step as f64;
             assert!(position[0] > EDGE);
             assert!(
                 (time - (EDGE - x0) / SPEED).abs() <= dt * (1.0 + 1e-9),
@@ -120,5 +120,5 @@ fn with_stop_the_first_point_to_cross_ends_the_run() {
         }
         other => panic!("unexpected error {other}"),
     }
-    assert!(sim.model.lost_points.is_empty());
+    assert!(sim.model.state.lost_points.is_empty());
 }

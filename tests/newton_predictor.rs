@@ -26,7 +26,7 @@ fn run(predictor: &str) -> (Vec<usize>, Vec<f64>) {
         let report = sim.step_once().unwrap_or_else(|e| panic!("{e}"));
         iterations.push(report.iterations);
     }
-    let p = &sim.model.particles;
+    let p = &sim.model.state.particles;
     let u = (0..p.len()).map(|i| p.displacement(i)[0]).collect();
     (iterations, u)
 }

@@ -23,7 +23,7 @@ fn column_errors(cell_size: f64, layout: &str, shift: [f64; 2]) -> (f64, f64) {
     let r = format!("bc.fixed.1.line=\"x={}\"", 2.0 * cell_size);
     let l = format!("grid.point_layout=\"{layout}\"");
     let mut sim = common::simulation("elastic/oedometer.toml", &[&h, &w, &b, &r, &l]);
-    for x in sim.model.particles.position.iter_mut() {
+    for x in sim.model.state.particles.position.iter_mut() {
         x[0] += shift[0] * cell_size;
         x[1] += shift[1] * cell_size;
     }
@@ -31,15 +31,15 @@ fn column_errors(cell_size: f64, layout: &str, shift: [f64; 2]) -> (f64, f64) {
     let column = common::elastic_column(&sim);
     let top = column.small_strain_displacement(H, G).abs();
     let mut nodal = 0.0f64;
-    for (node, du) in sim.model.last_increment.iter().enumerate() {
+    for (node, du) in sim.model.state.last_increment.iter().enumerate() {
         let y = sim.model.grid.node_position(node)[1];
         nodal = nodal.max((du[1] - column.small_strain_displacement(y, G)).abs() / top);
     }
     let mut stress = 0.0f64;
-    for p in 0..sim.model.particles.len() {
-        let y0 = sim.model.particles.position0[p][1] + shift[1] * cell_size;
+    for p in 0..sim.model.state.particles.len() {
+        let y0 = sim.model.state.particles.position0[p][1] + shift[1] * cell_size;
         let exact = column.vertical_stress(y0, G);
-        stress = stress.max((sim.model.particles.stress[p][1] - exact).abs());
+        stress = stress.max((sim.model.state.particles.stress[p][1] - exact).abs());
     }
     (nodal, stress)
 }

@@ -13,7 +13,7 @@ fn check_patch(overrides: &[&str]) {
     let strain = [1.0e-3, -2.0e-3, 0.0, 1.5e-3];
     let expected = mat4_mul_vec(&LinearElastic::new(20000.0, 0.2).stiffness(), &strain);
     let scale = expected.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-    for (p, s) in sim.model.particles.stress.iter().enumerate() {
+    for (p, s) in sim.model.state.particles.stress.iter().enumerate() {
         for k in 0..4 {
             let err = (s[k] - expected[k]).abs() / scale;
             assert!(

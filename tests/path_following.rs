@@ -32,7 +32,7 @@ fn follow(sim: &mut Simulation) -> (Vec<[f64; 3]>, Option<String>) {
     let (load, dissipation) = (column(sim, "load"), column(sim, "dissipation"));
     let row = |sim: &Simulation| {
         let v = sim.monitor_values();
-        [sim.model.time, v[load], v[dissipation]]
+        [sim.model.state.time, v[load], v[dissipation]]
     };
     let mut rows = vec![row(sim)];
     while !sim.finished() {

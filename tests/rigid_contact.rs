@@ -82,6 +82,7 @@ fn tied_points_over_emptied_cells_carry_neither_force_nor_stiffness() {
             && ((x[1] - origin[1]) / h).floor() as usize == cj
     };
     let keep: Vec<bool> = model
+        .state
         .particles
         .position
         .iter()
@@ -91,9 +92,9 @@ fn tied_points_over_emptied_cells_carry_neither_force_nor_stiffness() {
         keep.iter().any(|k| !k),
         "no material in the first tied point's cell"
     );
-    model.particles.retain(&keep);
+    model.state.particles.retain(&keep);
     let setup = StepSetup::new(model).unwrap();
-    let driven = &model.driven;
+    let driven = &model.state.driven;
     let bears: Vec<bool> = setup
         .driven_shapes
         .iter()
@@ -109,7 +110,7 @@ fn tied_points_over_emptied_cells_carry_neither_force_nor_stiffness() {
     let zero = vec![[0.0; 2]; nodes];
     let mut force = vec![[0.0; 2]; nodes];
     driven.add_forces(
-        &model.particles,
+        &model.state.particles,
         &setup.driven_shapes,
         &setup.bins,
         &zero,
@@ -120,7 +121,7 @@ fn tied_points_over_emptied_cells_carry_neither_force_nor_stiffness() {
         .filter(|&k| bears[k])
         .map(|k| {
             driven.stiffness[k]
-                * driven.gap(k, &model.particles, &setup.driven_shapes[k], &zero, t)[1]
+                * driven.gap(k, &model.state.particles, &setup.driven_shapes[k], &zero, t)[1]
         })
         .sum();
     let total: f64 = force.iter().map(|f| f[1]).sum();
@@ -144,9 +145,9 @@ fn tied_points_over_emptied_cells_carry_neither_force_nor_stiffness() {
     );
 
     // the reported force on the soil: the same points after the step's commit
-    let mut moved = model.driven.clone();
+    let mut moved = model.state.driven.clone();
     moved.advect(&setup.driven_shapes, &setup.bins, &zero, (t, t));
-    let reported = moved.force_on_soil(0, &model.particles, t)[1];
+    let reported = moved.force_on_soil(0, &model.state.particles, t)[1];
     assert!(
         (reported / expected - 1.0).abs() < 1e-12,
         "reported {reported}, expected {expected}"
@@ -155,7 +156,7 @@ fn tied_points_over_emptied_cells_carry_neither_force_nor_stiffness() {
     // over a step from t to t + 0.5 s in which the soil rises 0.05 m, the points over
     // soil rise with it and the one over the emptied cell moves with the footing
     // (0.125 m/s down): soil coming back under it is tied where the footing is
-    let mut stepped = model.driven.clone();
+    let mut stepped = model.state.driven.clone();
     let rising = vec![[0.0, 0.05]; nodes];
     stepped.advect(&setup.driven_shapes, &setup.bins, &rising, (t, t + 0.5));
     for (k, &bears) in bears.iter().enumerate() {
@@ -187,7 +188,7 @@ fn elastic_footing_load(lo: f64, hi: f64) -> (f64, Vec<String>) {
         footprint.as_str(),
     ];
     let mut sim = common::simulation("footing/local_h250.toml", &overrides);
-    let warnings = sim.model.scene.warnings();
+    let warnings = sim.scene.warnings();
     let history = common::run_history(&mut sim);
     (history[1].1[common::column(&sim, "load")], warnings)
 }

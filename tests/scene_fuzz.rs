@@ -273,7 +273,7 @@ fn names_something(error: &SceneError, file: &str) -> bool {
 
 /// Every material point variable and monitor finite.
 fn finite_state(sim: &Simulation) -> bool {
-    let p = &sim.model.particles;
+    let p = &sim.model.state.particles;
     let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
     (0..p.len()).all(|i| {
         finite(&p.position[i])

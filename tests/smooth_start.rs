@@ -230,7 +230,7 @@ fn prescribed_lines_started_over_a_ramp_impose_the_ramped_strain() {
     let stiffness = mpm_physics::constitutive::LinearElastic::new(20000.0, 0.2).stiffness();
     let expected = mpm_physics::constitutive::mat4_mul_vec(&stiffness, &strain);
     let scale = expected.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-    for s in &sim.model.particles.stress {
+    for s in &sim.model.state.particles.stress {
         for k in 0..4 {
             let error = (s[k] - expected[k]).abs() / scale;
             assert!(error <= 1e-10, "{s:?} against {expected:?}");

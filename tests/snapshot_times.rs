@@ -33,7 +33,7 @@ fn explicit_run_captures_the_first_step_past_each_requested_time() {
         );
         assert_eq!(
             field.positions.len(),
-            outcome.simulation.model.particles.len()
+            outcome.simulation.model.state.particles.len()
         );
     }
     let snapshots = std::fs::read_dir(dir.path())

@@ -94,6 +94,7 @@ fn softening_tangent_with_rotation_matches_directional_differences() {
     }
     assert!(
         sim.model
+            .state
             .particles
             .state
             .iter()
@@ -158,6 +159,7 @@ fn b_bar_plastic_tangent_matches_directional_differences() {
     }
     let yielded = sim
         .model
+        .state
         .particles
         .state
         .iter()

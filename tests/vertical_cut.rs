@@ -49,7 +49,7 @@ impl CutRun {
         Self {
             displacement: series(a),
             group_stress: series(b),
-            lost: sim.model.lost_points.len(),
+            lost: sim.model.state.lost_points.len(),
         }
     }
 
@@ -193,10 +193,11 @@ fn friction_run(scene: Scene) -> FrictionRun {
     let steps = common::run_history(&mut sim);
     let (t_end, last) = steps.last().expect("no step");
     assert!((t_end - 0.5).abs() < 1e-9, "the run ended at {t_end} s");
-    let lost = &sim.model.lost_points;
+    let lost = &sim.model.state.lost_points;
     assert!(lost.is_empty(), "points left the grid: {lost:?}");
     let lowest = sim
         .model
+        .state
         .particles
         .position
         .iter()

@@ -168,7 +168,7 @@ fn loaded_edges(
 }
 
 /// Massless boundary points carrying a follower pressure (theory §8.0).
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, serde::Serialize, serde::Deserialize)]
 pub struct TractionPoints {
     /// Current position x_s, m.
     pub position: Vec<[f64; 2]>,
@@ -321,7 +321,7 @@ impl TractionPoints {
 ///   The first step then equals a bilinear FE model with the top nodes
 ///   tied: 12,635 kN/m per m on the biaxial at h = 1/300 m, as an independent
 ///   FE computation gives (`scripts/rough_top_fe.py`, `tests/rigid_contact.rs`).
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, serde::Serialize, serde::Deserialize)]
 pub struct DrivenPoints {
     /// The tied material point, or `None` for a surface point.
     pub particle: Vec<Option<usize>>,
@@ -338,12 +338,14 @@ pub struct DrivenPoints {
     pub velocity: Vec<[f64; 2]>,
     /// Smooth start of each rigid body's motion (`ramp_time`): the scene's,
     /// so not checkpointed.
+    #[serde(skip)]
     pub ramp: Vec<StartRamp>,
     /// Names of the rigid bodies.
     pub names: Vec<String>,
     /// Whether each point bore on soil in the last committed step
     /// ([`DrivenPoints::bears_on_soil`]); empty before the first step (all
     /// bear). Derived every step, so not checkpointed.
+    #[serde(skip)]
     pub bearing: Vec<bool>,
 }
 

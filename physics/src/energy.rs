@@ -4,7 +4,7 @@
 //! W = W_int + (K − K0) + B + R,                                    (E1)
 //!
 //! W the work of the external loads (gravity, follower pressures, rigid
-//! bodies; `Model::external_work`), W_int the work of the stresses on the
+//! bodies; `State::external_work`), W_int the work of the stresses on the
 //! strain increments, K the kinetic energy of the points (with the points
 //! removed after leaving the grid, which take theirs with them), B the
 //! energy taken at the boundary (the kinetic energy the fixed dofs removed,
@@ -58,18 +58,18 @@ impl EnergyBudget {
         let removed_kinetic_energy = removed_kinetic_energy(model);
         let kinetic_energy = model.kinetic_energy();
         let stored_elastic = model.strain_energy();
-        let (external_work, internal_work) = (model.external_work, model.internal_work);
+        let (external_work, internal_work) = (model.state.external_work, model.state.internal_work);
         Self {
             external_work,
             internal_work,
             stored_elastic,
-            dissipation: model.dissipated_energy,
+            dissipation: model.state.dissipated_energy,
             kinetic_energy,
-            initial_kinetic_energy: model.initial_kinetic_energy,
+            initial_kinetic_energy: model.state.initial_kinetic_energy,
             removed_kinetic_energy,
-            boundary_work: model.boundary_work,
+            boundary_work: model.state.boundary_work,
             remainder: remainder(model),
-            internal_work_gap: internal_work - stored_elastic - model.dissipated_energy,
+            internal_work_gap: internal_work - stored_elastic - model.state.dissipated_energy,
         }
     }
 
@@ -110,6 +110,7 @@ impl EnergyBudget {
 /// when removed), kJ/m.
 pub fn removed_kinetic_energy(model: &Model) -> f64 {
     model
+        .state
         .lost_points
         .iter()
         .map(|p| 0.5 * p.mass * (p.velocity[0].powi(2) + p.velocity[1].powi(2)))
@@ -119,8 +120,8 @@ pub fn removed_kinetic_energy(model: &Model) -> f64 {
 /// R of (E1), kJ/m: W − W_int − (K + K_removed − K0) − B.
 pub fn remainder(model: &Model) -> f64 {
     let kinetic = model.kinetic_energy() + removed_kinetic_energy(model);
-    model.external_work
-        - model.internal_work
-        - (kinetic - model.initial_kinetic_energy)
-        - model.boundary_work
+    model.state.external_work
+        - model.state.internal_work
+        - (kinetic - model.state.initial_kinetic_energy)
+        - model.state.boundary_work
 }

@@ -101,6 +101,17 @@ impl serde::Serialize for TimeStepLimit {
     }
 }
 
+impl<'de> serde::Deserialize<'de> for TimeStepLimit {
+    /// Reads the text [`serde::Serialize`] writes.
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        let text = String::deserialize(deserializer)?;
+        [Self::WaveSpeed, Self::WaveSpeedAndSprings]
+            .into_iter()
+            .find(|limit| limit.to_string() == text)
+            .ok_or_else(|| serde::de::Error::custom(format!("unknown time-step limit `{text}`")))
+    }
+}
+
 /// A D18 criterion of the implicit Newton loop.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Criterion {

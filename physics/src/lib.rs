@@ -53,6 +53,7 @@ pub mod point_driver;
 pub mod profile;
 pub mod scene;
 pub mod seeding;
+pub mod settings;
 pub mod shape;
 pub mod simulation;
 pub mod smoothing;

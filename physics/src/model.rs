@@ -19,11 +19,12 @@ use crate::scene::{
     ShapeFunctionChoice,
 };
 use crate::seeding::seed_particles;
+use crate::settings::Settings;
 use crate::walls::Walls;
 
 /// A material point dropped from the run after it left the grid
 /// (`[grid] lost_points = "remove"`), as it was at that moment.
-#[derive(Debug, Clone, serde::Serialize)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct LostPoint {
     /// Step during which the point left the grid.
     pub step: usize,
@@ -45,12 +46,14 @@ pub struct LostPoint {
 /// (`None` for a removed point).
 pub type PointRemap = Vec<Option<usize>>;
 
-/// The model and its evolving state. `Clone` copies the whole state (the
-/// material laws are shared): `benches/step.rs` times one step from a fixed state.
+/// The model: what the scene fixes for the whole run (grid, materials,
+/// Dirichlet conditions, walls) and the [`State`] the steps advance.
+/// `Clone` copies the whole state (the material laws are shared):
+/// `benches/step.rs` times one step from a fixed state.
 #[derive(Clone)]
 pub struct Model {
-    /// The validated scene.
-    pub scene: Scene,
+    /// The settings the physics reads, resolved from the scene.
+    pub settings: Settings,
     /// Background grid.
     pub grid: Grid,
     /// Material laws, indexed by particle material id.
@@ -59,8 +62,6 @@ pub struct Model {
     pub material_names: Vec<String>,
     /// Elastic compliance C = D⁻¹ of every material (D22), same order.
     pub compliances: Vec<Mat4>,
-    /// Material points.
-    pub particles: Particles,
     /// Dirichlet conditions of every grid dof.
     pub constraints: Constraints,
     /// Nodes of the frictional edges (`[[bc.friction]]`); their normal dofs
@@ -69,6 +70,23 @@ pub struct Model {
     /// The grid edges the points cannot cross (theory eq. W1), from
     /// `constraints`.
     pub walls: Walls,
+    /// What the steps change.
+    pub state: State,
+}
+
+/// Everything a step changes: the material points, the boundary devices
+/// that move with them, time and step, the last step's nodal results, the
+/// energy accounts and the removed points. A checkpoint stores it whole
+/// (`src/checkpoint`), so a field added here is saved and restored without
+/// further code. Every field is stored as it is, the derived ones too
+/// ([`State::mass_height`], [`State::nodal_results_at`]), so a restored
+/// state needs no recomputation; only the rigid bodies' start ramps
+/// ([`DrivenPoints::ramp`], the scene's) and bearing flags (derived every
+/// step) are left out of the encoding.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+pub struct State {
+    /// Material points.
+    pub particles: Particles,
     /// Follower-pressure points.
     pub traction: TractionPoints,
     /// Penalty-tied points of rigid bodies.
@@ -98,7 +116,7 @@ pub struct Model {
     /// §9, M5): W = W_int + ΔK + numerical losses.
     pub external_work: f64,
     /// Σ_p m_p y_p of the committed points (t·m/m), from which a step's
-    /// gravity work follows; recomputed from the positions on a restore.
+    /// gravity work follows.
     pub mass_height: f64,
     /// Work of the stresses on the strain increments so far (theory D43 with the
     /// total strain increment), kJ per metre run: elastic energy stored plus
@@ -194,8 +212,8 @@ impl Model {
     /// traction and driven points. Geometry problems that only show once
     /// points are seeded (a body with no point, a platen touching none) are
     /// reported as field errors.
-    pub fn new(scene: Scene) -> Result<Self, SceneError> {
-        let grid = build_grid(&scene);
+    pub fn new(scene: &Scene) -> Result<Self, SceneError> {
+        let grid = build_grid(scene);
         let material_names: Vec<String> = scene.materials.keys().cloned().collect();
         let mut errors = Vec::new();
         let mut materials: Vec<Arc<dyn ConstitutiveModel>> = Vec::new();
@@ -208,9 +226,9 @@ impl Model {
                 }
             }
         }
-        let particles = seed_particles(&scene, &grid, &material_names, &mut errors);
-        let driven = build_driven_points(&scene, &particles, &mut errors);
-        check_initial_stresses(&scene, &materials, &particles, &mut errors);
+        let particles = seed_particles(scene, &grid, &material_names, &mut errors);
+        let driven = build_driven_points(scene, &particles, &mut errors);
+        check_initial_stresses(scene, &materials, &particles, &mut errors);
         if !errors.is_empty() {
             return Err(SceneError::Invalid {
                 path: scene.scene.name.clone(),
@@ -218,19 +236,9 @@ impl Model {
             });
         }
         let n_nodes = grid.node_count();
-        let constraints = Constraints::from_scene(&scene, &grid);
-        let mut model = Model {
-            walls: Walls::of(&grid, &constraints),
-            constraints,
-            friction: crate::friction::FrictionEdges::from_scene(&scene, &grid),
-            traction: TractionPoints::from_scene(&scene),
-            compliances: materials
-                .iter()
-                .map(|m| invert4(&m.elastic_stiffness()))
-                .collect(),
-            grid,
-            materials,
-            material_names,
+        let constraints = Constraints::from_scene(scene, &grid);
+        let state = State {
+            traction: TractionPoints::from_scene(scene),
             particles,
             driven,
             pinned_points: Vec::new(),
@@ -247,33 +255,46 @@ impl Model {
             mass_height: 0.0,
             lost_points: Vec::new(),
             rigid_force: Vec::new(),
-            scene,
         };
-        model.mass_height = model.current_mass_height();
-        model.initial_kinetic_energy = model.kinetic_energy();
+        let mut model = Model {
+            walls: Walls::of(&grid, &constraints),
+            constraints,
+            friction: crate::friction::FrictionEdges::from_scene(scene, &grid),
+            compliances: materials
+                .iter()
+                .map(|m| invert4(&m.elastic_stiffness()))
+                .collect(),
+            grid,
+            materials,
+            material_names,
+            state,
+            settings: Settings::of(scene),
+        };
+        model.state.mass_height = model.current_mass_height();
+        model.state.initial_kinetic_energy = model.kinetic_energy();
         Ok(model)
     }
 
     /// The analysis type.
     pub fn analysis(&self) -> AnalysisKind {
-        self.scene.scene.analysis
+        self.settings.run.analysis
     }
 
     /// Whether the run has reached its last step / end time.
     pub fn finished(&self) -> bool {
         match self.analysis() {
             AnalysisKind::Explicit => {
-                self.time >= self.scene.scene.end_time.unwrap_or(0.0) * (1.0 - 1e-12)
+                self.state.time >= self.settings.run.end_time.unwrap_or(0.0) * (1.0 - 1e-12)
             }
-            AnalysisKind::ImplicitDynamic if self.scene.solver.adaptive() => {
-                self.time >= self.scene.scene.end_time_or_steps() * (1.0 - 1e-12)
+            AnalysisKind::ImplicitDynamic if self.settings.solver.adaptive() => {
+                self.state.time >= self.settings.run.end_time_or_steps() * (1.0 - 1e-12)
             }
             // the last path step is displacement controlled to the end (PF5)
-            AnalysisKind::QuasiStatic if self.scene.solver.follows_path() => {
-                let dt = self.scene.scene.dt.unwrap_or(1.0);
-                self.time >= self.scene.scene.end_time_or_steps() - 1e-6 * dt
+            AnalysisKind::QuasiStatic if self.settings.solver.follows_path() => {
+                let dt = self.settings.run.dt.unwrap_or(1.0);
+                self.state.time >= self.settings.run.end_time_or_steps() - 1e-6 * dt
             }
-            _ => self.step >= self.scene.scene.steps.unwrap_or(0),
+            _ => self.state.step >= self.settings.run.steps.unwrap_or(0),
         }
     }
 
@@ -293,7 +314,7 @@ impl Model {
         if self.b_bar() {
             std::borrow::Cow::Owned(crate::volumetric::force_stresses(
                 bins,
-                &self.particles.volume,
+                &self.state.particles.volume,
                 stress,
             ))
         } else {
@@ -304,16 +325,12 @@ impl Model {
     /// True when the scene takes each point's dilatation as its cell's
     /// average (`[grid] volumetric = "b_bar"`, [`crate::volumetric`]).
     pub fn b_bar(&self) -> bool {
-        self.scene.grid.volumetric == crate::scene::VolumetricTreatment::BBar
+        self.settings.grid.volumetric == crate::scene::VolumetricTreatment::BBar
     }
 
     /// Largest Young's modulus of the materials, kPa.
     pub fn max_youngs_modulus(&self) -> f64 {
-        self.scene
-            .materials
-            .values()
-            .map(|m| m.youngs_modulus())
-            .fold(0.0, f64::max)
+        self.settings.stiffest_material.map_or(0.0, |(e, _)| e)
     }
 
     /// The double-mapping mode in force: `auto` means `increment` with
@@ -322,8 +339,8 @@ impl Model {
     /// 27 keeps the mapping off there (it made the biaxial bands irregular,
     /// and it adds stress without work, on which an explicit run can feed).
     pub fn double_mapping(&self) -> DoubleMapping {
-        let bilinear = self.scene.grid.shape_functions == ShapeFunctionChoice::Bilinear;
-        match self.scene.smoothing.double_mapping {
+        let bilinear = self.settings.grid.shape_functions == ShapeFunctionChoice::Bilinear;
+        match self.settings.smoothing.double_mapping {
             DoubleMapping::Auto if bilinear && self.materials.iter().any(|m| m.can_soften()) => {
                 DoubleMapping::Increment
             }
@@ -334,12 +351,12 @@ impl Model {
 
     /// Material points a cell needs to carry traction points (half the seeding count).
     pub fn traction_min_points(&self) -> usize {
-        (self.scene.grid.points_per_cell.pow(2) / 2).max(1)
+        (self.settings.grid.points_per_cell.pow(2) / 2).max(1)
     }
 
     /// Σ ½ m_p |v_p|², kJ per metre run.
     pub fn kinetic_energy(&self) -> f64 {
-        let p = &self.particles;
+        let p = &self.state.particles;
         (0..p.len())
             .map(|i| 0.5 * p.mass[i] * (p.velocity[i][0].powi(2) + p.velocity[i][1].powi(2)))
             .sum()
@@ -348,7 +365,7 @@ impl Model {
     /// Elastic strain energy Σ ½ V_p σ_pᵀ C σ_p, kJ per metre run (C = D⁻¹ of the
     /// particle's material).
     pub fn strain_energy(&self) -> f64 {
-        let p = &self.particles;
+        let p = &self.state.particles;
         let compliance: Vec<Mat4> = p
             .material
             .iter()
@@ -364,18 +381,18 @@ impl Model {
 
     /// Σ_p m_p y_p over the material points, t·m per metre run.
     pub fn current_mass_height(&self) -> f64 {
-        let p = &self.particles;
+        let p = &self.state.particles;
         p.mass.iter().zip(&p.position).map(|(m, x)| m * x[1]).sum()
     }
 
     /// Add the work of gravity `g` (along −y) over the step that moved the
-    /// points from [`Self::mass_height`] to their present positions:
+    /// points from [`State::mass_height`] to their present positions:
     /// −g Σ_p m_p Δy_p, which equals Σ_i f_i^g · Δu_i of the body forces
     /// (theory D10) because a point moves by Σ_i N_ip Δu_i.
     pub(crate) fn account_gravity_work(&mut self, g: f64) {
         let now = self.current_mass_height();
-        self.external_work -= g * (now - self.mass_height);
-        self.mass_height = now;
+        self.state.external_work -= g * (now - self.state.mass_height);
+        self.state.mass_height = now;
     }
 
     /// Add the work of the rigid bodies on the soil over the step that began at
@@ -383,38 +400,42 @@ impl Model {
     /// theory D40), the anchor's motion being (D(t_n+1) − D(t_n)) v with the
     /// start ramp's D (v Δt without ramp).
     pub fn account_rigid_work(&mut self, start: f64) {
-        let bodies = self.driven.velocity.len();
-        self.rigid_force.resize(bodies, [0.0; 2]);
+        let bodies = self.state.driven.velocity.len();
+        self.state.rigid_force.resize(bodies, [0.0; 2]);
         for r in 0..bodies {
-            let now = self.driven.force_on_soil(r, &self.particles, self.time);
-            let before = self.rigid_force[r];
-            let v = self.driven.velocity[r];
-            let travel = self.driven.travel(r, start, self.time);
-            self.external_work +=
+            let now = self
+                .state
+                .driven
+                .force_on_soil(r, &self.state.particles, self.state.time);
+            let before = self.state.rigid_force[r];
+            let v = self.state.driven.velocity[r];
+            let travel = self.state.driven.travel(r, start, self.state.time);
+            self.state.external_work +=
                 0.5 * travel * ((before[0] + now[0]) * v[0] + (before[1] + now[1]) * v[1]);
-            self.rigid_force[r] = now;
+            self.state.rigid_force[r] = now;
         }
     }
 
     /// With `[grid] lost_points = "remove"`, drop every material point outside
-    /// the grid and record it in [`Self::lost_points`]; the rigid-body ties and
-    /// [`Self::pinned_points`] follow, and the remap is returned for whoever
+    /// the grid and record it in [`State::lost_points`]; the rigid-body ties and
+    /// [`State::pinned_points`] follow, and the remap is returned for whoever
     /// else holds point indices (`None` when no point was removed). A point a
     /// rigid body is tied to or that is pinned is not dropped, nor is the last
     /// point of the run: the first such point is reported as having left the
     /// grid. With `stop` this does nothing.
     pub fn drop_lost_points(&mut self) -> Result<Option<PointRemap>, StepError> {
-        if self.scene.grid.lost_points == LostPointPolicy::Stop {
+        if self.settings.grid.lost_points == LostPointPolicy::Stop {
             return Ok(None);
         }
-        let p = &self.particles;
+        let p = &self.state.particles;
         let grid = &self.grid;
         if p.position.par_iter().all(|&x| grid.contains(x)) {
             return Ok(None);
         }
         let keep: Vec<bool> = p.position.iter().map(|&x| grid.contains(x)).collect();
-        let held =
-            |i: usize| self.driven.particle.contains(&Some(i)) || self.pinned_points.contains(&i);
+        let held = |i: usize| {
+            self.state.driven.particle.contains(&Some(i)) || self.state.pinned_points.contains(&i)
+        };
         // A run with no material left has nothing to compute: report the first point out.
         let nothing_left = !keep.iter().any(|&k| k);
         if let Some(i) = (0..keep.len()).find(|&i| !keep[i] && (nothing_left || held(i))) {
@@ -424,8 +445,8 @@ impl Model {
             });
         }
         for (removed, i) in (0..keep.len()).filter(|&i| !keep[i]).enumerate() {
-            self.lost_points.push(LostPoint {
-                step: self.step + 1,
+            self.state.lost_points.push(LostPoint {
+                step: self.state.step + 1,
                 index: i - removed,
                 position: p.position[i],
                 velocity: p.velocity[i],
@@ -435,13 +456,13 @@ impl Model {
             });
         }
         let remap = remap_of(&keep);
-        for tie in self.driven.particle.iter_mut().flatten() {
+        for tie in self.state.driven.particle.iter_mut().flatten() {
             *tie = remap[*tie].unwrap_or(*tie);
         }
-        for pinned in &mut self.pinned_points {
+        for pinned in &mut self.state.pinned_points {
             *pinned = remap[*pinned].unwrap_or(*pinned);
         }
-        self.particles.retain(&keep);
+        self.state.particles.retain(&keep);
         Ok(Some(remap))
     }
 }

@@ -35,6 +35,7 @@ impl Monitor {
             | MonitorKind::PointStress => {
                 let x = spec.point.unwrap_or_default();
                 let p = model
+                    .state
                     .particles
                     .position0
                     .iter()
@@ -57,6 +58,7 @@ impl Monitor {
                 let name = spec.rigid.clone().unwrap_or_default();
                 Target::Rigid(
                     model
+                        .state
                         .driven
                         .names
                         .iter()
@@ -118,7 +120,7 @@ impl Monitor {
     /// own value): stresses of the mean stress tensor, the mean κ or κ̄, the
     /// centre; NaN for an empty group.
     fn quantity(&self, model: &Model, members: &[usize]) -> f64 {
-        let p = &model.particles;
+        let p = &model.state.particles;
         let volume: f64 = members.iter().map(|&i| p.volume[i]).sum();
         let mean = |value: &dyn Fn(usize) -> f64| match members {
             [one] => value(*one),
@@ -150,7 +152,7 @@ impl Monitor {
             VectorComponent::Y => v[1],
             VectorComponent::Norm => (v[0] * v[0] + v[1] * v[1]).sqrt(),
         };
-        let p = &model.particles;
+        let p = &model.state.particles;
         let raw = match (&self.target, self.spec.kind) {
             (Target::Particle(i), MonitorKind::PointDisplacement) => pick(p.displacement(*i)),
             (Target::Particle(i), MonitorKind::PointVelocity) => pick(p.velocity[*i]),
@@ -159,7 +161,7 @@ impl Monitor {
             (Target::Nodes(nodes), _) => {
                 let mut sum = [0.0; 2];
                 for &n in nodes {
-                    if let Some(r) = model.reaction.get(n) {
+                    if let Some(r) = model.state.reaction.get(n) {
                         sum[0] += r[0];
                         sum[1] += r[1];
                     }
@@ -167,22 +169,24 @@ impl Monitor {
                 pick(sum)
             }
             (Target::Rigid(r), MonitorKind::RigidDisplacement) => {
-                pick(model.driven.mean_displacement(*r, p))
+                pick(model.state.driven.mean_displacement(*r, p))
             }
-            (Target::Rigid(r), _) => pick(model.driven.force_on_soil(*r, p, model.time)),
+            (Target::Rigid(r), _) => {
+                pick(model.state.driven.force_on_soil(*r, p, model.state.time))
+            }
             (_, MonitorKind::KineticEnergy) => model.kinetic_energy(),
             (_, MonitorKind::StrainEnergy) => model.strain_energy(),
-            (_, MonitorKind::ExternalWork) => model.external_work,
-            (_, MonitorKind::InternalWork) => model.internal_work,
+            (_, MonitorKind::ExternalWork) => model.state.external_work,
+            (_, MonitorKind::InternalWork) => model.state.internal_work,
             (_, MonitorKind::MaxPlasticStrain) => p
                 .state
                 .iter()
                 .map(|s| s.plastic_strain_eq)
                 .fold(0.0, f64::max),
-            (_, MonitorKind::DissipatedEnergy) => model.dissipated_energy,
-            (_, MonitorKind::BoundaryWork) => model.boundary_work,
+            (_, MonitorKind::DissipatedEnergy) => model.state.dissipated_energy,
+            (_, MonitorKind::BoundaryWork) => model.state.boundary_work,
             (_, MonitorKind::EnergyRemainder) => crate::energy::remainder(model),
-            (_, MonitorKind::Gravity) => model.scene.loads.gravity_at(model.time),
+            (_, MonitorKind::Gravity) => model.settings.loads.gravity_at(model.state.time),
             (_, MonitorKind::RunOut) => p
                 .position
                 .iter()
@@ -201,7 +205,7 @@ fn neighbourhood(spec: &MonitorSpec, model: &Model) -> Vec<usize> {
     let x = spec.point.unwrap_or_default();
     let radius = spec.radius.unwrap_or(model.grid.cell_size);
     let distance2 = |y: &[f64; 2]| (y[0] - x[0]).powi(2) + (y[1] - x[1]).powi(2);
-    let start = &model.particles.position0;
+    let start = &model.state.particles.position0;
     let members: Vec<usize> = (0..start.len())
         .filter(|&p| distance2(&start[p]) <= radius * radius)
         .collect();
@@ -224,16 +228,16 @@ mod tests {
     /// The coarse cut (h = 0.25 m, four points per cell) with a neighbourhood
     /// monitor of `quantity` around B, radius `radius`.
     fn cut_with_group(quantity: StressQuantity, radius: Option<f64>) -> (Model, Monitor) {
-        let scene =
+        let cut =
             Scene::from_str_with_overrides(CUT, "cut", &["grid.cell_size=0.25".into()]).unwrap();
-        let model = Model::new(scene).unwrap();
+        let model = Model::new(&cut).unwrap();
         let spec = MonitorSpec {
             name: "group".into(),
             kind: MonitorKind::NeighbourhoodStress,
             point: Some([2.78, 0.34]),
             quantity: Some(quantity),
             radius,
-            ..model.scene.monitor[0].clone()
+            ..cut.monitor[0].clone()
         };
         let monitor = Monitor::resolve(&spec, &model);
         (model, monitor)
@@ -254,7 +258,7 @@ mod tests {
         let (mut model, q) = cut_with_group(StressQuantity::Q, None);
         let group = members(&q);
         let x = [2.78, 0.34];
-        let p = &mut model.particles;
+        let p = &mut model.state.particles;
         let near = |i: usize| {
             let y = p.position0[i];
             (y[0] - x[0]).powi(2) + (y[1] - x[1]).powi(2) <= 0.25 * 0.25
@@ -276,7 +280,7 @@ mod tests {
         // q of a uniaxial tensor is |σxx|
         assert!((q.value(&model) - sxx.abs()).abs() < 1e-12);
         let (_, centre) = cut_with_group(StressQuantity::X, Some(0.25));
-        let p = &model.particles;
+        let p = &model.state.particles;
         let volume: f64 = group.iter().map(|&i| p.volume[i]).sum();
         let x_mean = group
             .iter()
@@ -293,7 +297,7 @@ mod tests {
         let (mut model, mut monitor) = cut_with_group(StressQuantity::P, Some(0.3));
         let group = members(&monitor);
         let gone = group[1];
-        let new_index: Vec<Option<usize>> = (0..model.particles.mass.len())
+        let new_index: Vec<Option<usize>> = (0..model.state.particles.mass.len())
             .map(|i| match i.cmp(&gone) {
                 std::cmp::Ordering::Less => Some(i),
                 std::cmp::Ordering::Equal => None,
@@ -303,7 +307,7 @@ mod tests {
         monitor.remap_particle(&new_index);
         let remapped = members(&monitor);
         assert_eq!(remapped.len(), group.len() - 1);
-        model.particles.position0.remove(gone);
+        model.state.particles.position0.remove(gone);
         monitor.regroup(&model);
         assert_eq!(members(&monitor), remapped);
     }

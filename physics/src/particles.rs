@@ -6,7 +6,7 @@
 use crate::constitutive::{PointState, Voigt};
 
 /// All material points of a run.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, serde::Serialize, serde::Deserialize)]
 pub struct Particles {
     /// Current position x_p, m.
     pub position: Vec<[f64; 2]>,

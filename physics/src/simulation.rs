@@ -92,6 +92,9 @@ pub use crate::scene::{STEP_COLUMN, STEP_COLUMNS, TIME_COLUMN};
 
 /// A run in progress.
 pub struct Simulation {
+    /// The validated scene the run was built from (its outputs record it;
+    /// the physics reads the model's [`crate::settings::Settings`]).
+    pub scene: Scene,
     /// The model and its state.
     pub model: Model,
     /// The time integrator.
@@ -114,18 +117,18 @@ impl Simulation {
         scene.check_resources(&ResourceLimits::for_scene(&scene))?;
         let profile = Profile::default();
         let (model, integrator, monitors) = profile.time(Stage::Build, || {
-            let mut model = Model::new(scene)?;
+            let mut model = Model::new(&scene)?;
             let integrator = Integrator::for_model(&model)?;
-            let monitors: Vec<Monitor> = model
-                .scene
+            let monitors: Vec<Monitor> = scene
                 .monitor
                 .iter()
                 .map(|m| Monitor::resolve(m, &model))
                 .collect();
-            model.pinned_points = monitors.iter().filter_map(Monitor::particle).collect();
+            model.state.pinned_points = monitors.iter().filter_map(Monitor::particle).collect();
             Ok::<_, SceneError>((model, integrator, monitors))
         })?;
         Ok(Self {
+            scene,
             model,
             integrator,
             monitors,
@@ -142,13 +145,13 @@ impl Simulation {
     /// Advance one step with the scene's integrator; a failure carries the
     /// step and the time reached.
     pub fn step_once(&mut self) -> Result<StepReport, RunError> {
-        let start = self.model.time;
+        let start = self.model.state.time;
         let report = self
             .integrator
             .step(&mut self.model, &self.profile)
             .map_err(|cause| RunError::Step {
-                step: self.model.step + 1,
-                time: self.model.time,
+                step: self.model.state.step + 1,
+                time: self.model.state.time,
                 cause,
             })?;
         self.model.account_rigid_work(start);
@@ -201,7 +204,7 @@ impl Simulation {
     /// Whether the run's steps are error-controlled.
     fn adaptive(&self) -> bool {
         self.model.analysis() == crate::scene::AnalysisKind::ImplicitDynamic
-            && self.model.scene.solver.adaptive()
+            && self.model.settings.solver.adaptive()
     }
 
     /// Run to the end, reporting every step to `observer`. On a failure the
@@ -229,8 +232,8 @@ impl Simulation {
             let value = m.value(&self.model);
             if !value.is_finite() {
                 return Err(RunError::Step {
-                    step: self.model.step,
-                    time: self.model.time,
+                    step: self.model.state.step,
+                    time: self.model.state.time,
                     cause: StepError::NonFiniteMonitor {
                         name: m.name.clone(),
                         value,
@@ -253,8 +256,8 @@ impl Simulation {
         free_increment: &[f64],
     ) -> Result<(Vec<f64>, SparseMatrix), RunError> {
         let step_error = |model: &Model, cause| RunError::Step {
-            step: model.step + 1,
-            time: model.time,
+            step: model.state.step + 1,
+            time: model.state.time,
             cause,
         };
         match self.integrator.implicit_mut() {
@@ -271,8 +274,8 @@ impl Simulation {
     /// Number of unknowns of the next implicit step.
     pub fn unknowns(&self) -> Result<usize, RunError> {
         ImplicitIntegrator::unknowns(&self.model).map_err(|cause| RunError::Step {
-            step: self.model.step + 1,
-            time: self.model.time,
+            step: self.model.state.step + 1,
+            time: self.model.state.time,
             cause,
         })
     }

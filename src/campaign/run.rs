@@ -401,12 +401,12 @@ fn execute(
         return Ok(Executed::Interrupted(signal));
     }
     let model = &outcome.simulation.model;
-    let p = &model.particles;
+    let p = &model.state.particles;
     record.positions = p.position.clone();
     record.volumes = p.volume.clone();
     let usage = outcome.simulation.integrator.usage();
     record.effort = Effort {
-        steps: model.step,
+        steps: model.state.step,
         newton_iterations: usage.newton_iterations,
         halvings: usage.halvings,
     };
@@ -419,9 +419,9 @@ fn execute(
             .collect();
     }
     record.error = outcome.error.as_ref().map(|e| e.to_string());
-    let lost_mass: f64 = model.lost_points.iter().map(|l| l.mass).sum();
+    let lost_mass: f64 = model.state.lost_points.iter().map(|l| l.mass).sum();
     let total_mass = p.mass.iter().sum::<f64>() + lost_mass;
-    record.lost_points = (model.lost_points.len(), lost_mass / total_mass);
+    record.lost_points = (model.state.lost_points.len(), lost_mass / total_mass);
     record.profile = outcome.simulation.profile.table(outcome.wall_seconds);
     record.wall_seconds = start.elapsed().as_secs_f64();
     record.fields = outcome.fields;

@@ -22,7 +22,7 @@
 //! | 16..24 | scene fingerprint (FNV-1a of the scene text and overrides) |
 //! | 24..32 | payload length, bytes |
 //! | 32..36 | CRC-32 of bytes 12..32 and of the payload |
-//! | 36.. | payload ([`codec`]: `f64` by bit pattern) |
+//! | 36.. | payload ([`codec`]: [`SavedState`] by its serde derive, `f64` by bit pattern) |
 //!
 //! Reading checks, in order: magic, version, length (truncation), checksum
 //! (corruption), fingerprint against the directory's scene (a checkpoint of
@@ -46,10 +46,11 @@ use crate::manifest::Manifest;
 use crate::output::OutputCursor;
 use crate::scene::{Scene, SceneError};
 use crate::simulation::Simulation;
-use codec::{fnv1a64, Reader, Writer};
+use bincode::Options;
+use codec::fnv1a64;
 
 /// Version of the checkpoint layout this build writes and reads.
-pub const FORMAT_VERSION: u32 = 4;
+pub const FORMAT_VERSION: u32 = 5;
 /// First bytes of every checkpoint.
 pub const MAGIC: [u8; 8] = *b"MPMGEOCK";
 /// The checkpoint file in a run directory.
@@ -280,9 +281,9 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), CheckpointError
 
 /// The bytes of a checkpoint file holding `state` of the scene `fingerprint`.
 pub fn encode(fingerprint: u64, state: &SavedState) -> Vec<u8> {
-    let mut w = Writer::default();
-    w.put(state);
-    let payload = w.into_bytes();
+    let payload = codec::options()
+        .serialize(state)
+        .expect("a checkpoint state is plain data and always encodes");
     let mut bytes = Vec::with_capacity(HEADER_LEN + payload.len());
     bytes.extend_from_slice(&MAGIC);
     bytes.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
@@ -365,12 +366,10 @@ pub fn decode(path: &Path, bytes: &[u8], fingerprint: u64) -> Result<SavedState,
             expected: fingerprint,
         });
     }
-    let mut reader = Reader::new(payload);
-    let state: SavedState = reader
-        .get()
-        .and_then(|s| reader.finish().map(|()| s))
-        .map_err(|e| corrupt(format!("payload: {e}")))?;
-    Ok(state)
+    codec::options()
+        .with_limit(payload.len() as u64)
+        .deserialize(payload)
+        .map_err(|e| corrupt(format!("payload: {e}")))
 }
 
 /// CRC-32 and length of `curve.csv` as far as a checkpoint has seen it
@@ -440,7 +439,7 @@ impl Checkpointer {
     /// Whether a checkpoint is due after the step `sim` has just completed
     /// (every `every` steps, not at the end: a finished run has its outputs).
     pub fn due(&self, sim: &Simulation) -> bool {
-        let step = sim.model.step;
+        let step = sim.model.state.step;
         self.every > 0 && step > 0 && step.is_multiple_of(self.every) && !sim.finished()
     }
 
@@ -567,7 +566,7 @@ impl Resumable {
                 path: curve_path.display().to_string(),
                 detail: format!(
                     "its first {} bytes are not the ones the checkpoint of step {} saw",
-                    state.cursor.curve_bytes, state.step
+                    state.cursor.curve_bytes, state.model.step
                 ),
             });
         }
@@ -592,12 +591,12 @@ impl Resumable {
 
     /// The scene, as rebuilt.
     pub fn scene(&self) -> &Scene {
-        &self.simulation.model.scene
+        &self.simulation.scene
     }
 
     /// The step the checkpoint was written after.
     pub fn step(&self) -> usize {
-        self.state.step
+        self.state.model.step
     }
 }
 

@@ -41,7 +41,7 @@ fn file() -> Vec<u8> {
 }
 
 fn bits(sim: &Simulation) -> Vec<u64> {
-    let p = &sim.model.particles;
+    let p = &sim.model.state.particles;
     p.position
         .iter()
         .chain(&p.velocity)
@@ -63,13 +63,16 @@ fn a_restored_state_steps_on_bit_identically() {
     assert_eq!(back.last_row_step, Some(3));
     assert_eq!(back.pending_times, vec![0.5, 0.25]);
     assert_eq!((back.curve_bytes, back.curve_checksum), (1234, 0xdead_beef));
-    assert_eq!(resumed.model.step, 3);
+    assert_eq!(resumed.model.state.step, 3);
     assert_eq!(bits(&resumed), bits(&straight));
     for _ in 0..3 {
         straight.step_once().unwrap();
         resumed.step_once().unwrap();
     }
-    assert_eq!(resumed.model.time.to_bits(), straight.model.time.to_bits());
+    assert_eq!(
+        resumed.model.state.time.to_bits(),
+        straight.model.state.time.to_bits()
+    );
     assert_eq!(bits(&resumed), bits(&straight));
     assert_eq!(resumed.monitor_values(), straight.monitor_values());
     // the state is the whole payload: encoding the restored run gives the same file

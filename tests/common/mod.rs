@@ -31,10 +31,10 @@ pub fn simulation(path: &str, overrides: &[&str]) -> Simulation {
 
 /// Run to the end, recording (time, monitor values) after every step (and at t = 0).
 pub fn run_history(sim: &mut Simulation) -> Vec<(f64, Vec<f64>)> {
-    let mut history = vec![(sim.model.time, sim.monitor_values())];
+    let mut history = vec![(sim.model.state.time, sim.monitor_values())];
     while !sim.finished() {
         sim.step_once().unwrap_or_else(|e| panic!("{e}"));
-        history.push((sim.model.time, sim.monitor_values()));
+        history.push((sim.model.state.time, sim.monitor_values()));
     }
     history
 }
@@ -42,8 +42,8 @@ pub fn run_history(sim: &mut Simulation) -> Vec<(f64, Vec<f64>)> {
 /// The closed-form column of a scene whose first body is an elastic box
 /// standing on y = 0 (`elastic/oedometer.toml`, `elastic/soft_column.toml`).
 pub fn elastic_column(sim: &Simulation) -> Column {
-    let body = &sim.model.scene.body[0];
-    let MaterialSpec::LinearElastic(elastic) = &sim.model.scene.materials[&body.material] else {
+    let body = &sim.scene.body[0];
+    let MaterialSpec::LinearElastic(elastic) = &sim.scene.materials[&body.material] else {
         panic!("material `{}` is not linear_elastic", body.material)
     };
     Column {
@@ -57,7 +57,7 @@ pub fn elastic_column(sim: &Simulation) -> Column {
 /// gravity `g`, kPa.
 pub fn column_stress_rms(sim: &Simulation, g: f64) -> f64 {
     let column = elastic_column(sim);
-    let p = &sim.model.particles;
+    let p = &sim.model.state.particles;
     let sum: f64 = (0..p.len())
         .map(|i| (p.stress[i][1] - column.vertical_stress(p.position0[i][1], g)).powi(2))
         .sum();

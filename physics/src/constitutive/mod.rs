@@ -29,7 +29,7 @@ pub type Voigt = [f64; 4];
 pub type Mat4 = [[f64; 4]; 4];
 
 /// State variables carried by every material point.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PointState {
     /// Local equivalent plastic strain κ, accumulated by increments (theory D27).
     pub plastic_strain_eq: f64,

@@ -65,14 +65,14 @@ pub fn commit_swapping(
     converged: &mut ConvergedStresses,
     nodal: NodalResults,
 ) -> Result<Option<PointRemap>, StepError> {
-    model.internal_work += converged.internal_work;
-    model.dissipated_energy += converged.dissipation;
-    model.boundary_work += model.walls.hold_points(&mut model.particles);
-    let p = &mut model.particles;
+    model.state.internal_work += converged.internal_work;
+    model.state.dissipated_energy += converged.dissipation;
+    model.state.boundary_work += model.walls.hold_points(&mut model.state.particles);
+    let p = &mut model.state.particles;
     std::mem::swap(&mut p.stress, &mut converged.stress);
     std::mem::swap(&mut p.state, &mut converged.state);
     let volume_cap = model
-        .scene
+        .settings
         .grid
         .max_point_volume
         .map_or(f64::INFINITY, |cells| cells * model.grid.cell_size.powi(2));
@@ -81,7 +81,7 @@ pub fn commit_swapping(
         return Err(non_finite_point(p, i));
     }
     check_finite_nodes(&model.grid, &nodal)?;
-    if model.scene.grid.lost_points == LostPointPolicy::Stop {
+    if model.settings.grid.lost_points == LostPointPolicy::Stop {
         if let Some(i) = first.outside {
             return Err(StepError::ParticleLeftGrid {
                 particle: i,
@@ -91,19 +91,20 @@ pub fn commit_swapping(
     }
 
     model.account_gravity_work(nodal.gravity);
-    model.boundary_work += nodal.boundary_work;
-    model.external_work += model
+    model.state.boundary_work += nodal.boundary_work;
+    model.state.external_work += model
+        .state
         .traction
         .advect(&setup.traction_shapes, nodal.increment);
-    model.driven.advect(
+    model.state.driven.advect(
         &setup.driven_shapes,
         &setup.bins,
         nodal.contact_motion,
-        (model.time, nodal.end_time),
+        (model.state.time, nodal.end_time),
     );
     keep_nodal_results(model, &nodal);
     let remap = model.drop_lost_points();
-    model.mass_height = model.current_mass_height();
+    model.state.mass_height = model.current_mass_height();
     remap
 }
 
@@ -112,16 +113,16 @@ pub fn commit_swapping(
 /// known (a grid much larger than the body costs nothing), else copied
 /// whole.
 fn keep_nodal_results(model: &mut Model, nodal: &NodalResults) {
-    let before = model.nodal_results_at.take();
+    let before = model.state.nodal_results_at.take();
     let (now, before_nodes) = (nodal.nonzero_at, before.as_deref());
-    copy_nodal(&mut model.reaction, nodal.reaction, before_nodes, now);
+    copy_nodal(&mut model.state.reaction, nodal.reaction, before_nodes, now);
     copy_nodal(
-        &mut model.last_increment,
+        &mut model.state.last_increment,
         nodal.increment,
         before_nodes,
         now,
     );
-    model.nodal_results_at = now.map(|now| {
+    model.state.nodal_results_at = now.map(|now| {
         let mut nodes = before.unwrap_or_default();
         nodes.clear();
         nodes.extend_from_slice(now);

@@ -91,7 +91,11 @@ fn converge(
         step_energies(model, trial, stress, (point_work, point_dissipation));
     let kappa_bar = match nonlocal {
         Some(nl) => Some(profile.time(Stage::Nonlocal, || {
-            nl.committed(&model.particles, |p| state[p].plastic_strain_eq, profile)
+            nl.committed(
+                &model.state.particles,
+                |p| state[p].plastic_strain_eq,
+                profile,
+            )
         })?),
         None => None,
     };
@@ -135,15 +139,15 @@ fn smooth(
         grid: &model.grid,
         bins: &setup.bins,
         shapes: &setup.shapes,
-        mass: &model.particles.mass,
+        mass: &model.state.particles.mass,
     };
     let dofs = model
-        .scene
+        .settings
         .smoothing
         .restore_forces
         .then(|| DofMap::new(&setup.bins, &model.constraints));
     let equilibrium = dofs.as_ref().map(|dofs| Equilibrium {
-        volume: &model.particles.volume,
+        volume: &model.state.particles.volume,
         dofs,
     });
     let restored = equilibrium.is_some();
@@ -154,7 +158,7 @@ fn smooth(
         &trial.rotated,
         stress,
         &model.materials,
-        &model.particles.material,
+        &model.state.particles.material,
         state,
         kappa_bar,
     )
@@ -188,7 +192,7 @@ fn step_energies(
     stress: &[Voigt],
     (point_work, point_dissipation): (&mut Vec<f64>, &mut Vec<f64>),
 ) -> (f64, f64) {
-    let p = &model.particles;
+    let p = &model.state.particles;
     let all_elastic = model.materials.iter().all(|m| m.is_elastic());
     let point_energies = |i: usize| {
         let strain = trial.strain_increment(i);

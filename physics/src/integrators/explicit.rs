@@ -125,7 +125,7 @@ impl ExplicitIntegrator {
     /// limit of the material at rest in its initial configuration is refused
     /// before the run; the velocity term and later drops are checked every step.
     pub fn new(model: &Model) -> Result<Self, SceneError> {
-        if let Some(dt) = model.scene.scene.dt {
+        if let Some(dt) = model.settings.run.dt {
             let Ok(setup) = StepSetup::new(model) else {
                 return Ok(Self::default()); // points outside the grid are reported by the validation
             };
@@ -133,12 +133,12 @@ impl ExplicitIntegrator {
                 &model.grid,
                 &setup.bins,
                 &setup.shapes,
-                &model.particles.mass,
+                &model.state.particles.mass,
             );
             let stable = StableTimeStep::of(model, &mass, &setup.driven_shapes, false);
             if dt > stable.limit {
                 return Err(SceneError::Invalid {
-                    path: model.scene.scene.name.clone(),
+                    path: model.settings.run.name.clone(),
                     errors: vec![FieldError {
                         field: "scene.dt".into(),
                         message: format!(
@@ -154,7 +154,7 @@ impl ExplicitIntegrator {
 
     /// One MUSL step (theory §4), in the order of paper Fig. 1.
     pub fn step(&mut self, model: &mut Model, profile: &Profile) -> Result<StepReport, StepError> {
-        let t = model.time;
+        let t = model.state.time;
         let work = &mut *self.work;
         let compact = profile.time(Stage::Setup, || work.refresh(model))?;
         let Workspace {
@@ -168,11 +168,11 @@ impl ExplicitIntegrator {
         } else {
             buffers.advance(model, setup, &setup.shapes, usage, profile)
         }?;
-        model.step += 1;
-        model.time = t + dt;
+        model.state.step += 1;
+        model.state.time = t + dt;
         Ok(StepReport {
-            step: model.step,
-            time: model.time,
+            step: model.state.step,
+            time: model.state.time,
             dt,
             iterations: 0,
             substeps: 1,
@@ -210,7 +210,7 @@ impl Buffers {
         usage: &mut SolverUsage,
         profile: &Profile,
     ) -> Result<(f64, Option<PointRemap>), StepError> {
-        let t = model.time;
+        let t = model.state.time;
         let mut nonlocal = NonlocalStep::start(model, true, profile)?;
         profile.time(Stage::P2G, || {
             self.map_to_grid(model, setup, shapes, t, profile)
@@ -225,7 +225,7 @@ impl Buffers {
             Ok::<_, StepError>((dt, removed))
         })?;
         profile.time(Stage::G2P, || {
-            g2p(&mut model.particles, shapes, &self.grid.motion(dt))
+            g2p(&mut model.state.particles, shapes, &self.grid.motion(dt))
         });
         profile.time(Stage::Remap, || self.remap(model, setup, shapes, dt));
         profile.time(Stage::StressUpdate, || {
@@ -248,7 +248,7 @@ impl Buffers {
                 reaction: &grid.reaction,
                 increment,
                 contact_motion,
-                gravity: model.scene.loads.gravity_at(t),
+                gravity: model.settings.loads.gravity_at(t),
                 end_time: t + dt,
                 nonzero_at: Some(&setup.bins.active_nodes),
                 boundary_work,
@@ -269,7 +269,7 @@ fn time_step(
     nodal_mass: &[f64],
 ) -> Result<f64, StepError> {
     let stable = StableTimeStep::of(model, nodal_mass, &setup.driven_shapes, true);
-    let dt = match model.scene.scene.dt {
+    let dt = match model.settings.run.dt {
         Some(fixed) if fixed > stable.limit => {
             return Err(StepError::UnstableTimeStep {
                 dt: fixed,
@@ -278,15 +278,15 @@ fn time_step(
             })
         }
         Some(fixed) => fixed,
-        None => stable.with_cfl(model.scene.solver.cfl),
+        None => stable.with_cfl(model.settings.solver.cfl),
     };
     usage.explicit_time_step = Some(match usage.explicit_time_step {
         Some((lo, hi)) => (lo.min(dt), hi.max(dt)),
         None => (dt, dt),
     });
     usage.time_step_limited_by = Some(stable.limited_by);
-    let end = model.scene.scene.end_time.unwrap_or(f64::INFINITY);
-    let dt = dt.min(end - model.time).max(0.0);
+    let end = model.settings.run.end_time.unwrap_or(f64::INFINITY);
+    let dt = dt.min(end - model.state.time).max(0.0);
     if dt <= 0.0 || !dt.is_finite() {
         return Err(StepError::InvalidTimeStep { dt });
     }
@@ -305,9 +305,9 @@ impl Buffers {
         t: f64,
         profile: &Profile,
     ) {
-        let p = &model.particles;
+        let p = &model.state.particles;
         let stress = model.force_stresses(&setup.bins, &p.stress);
-        let g = model.scene.loads.gravity_at(t);
+        let g = model.settings.loads.gravity_at(t);
         let (mass, velocity, volume) = (&p.mass, &p.velocity, &p.volume);
         let add = |p: usize, s: &S, patch: &mut [P2gSums]| {
             let (m, v, vol, sig) = (mass[p], velocity[p], volume[p], &stress[p]);
@@ -334,7 +334,7 @@ impl Buffers {
         profile.count(Work::ExplicitNodalMass, 1);
         let nodes = self.p2g.len();
         // f_ext of the boundary devices: follower pressures, springs
-        let devices = !model.traction.is_empty() || !model.driven.is_empty();
+        let devices = !model.state.traction.is_empty() || !model.state.driven.is_empty();
         self.external.clear();
         if devices {
             self.external.extend(self.p2g.iter().map(|sums| {
@@ -345,12 +345,13 @@ impl Buffers {
                 }
             }));
             model
+                .state
                 .traction
                 .add_forces(&setup.traction_shapes, &mut self.external);
-            if !model.driven.is_empty() {
+            if !model.state.driven.is_empty() {
                 self.zero.clear();
                 self.zero.resize(nodes, [0.0; 2]);
-                model.driven.add_forces(
+                model.state.driven.add_forces(
                     p,
                     &setup.driven_shapes,
                     &setup.bins,
@@ -393,7 +394,7 @@ impl Buffers {
     /// takes the update's velocity, as a prescribed dof does, theory eq.
     /// FR3); Δu_i = Δt p_i / m_i into `self.increment`.
     fn remap<S: Support>(&mut self, model: &Model, setup: &StepSetup, shapes: &[S], dt: f64) {
-        let p = &model.particles;
+        let p = &model.state.particles;
         let (mass, velocity) = (&p.mass, &p.velocity);
         let add = |p: usize, s: &S, patch: &mut [[f64; 2]]| {
             let (m, v) = (mass[p], velocity[p]);
@@ -510,8 +511,8 @@ impl UpdatedGrid {
         // a maximum: the same whatever the order
         let largest = active.par_iter().map(|&node| self.mass[node as usize]);
         self.tiny_mass = 1e-12 * largest.reduce(|| 0.0, f64::max);
-        let damping = model.scene.solver.damping;
-        let t = model.time;
+        let damping = model.settings.solver.damping;
+        let t = model.state.time;
         let (tiny_mass, mass, momentum, force) =
             (self.tiny_mass, &self.mass, &self.momentum, &self.force);
         refill_fields(
@@ -629,7 +630,7 @@ impl UpdatedGrid {
     /// platen load swings by ±8 %. Left empty without rigid bodies.
     fn contact_motion(&self, model: &Model, dt: f64, motion: &mut Vec<[f64; 2]>) {
         motion.clear();
-        if !model.driven.is_empty() {
+        if !model.state.driven.is_empty() {
             motion.extend(self.velocity.iter().map(|v| [dt * v[0], dt * v[1]]));
         }
     }

@@ -46,7 +46,7 @@ impl SystemExport {
 
     /// A Newton solve begins (iteration numbers restart).
     pub fn begin_solve(&mut self, system: &StepSystem) {
-        let step = system.model.step + 1;
+        let step = system.model.state.step + 1;
         if self.current.is_some_and(|(s, _)| s == step) {
             self.solve_in_step += 1;
         } else {
@@ -71,7 +71,7 @@ impl SystemExport {
     ) {
         let iteration = self.iteration;
         self.iteration += 1;
-        let step = system.model.step + 1;
+        let step = system.model.state.step + 1;
         if !self.steps.contains(&step) {
             return;
         }
@@ -95,7 +95,7 @@ impl SystemExport {
             }
         }
         let meta = json!({
-            "scene": system.model.scene.scene.name,
+            "scene": system.model.settings.run.name,
             "step": step,
             "newton_solve_in_step": self.solve_in_step,
             "newton_iteration": iteration,

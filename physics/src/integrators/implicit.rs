@@ -90,16 +90,16 @@ impl ImplicitIntegrator {
     pub fn new(model: &Model) -> Result<Self, crate::scene::SceneError> {
         let dynamic = model.analysis() == AnalysisKind::ImplicitDynamic;
         Ok(Self {
-            dt: model.scene.scene.dt.unwrap_or(1.0),
-            newmark: dynamic.then(|| Newmark::from_solver(&model.scene.solver)),
+            dt: model.settings.run.dt.unwrap_or(1.0),
+            newmark: dynamic.then(|| Newmark::from_solver(&model.settings.solver)),
             tangent: Tangent::new(model)?,
-            background_block: background_block(&model.scene, &model.grid),
+            background_block: background_block(&model.settings, &model.grid),
             setup: StepSetup::default(),
             usage: SolverUsage::default(),
             last_residuals: (Vec::new(), 0.0),
             newton_buffers: NewtonBuffers::default(),
             p2g: KinematicsBuffers::default(),
-            control: StepController::of(&model.scene),
+            control: StepController::of(&model.settings),
             path_jump: None,
         })
         .map(|mut integrator| {
@@ -109,7 +109,7 @@ impl ImplicitIntegrator {
                     ..Default::default()
                 });
             }
-            if model.scene.solver.follows_path() {
+            if model.settings.solver.follows_path() {
                 integrator.usage.path = Some(PathRecord::default());
             }
             integrator
@@ -147,19 +147,19 @@ impl ImplicitIntegrator {
         if let Some(control) = self.control {
             return self.adaptive_step(model, profile, control);
         }
-        if model.scene.solver.follows_path() {
+        if model.settings.solver.follows_path() {
             return self.path_step(model, profile);
         }
-        let (t0, dt) = (model.time, self.dt);
+        let (t0, dt) = (model.state.time, self.dt);
         let mut report = StepReport {
-            step: model.step + 1,
+            step: model.state.step + 1,
             dt,
             ..Default::default()
         };
         self.advance(model, profile, t0, dt, 0, &mut report)?;
-        model.step += 1;
-        model.time = t0 + dt;
-        report.time = model.time;
+        model.state.step += 1;
+        model.state.time = t0 + dt;
+        report.time = model.state.time;
         Ok(report)
     }
 
@@ -176,11 +176,11 @@ impl ImplicitIntegrator {
         profile: &Profile,
         control: StepController,
     ) -> Result<StepReport, StepError> {
-        let t0 = model.time;
+        let t0 = model.state.time;
         restart_at_gravity_jump(model, self.newmark);
         let mut record = self.usage.step_control.take().unwrap_or_default();
         let mut report = StepReport {
-            step: model.step + 1,
+            step: model.state.step + 1,
             ..Default::default()
         };
         let mut proposal = record.next_dt;
@@ -189,7 +189,7 @@ impl ImplicitIntegrator {
             let judge = ErrorControl {
                 controller: control,
                 velocity_scale: record.velocity_scale,
-                keep_any: model.step == 0 || dt <= control.dt_min * (1.0 + 1e-9),
+                keep_any: model.state.step == 0 || dt <= control.dt_min * (1.0 + 1e-9),
             };
             match self.substep(model, profile, t0, dt, Control::Error(judge), &mut report) {
                 Ok(Attempt::Committed(iterations, local)) => {
@@ -227,8 +227,8 @@ impl ImplicitIntegrator {
         };
         self.usage.step_control = Some(record);
         result?;
-        model.step += 1;
-        report.time = model.time;
+        model.state.step += 1;
+        report.time = model.state.time;
         Ok(report)
     }
 
@@ -238,22 +238,22 @@ impl ImplicitIntegrator {
     /// `solver.max_halvings` times. The run stops with its step budget
     /// (`solver.path_max_steps`) spent.
     fn path_step(&mut self, model: &mut Model, profile: &Profile) -> Result<StepReport, StepError> {
-        let scene = &model.scene;
-        let end = scene.scene.end_time_or_steps();
-        let budget = scene.solver.path_step_budget(scene.scene.steps);
-        if model.step >= budget {
+        let settings = &model.settings;
+        let end = settings.run.end_time_or_steps();
+        let budget = settings.solver.path_step_budget(settings.run.steps);
+        if model.state.step >= budget {
             return Err(StepError::PathBudget {
-                steps: model.step,
-                reached: model.time,
+                steps: model.state.step,
+                reached: model.state.time,
                 end,
             });
         }
-        let max_cuts = scene.solver.max_halvings;
-        let (t, dt) = (model.time, self.dt);
+        let max_cuts = settings.solver.max_halvings;
+        let (t, dt) = (model.state.time, self.dt);
         let mut record = self.usage.path.take().unwrap_or_default();
-        let load_before = model.driven.committed_load(&model.particles, t);
+        let load_before = model.state.driven.committed_load(&model.state.particles, t);
         let mut report = StepReport {
-            step: model.step + 1,
+            step: model.state.step + 1,
             ..Default::default()
         };
         let mut shrink = 1.0;
@@ -273,8 +273,11 @@ impl ImplicitIntegrator {
                     report.iterations += iterations;
                     report.substeps += 1;
                     self.usage.newton_iterations += iterations;
-                    let load = model.driven.committed_load(&model.particles, model.time);
-                    record.advance(dt, model.time - t, load - load_before, iterations);
+                    let load = model
+                        .state
+                        .driven
+                        .committed_load(&model.state.particles, model.state.time);
+                    record.advance(dt, model.state.time - t, load - load_before, iterations);
                     break Ok(());
                 }
                 // a jump onto an elastic branch measures the body's present
@@ -308,18 +311,18 @@ impl ImplicitIntegrator {
         };
         self.usage.path = Some(record);
         result?;
-        model.step += 1;
-        report.dt = model.time - t;
-        report.time = model.time;
+        model.state.step += 1;
+        report.dt = model.state.time - t;
+        report.time = model.state.time;
         Ok(report)
     }
 
     /// The step `proposal` cut to end at the next jump of the stepped gravity
     /// and at the end time.
     fn step_within_loads(&self, model: &Model, t: f64, proposal: f64) -> f64 {
-        let end = model.scene.scene.end_time_or_steps();
+        let end = model.settings.run.end_time_or_steps();
         let mut dt = proposal.min(end - t);
-        if let Some(jump) = model.scene.loads.next_gravity_jump(t) {
+        if let Some(jump) = model.settings.loads.next_gravity_jump(t) {
             dt = dt.min(jump - t);
         }
         dt
@@ -347,7 +350,7 @@ impl ImplicitIntegrator {
                 self.usage.newton_iterations += iterations;
                 Ok(())
             }
-            Err(e) if e.retry() && depth < model.scene.solver.max_halvings => {
+            Err(e) if e.retry() && depth < model.settings.solver.max_halvings => {
                 self.usage.halvings += 1;
                 self.advance(model, profile, t, 0.5 * dt, depth + 1, report)?;
                 self.advance(model, profile, t + 0.5 * dt, 0.5 * dt, depth + 1, report)
@@ -461,7 +464,7 @@ impl ImplicitIntegrator {
         let mut motion = grid.motion(dt, self.newmark);
         motion.velocity_removed = (!removed_velocity.is_empty()).then_some(&removed_velocity[..]);
         profile.time(Stage::G2P, || {
-            g2p(&mut model.particles, &setup.shapes, &motion)
+            g2p(&mut model.state.particles, &setup.shapes, &motion)
         });
         let converged = profile.time(Stage::Stresses, || {
             converged_stresses(model, setup, &grid.trial, nonlocal.as_mut(), profile)
@@ -471,7 +474,7 @@ impl ImplicitIntegrator {
                 reaction: &grid.reaction,
                 increment: &grid.du,
                 contact_motion: &grid.du,
-                gravity: model.scene.loads.gravity_at(t + dt),
+                gravity: model.settings.loads.gravity_at(t + dt),
                 end_time: t + dt,
                 nonzero_at: None,
                 boundary_work,
@@ -479,7 +482,7 @@ impl ImplicitIntegrator {
             commit(model, setup, &grid.trial, converged, nodal)
         })?;
         report.removed_points.extend(removed);
-        model.time = t + dt;
+        model.state.time = t + dt;
         self.newton_buffers.recycle(grid.trial);
         Ok(Attempt::Committed(grid.iterations, local))
     }
@@ -541,7 +544,7 @@ impl ImplicitIntegrator {
         model: &Model,
         free_increment: &[f64],
     ) -> Result<(Vec<f64>, SparseMatrix), StepError> {
-        let (t, dt) = (model.time, self.dt);
+        let (t, dt) = (model.state.time, self.dt);
         let profile = Profile::default();
         let (setup, dofs) = step_setup(model)?;
         if free_increment.len() != dofs.n_free {
@@ -578,11 +581,11 @@ impl ImplicitIntegrator {
 /// next step starts from the acceleration after it and its error estimate
 /// sees no load discontinuity.
 fn restart_at_gravity_jump(model: &mut Model, newmark: Option<Newmark>) {
-    let jump = model.scene.loads.gravity_jump_at(model.time);
+    let jump = model.settings.loads.gravity_jump_at(model.state.time);
     if jump == 0.0 || newmark.is_none() {
         return;
     }
-    let p = &mut model.particles;
+    let p = &mut model.state.particles;
     p.acceleration.iter_mut().for_each(|a| a[1] -= jump);
     if newmark.is_some_and(|n| n.is_generalised_alpha()) {
         p.force_per_mass.iter_mut().for_each(|q| q[1] -= jump);
@@ -718,7 +721,7 @@ fn open_at_start(model: &Model, setup: &StepSetup, mapped: &NodalKinematics, dt:
     }
     edges.open_at_start(
         |node| setup.bins.node_active[node],
-        |c| model.reaction[c.node][c.normal] * c.inward,
+        |c| model.state.reaction[c.node][c.normal] * c.inward,
         |c| mapped.velocity[c.node][c.normal] * c.inward * dt - LIFT_OFF * model.grid.cell_size,
     )
 }

@@ -76,7 +76,7 @@ pub struct StepReport {
 }
 
 /// Counts of what the integrator did (written to `run.json`).
-#[derive(Clone, Debug, Default, serde::Serialize)]
+#[derive(Clone, Debug, Default, serde::Serialize, serde::Deserialize)]
 pub struct SolverUsage {
     /// Factorisations done with sparse Cholesky.
     pub cholesky: usize,

@@ -240,7 +240,7 @@ pub fn solve(
     buffers: &mut NewtonBuffers,
 ) -> Result<Solution, NewtonError> {
     let model = system.model;
-    let mut convergence = Convergence::new(&model.scene.solver, model.scene.max_iterations());
+    let mut convergence = Convergence::new(&model.settings.solver, model.settings.max_iterations);
     tangent.begin_newton(system);
     // the iterate, the line search's best candidate and its spare slot
     let NewtonBuffers {
@@ -277,7 +277,7 @@ pub fn solve(
         let kappa_settled = || match nonlocal.as_deref_mut() {
             Some(nl) => Ok(profile.time(Stage::Nonlocal, || {
                 nl.iterate(
-                    &model.particles,
+                    &model.state.particles,
                     |p| trial.state[p].plastic_strain_eq,
                     profile,
                 )

@@ -14,14 +14,15 @@ use crate::transfer::{self, NodalField, NODES_PER_TASK};
 /// the follower pressures of the traction points, per grid node (theory D10).
 pub fn external_force(model: &Model, setup: &StepSetup, t: f64) -> Vec<[f64; 2]> {
     let grid = &model.grid;
-    let p = &model.particles;
-    let g = model.scene.loads.gravity_at(t);
+    let p = &model.state.particles;
+    let g = model.settings.loads.gravity_at(t);
     let mut external = if g != 0.0 {
         transfer::body_force(grid, &setup.bins, &setup.shapes, &p.mass, [0.0, -g])
     } else {
         vec![[0.0; 2]; grid.node_count()]
     };
     model
+        .state
         .traction
         .add_forces(&setup.traction_shapes, &mut external);
     external
@@ -62,8 +63,8 @@ pub fn nodal_kinematics(
     carry_force: bool,
     buffers: &mut KinematicsBuffers,
 ) -> NodalKinematics {
-    let p = &model.particles;
-    let g = model.scene.loads.gravity_at(t);
+    let p = &model.state.particles;
+    let g = model.settings.loads.gravity_at(t);
     let (mass, velocity, acceleration) = (&p.mass, &p.velocity, &p.acceleration);
     let force_per_mass = &p.force_per_mass;
     let add = |p: usize, s: &ShapeAt, patch: &mut [KinematicSums]| {
@@ -98,6 +99,7 @@ pub fn nodal_kinematics(
         vec![[0.0; 2]; sums.len()]
     };
     model
+        .state
         .traction
         .add_forces(&setup.traction_shapes, &mut external);
     NodalKinematics {
@@ -147,8 +149,8 @@ mod tests {
             overrides.push("grid.point_layout=\"gauss\"".into());
         }
         let scene = Scene::from_str_with_overrides(BIAXIAL, "biaxial", &overrides).unwrap();
-        let mut model = Model::new(scene).unwrap();
-        let p = &mut model.particles;
+        let mut model = Model::new(&scene).unwrap();
+        let p = &mut model.state.particles;
         for i in 0..p.mass.len() {
             let s = (i as f64 * 0.37).sin();
             p.velocity[i] = [0.1 * s, -0.03 + 0.2 * s * s];
@@ -167,7 +169,7 @@ mod tests {
         for bilinear in [false, true] {
             let (model, setup) = moving_specimen(bilinear);
             let (grid, bins, shapes) = (&model.grid, &setup.bins, &setup.shapes);
-            let p = &model.particles;
+            let p = &model.state.particles;
             let mass = transfer::nodal_mass(grid, bins, shapes, &p.mass);
             let per_mass = |q: &[[f64; 2]]| -> Vec<[f64; 2]> {
                 let weighted = transfer::nodal_mass_weighted(grid, bins, shapes, &p.mass, q);

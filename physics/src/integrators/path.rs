@@ -151,7 +151,7 @@ impl PathConstraint {
 
 /// Where the path following stands and what it did (`run.json` →
 /// `usage.path`; checkpointed).
-#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PathRecord {
     /// The last step in the scaled plane: (Δτ/Δt, ΔF/F_ref).
     pub last_step: [f64; 2],

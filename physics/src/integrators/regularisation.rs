@@ -5,7 +5,7 @@
 
 use crate::constitutive::StrengthVariable;
 use crate::model::Model;
-use crate::nonlocal::{NonlocalAverager, NonlocalError, NonlocalParameters};
+use crate::nonlocal::{NonlocalAverager, NonlocalError};
 use crate::particles::Particles;
 use crate::profile::{Profile, Stage, Work};
 use crate::scene::{NonlocalSpec, NonlocalUpdate};
@@ -58,11 +58,11 @@ impl NonlocalStep {
         step_update: bool,
         profile: &Profile,
     ) -> Result<Option<Self>, NonlocalError> {
-        let Some(spec) = &model.scene.nonlocal else {
+        let Some(spec) = &model.settings.nonlocal else {
             return Ok(None);
         };
         let step = profile.time(Stage::Nonlocal, || {
-            Self::new(spec, &model.particles, step_update)
+            Self::new(spec, &model.state.particles, step_update)
         })?;
         profile.count(Work::NeighbourLists, 1);
         Ok(Some(step))
@@ -75,12 +75,8 @@ impl NonlocalStep {
         particles: &Particles,
         force_step_update: bool,
     ) -> Result<Self, NonlocalError> {
-        let params = NonlocalParameters {
-            length_scale: spec.length_scale,
-            cutoff_factor: spec.cutoff_factor,
-        };
         let mut averager = NonlocalAverager::new(
-            &params,
+            spec,
             &particles.position,
             &particles.volume,
             &particles.material,

@@ -40,7 +40,7 @@ impl StepSetup {
     /// material points' shape functions and bins once they have grown).
     pub fn refresh(&mut self, model: &Model) -> Result<(), StepError> {
         let grid = &model.grid;
-        let positions = &model.particles.position;
+        let positions = &model.state.particles.position;
         transfer::shapes_into(grid, positions, &mut self.scratch, &mut self.shapes)
             .map_err(point_left_grid)?;
         self.bins.rebuild(grid, &self.shapes);
@@ -53,7 +53,7 @@ impl StepSetup {
     /// double mapping (it reads them).
     pub fn compact_applies(model: &Model) -> bool {
         model.grid.shape_functions == ShapeFunctions::Bilinear
-            && model.driven.is_empty()
+            && model.state.driven.is_empty()
             && model.double_mapping() == DoubleMapping::Off
     }
 
@@ -68,7 +68,7 @@ impl StepSetup {
         debug_assert!(Self::compact_applies(model));
         let grid = &model.grid;
         let cells = &mut self.cells;
-        transfer::bilinear_shapes_into(grid, &model.particles.position, shapes, cells)
+        transfer::bilinear_shapes_into(grid, &model.state.particles.position, shapes, cells)
             .map_err(point_left_grid)?;
         self.shapes.clear();
         self.bins.rebuild_bilinear(grid, cells);
@@ -88,10 +88,12 @@ impl StepSetup {
             }
         };
         self.traction_shapes = model
+            .state
             .traction
             .shapes(grid, &self.bins, min_points)
             .map_err(boundary(BoundaryPointKind::Traction))?;
         self.driven_shapes = model
+            .state
             .driven
             .shapes(grid, &self.bins, min_points, &self.shapes)
             .map_err(boundary(BoundaryPointKind::Contact))?;

@@ -5,7 +5,7 @@
 //! checkpoints).
 
 use super::step_system::{Newmark, StepSystem};
-use crate::scene::Scene;
+use crate::settings::Settings;
 use crate::transfer::NONE;
 
 /// The local error of a converged step and the size of its motion, both as
@@ -87,14 +87,14 @@ impl StepController {
     /// Largest reduction of the step after one estimate.
     const MAX_SHRINK: f64 = 0.2;
 
-    /// The controller of an adaptive scene (`None` for fixed steps).
-    pub fn of(scene: &Scene) -> Option<Self> {
-        if !scene.solver.adaptive() {
+    /// The controller of an adaptive run (`None` for fixed steps).
+    pub fn of(settings: &Settings) -> Option<Self> {
+        if !settings.solver.adaptive() {
             return None;
         }
-        let (dt_min, dt_max) = scene.solver.step_bounds(scene.scene.dt.unwrap_or(1.0));
+        let (dt_min, dt_max) = settings.solver.step_bounds(settings.run.dt.unwrap_or(1.0));
         Some(Self {
-            tolerance: scene.solver.error_tolerance,
+            tolerance: settings.solver.error_tolerance,
             dt_min,
             dt_max,
         })
@@ -120,7 +120,7 @@ impl StepController {
 }
 
 /// What the step control did so far (`run.json` → `usage.step_control`).
-#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct StepControlRecord {
     /// The step the controller proposes next, s.
     pub next_dt: f64,

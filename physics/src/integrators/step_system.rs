@@ -282,7 +282,7 @@ impl StepSystem<'_> {
     /// quasi-static run or with `predictor = "zero"` (theory D17).
     pub fn predictor(&self) -> Vec<f64> {
         let mut free = vec![0.0; self.dofs.n_free];
-        if self.newmark.is_none() || self.model.scene.solver.predictor == PredictorChoice::Zero {
+        if self.newmark.is_none() || self.model.settings.solver.predictor == PredictorChoice::Zero {
             return free;
         }
         let (dt, nodal) = (self.dt, &self.nodal);
@@ -444,7 +444,7 @@ impl StepSystem<'_> {
         profile: &Profile,
     ) {
         let model = self.model;
-        let (grid, p, bins) = (&model.grid, &model.particles, &self.setup.bins);
+        let (grid, p, bins) = (&model.grid, &model.state.particles, &self.setup.bins);
         let ResidualScratch {
             internal,
             cell_sums,
@@ -471,7 +471,7 @@ impl StepSystem<'_> {
             internal_values,
         );
         zeroed(penalty, grid.node_count());
-        model.driven.add_forces(
+        model.state.driven.add_forces(
             p,
             &self.setup.driven_shapes,
             bins,
@@ -516,7 +516,7 @@ impl StepSystem<'_> {
     /// meets only the stick–slip switch, as in a return mapping), each
     /// contact patch's net force shared by the filtered reactions (eq. FR4);
     /// the stick spring continues from the last step's friction force,
-    /// `model.reaction` at the tangential dof (FR1).
+    /// `model.state.reaction` at the tangential dof (FR1).
     fn add_friction(
         &self,
         du: &[[f64; 2]],
@@ -616,7 +616,7 @@ impl StepSystem<'_> {
         };
         edges.patch_normals(
             in_contact,
-            |c| model.reaction[c.node][c.normal] * c.inward,
+            |c| model.state.reaction[c.node][c.normal] * c.inward,
             &mut normals,
         );
         for (k, contact) in edges.nodes.iter().enumerate() {
@@ -628,7 +628,7 @@ impl StepSystem<'_> {
             {
                 continue;
             }
-            let previous = model.reaction[node][t];
+            let previous = model.state.reaction[node][t];
             let (force, k_t, state) = edges.tangential_force(
                 contact,
                 du[node][t],
@@ -644,7 +644,7 @@ impl StepSystem<'_> {
     /// (path following's start, PF4).
     pub(super) fn scaled_last_increment(&self, factor: f64) -> Vec<f64> {
         let mut free = Vec::new();
-        gather_free_into(&self.dofs, &self.model.last_increment, &mut free);
+        gather_free_into(&self.dofs, &self.model.state.last_increment, &mut free);
         free.iter_mut().for_each(|x| *x *= factor);
         free
     }
@@ -653,8 +653,8 @@ impl StepSystem<'_> {
     /// anchors moved over `travel` (theory PF1), kN/m.
     pub fn driven_load(&self, du: &[[f64; 2]], travel: f64) -> f64 {
         let model = self.model;
-        model.driven.load_along_motion(
-            &model.particles,
+        model.state.driven.load_along_motion(
+            &model.state.particles,
             &self.setup.driven_shapes,
             &self.setup.bins,
             du,
@@ -666,7 +666,7 @@ impl StepSystem<'_> {
     /// (theory PF3).
     pub(super) fn travel_derivatives(&self) -> TravelDerivatives {
         let setup = self.setup;
-        self.model.driven.travel_derivatives(
+        self.model.state.driven.travel_derivatives(
             &setup.driven_shapes,
             &setup.bins,
             &self.dofs.index,
@@ -698,7 +698,7 @@ impl StepSystem<'_> {
         if distance > 0.5 * self.model.grid.cell_size {
             return Err(NewtonFailure::Motion {
                 particle,
-                position: self.model.particles.position[particle],
+                position: self.model.state.particles.position[particle],
                 distance,
             });
         }

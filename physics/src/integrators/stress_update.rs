@@ -117,7 +117,7 @@ fn evaluate<S: Support>(
     tangents: Tangents,
     trial: &mut TrialStresses,
 ) -> UpdateTally {
-    let (particles, materials) = (&model.particles, &model.materials);
+    let (particles, materials) = (&model.state.particles, &model.materials);
     let compliances = (tangents == Tangents::WithSpinTerm).then_some(model.compliances.as_slice());
     let n = particles.len();
     let gradient_known = prepare_trial(model, setup, shapes, du, trial);
@@ -220,7 +220,7 @@ fn prepare_trial<S: Support>(
     du: &[[f64; 2]],
     trial: &mut TrialStresses,
 ) -> bool {
-    let particles = &model.particles;
+    let particles = &model.state.particles;
     let b_bar = model.b_bar().then_some(&setup.bins);
     let n = particles.len();
     trial.stress.resize(n, [0.0; 4]);
@@ -244,7 +244,7 @@ fn prepare_trial<S: Support>(
 /// The spin term's sensitivities dσ/dω = D_alg C (dσ_J/dω) of every point
 /// (with `compliances`: unsymmetric tangents with the spin term), else none.
 fn spin_sensitivities(model: &Model, compliances: Option<&[Mat4]>, trial: &mut TrialStresses) {
-    let particles = &model.particles;
+    let particles = &model.state.particles;
     if let Some(compliances) = compliances {
         trial.spin_sensitivity.resize(particles.len(), [0.0; 4]);
         trial

@@ -16,7 +16,8 @@ use crate::error::StepError;
 use crate::grid::Grid;
 use crate::model::Model;
 use crate::profile::{Profile, Stage, Work};
-use crate::scene::{FieldError, Scene, SceneError};
+use crate::scene::{FieldError, SceneError};
+use crate::settings::Settings;
 use crate::stiffness;
 use crate::transfer::{ParticleBins, NONE};
 use crate::volumetric::CellMeanGradients;
@@ -48,9 +49,9 @@ impl Tangent {
     /// makes for it).
     pub fn new(model: &Model) -> Result<Self, SceneError> {
         let symmetric = model.symmetric_tangent();
-        let options = model.scene.solver.linear_options();
+        let options = model.settings.solver.linear_options();
         let refuse = |message: String| SceneError::Invalid {
-            path: model.scene.scene.name.clone(),
+            path: model.settings.run.name.clone(),
             errors: vec![FieldError {
                 field: "solver.linear_solver".into(),
                 message,
@@ -66,7 +67,7 @@ impl Tangent {
                 .collect();
             return Err(refuse(format!(
                 "{:?} needs a symmetric tangent, but material(s) {} have an unsymmetric one (softening or non-associated plasticity): use `lu` or `auto`",
-                model.scene.solver.linear_solver,
+                model.settings.solver.linear_solver,
                 unsymmetric.join(", ")
             )));
         }
@@ -354,11 +355,16 @@ fn fill_cell_blocks(system: &StepSystem, trial: &TrialStresses, blocks: &mut Vec
     let spin = (!trial.spin_sensitivity.is_empty()).then_some(trial.spin_sensitivity.as_slice());
     let places = grid.patch_side() * grid.patch_side();
     let b_bar = model.b_bar().then(|| {
-        CellMeanGradients::new(&setup.bins, &setup.shapes, &model.particles.volume, places)
+        CellMeanGradients::new(
+            &setup.bins,
+            &setup.shapes,
+            &model.state.particles.volume,
+            places,
+        )
     });
     let points = stiffness::PointStiffness {
         shapes: &setup.shapes,
-        volume: &model.particles.volume,
+        volume: &model.state.particles.volume,
         tangent: &trial.tangent,
         spin_sensitivity: spin,
         b_bar: b_bar.as_ref(),
@@ -366,6 +372,7 @@ fn fill_cell_blocks(system: &StepSystem, trial: &TrialStresses, blocks: &mut Vec
     stiffness::cell_stiffness_blocks_into(grid, &setup.bins, &points, blocks);
     let dofs = stiffness::patch_dofs(grid);
     model
+        .state
         .driven
         .add_stiffness(&setup.driven_shapes, &setup.bins, dofs, blocks);
     let background = &system.background_block;
@@ -407,16 +414,12 @@ impl StepSystem<'_> {
 /// ε_bg times the 2×2-Gauss bilinear elastic stiffness of a full cell with the
 /// stiffest material's E and its ν (theory D19), over the cell's nodes in
 /// row-major order (see `stiffness::system_blocks`).
-pub fn background_block(scene: &Scene, grid: &Grid) -> [f64; 64] {
+pub fn background_block(settings: &Settings, grid: &Grid) -> [f64; 64] {
     let mut block = [0.0; 64];
-    let reference = scene
-        .materials
-        .values()
-        .max_by(|a, b| a.youngs_modulus().total_cmp(&b.youngs_modulus()));
-    let Some(reference) = reference else {
+    let Some((youngs_modulus, poisson_ratio)) = settings.stiffest_material else {
         return block;
     };
-    let d = LinearElastic::new(reference.youngs_modulus(), reference.poisson_ratio()).stiffness();
+    let d = LinearElastic::new(youngs_modulus, poisson_ratio).stiffness();
     let h = grid.cell_size;
     let grid = Grid::bilinear(grid.origin, h, grid.cells);
     let g = 0.5 / 3f64.sqrt();
@@ -430,6 +433,6 @@ pub fn background_block(scene: &Scene, grid: &Grid) -> [f64; 64] {
     }
     block
         .iter_mut()
-        .for_each(|v| *v *= scene.solver.background_stiffness);
+        .for_each(|v| *v *= settings.solver.background_stiffness);
     block
 }

@@ -28,7 +28,7 @@ impl StableTimeStep {
             limit: wave,
             limited_by: TimeStepLimit::WaveSpeed,
         };
-        if model.driven.is_empty() {
+        if model.state.driven.is_empty() {
             return step;
         }
         // At a node tied by springs the material and spring frequencies add,
@@ -38,7 +38,7 @@ impl StableTimeStep {
         // cycle where it opposes the velocity, so the spring frequency is
         // taken as (1 + α_d) k_i/m_i (measured: without the factor, springs
         // with α_d = 0.7 were unstable from 0.6–0.8 of the estimate).
-        let damping_factor = 1.0 + model.scene.solver.damping;
+        let damping_factor = 1.0 + model.settings.solver.damping;
         for (node, &k) in nodal_spring_stiffness(model, nodal_mass.len(), driven_shapes)
             .iter()
             .enumerate()
@@ -69,7 +69,7 @@ impl StableTimeStep {
 /// one per point. In parallel over the points (a maximum: the same whatever
 /// the order).
 fn wave_limit(model: &Model, moving: bool) -> f64 {
-    let p = &model.particles;
+    let p = &model.state.particles;
     let h = model.grid.cell_size;
     let moduli: Vec<f64> = model.materials.iter().map(|m| m.p_wave_modulus()).collect();
     let fastest = (0..p.len())
@@ -95,7 +95,7 @@ fn nodal_spring_stiffness(model: &Model, nodes: usize, driven_shapes: &[ShapeAt]
     let mut spring = vec![0.0; nodes];
     for (k, s) in driven_shapes.iter().enumerate() {
         for a in s.support() {
-            spring[s.nodes[a] as usize] += model.driven.stiffness[k] * s.n[a];
+            spring[s.nodes[a] as usize] += model.state.driven.stiffness[k] * s.n[a];
         }
     }
     spring

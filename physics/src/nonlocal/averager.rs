@@ -6,7 +6,7 @@ use std::sync::{Mutex, OnceLock};
 use rayon::prelude::*;
 
 use super::kernel::kernel;
-use super::parameters::{NonlocalError, NonlocalParameters};
+use super::parameters::{NonlocalError, NonlocalSpec};
 use super::plan::{block_times, sub_bins_per_side, validate_inputs, SymmetricPlan, Tile};
 use super::{BIN_SAFETY, DEFAULT_PAIR_BUDGET, MIN_CHUNK};
 use crate::shape::floor_int;
@@ -60,7 +60,7 @@ impl SourceList {
 /// `|x_p − x_q| ≤ R_c`. Results do not depend on the number of rayon threads.
 #[derive(Debug, Clone)]
 pub struct NonlocalAverager {
-    params: NonlocalParameters,
+    params: NonlocalSpec,
     /// Squared cutoff radius.
     rc2: f64,
     /// `1 / l_s²`.
@@ -218,7 +218,7 @@ impl NonlocalAverager {
     /// slices have different lengths, if a position is not finite, or if a volume is negative
     /// or not finite.
     pub fn new(
-        params: &NonlocalParameters,
+        params: &NonlocalSpec,
         positions: &[[f64; 2]],
         volumes: &[f64],
         groups: &[u16],
@@ -313,7 +313,7 @@ impl NonlocalAverager {
     }
 
     /// The parameters the operator was built with.
-    pub fn parameters(&self) -> &NonlocalParameters {
+    pub fn parameters(&self) -> &NonlocalSpec {
         &self.params
     }
 
@@ -639,7 +639,7 @@ impl NonlocalAverager {
     /// # Errors
     /// As [`Self::new`], plus [`NonlocalError::FieldLengthMismatch`].
     pub fn average_brute_force(
-        params: &NonlocalParameters,
+        params: &NonlocalSpec,
         positions: &[[f64; 2]],
         volumes: &[f64],
         groups: &[u16],

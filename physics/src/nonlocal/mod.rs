@@ -67,7 +67,7 @@ mod tests;
 
 pub use averager::{CacheStats, NonlocalAverager};
 pub use kernel::weight;
-pub use parameters::{NonlocalError, NonlocalParameters};
+pub use parameters::{NonlocalError, NonlocalSpec, NonlocalUpdate};
 
 // the private items the tests reach through `use super::*`
 #[cfg(test)]

@@ -79,7 +79,7 @@ fn nonlocal_uniform_field_reproduced_everywhere() {
         (&pos_r, &vol_r, &grp_r, 0.3),
         (&pos_l, &vol_l, &grp_l, 0.25),
     ] {
-        let nl = NonlocalAverager::new(&NonlocalParameters::new(ls), pos, vol, grp).unwrap();
+        let nl = NonlocalAverager::new(&NonlocalSpec::new(ls), pos, vol, grp).unwrap();
         let mut out = vec![0.0; pos.len()];
         // c = 1: the numerator visits the same terms in the same order as the denominator
         // -> bit-exact.
@@ -117,7 +117,7 @@ fn nonlocal_linear_field_reproduced_on_symmetric_lattice() {
     // R_c an exact multiple of the spacing, pairs at |x_q − x_p| = R_c are kept or dropped by
     // the last bit of r², unevenly between mirrored pairs: a ~1e−6 asymmetry of the hard
     // cutoff (observed with l_s = 5 h), not of the operator.
-    let params = NonlocalParameters::new(4.9 * h);
+    let params = NonlocalSpec::new(4.9 * h);
     let rc = params.cutoff_radius();
     let nl = NonlocalAverager::new(&params, &pos, &vol, &grp).unwrap();
     let f = |p: [f64; 2]| 1.3 + 0.7 * p[0] - 0.4 * p[1];
@@ -171,7 +171,7 @@ fn nonlocal_linear_field_on_gauss_lattice() {
     let d = h / (2.0 * 3f64.sqrt());
     let (pos, vol, centre) = cell_lattice(nx, ny, h, d);
     let grp = vec![0u16; pos.len()];
-    let params = NonlocalParameters::new(4.9 * h); // see the symmetric-lattice test
+    let params = NonlocalSpec::new(4.9 * h); // see the symmetric-lattice test
     let rc = params.cutoff_radius();
     let nl = NonlocalAverager::new(&params, &pos, &vol, &grp).unwrap();
     let f = |p: [f64; 2]| 1.3 + 0.7 * p[0] - 0.4 * p[1];
@@ -236,7 +236,7 @@ fn nonlocal_linear_field_on_gauss_lattice() {
 // ---------------------------------------------------------------------------------------------
 
 fn assert_matches_brute_force(
-    params: &NonlocalParameters,
+    params: &NonlocalSpec,
     pos: &[[f64; 2]],
     vol: &[f64],
     grp: &[u16],
@@ -283,9 +283,9 @@ fn nonlocal_cell_list_matches_brute_force() {
     let dense: Vec<f64> = (0..n).map(|_| rng.range(-1.0, 2.0)).collect();
     for ls in [0.05, 0.2, 0.7] {
         for cutoff in [3.0, 1.3] {
-            let params = NonlocalParameters {
-                length_scale: ls,
+            let params = NonlocalSpec {
                 cutoff_factor: cutoff,
+                ..NonlocalSpec::new(ls)
             };
             assert_matches_brute_force(&params, &pos, &vol, &grp, &sparse);
             assert_matches_brute_force(&params, &pos, &vol, &grp, &dense);
@@ -317,7 +317,7 @@ fn nonlocal_cell_list_matches_brute_force_on_exact_cutoff_lattice() {
         })
         .collect();
     for ls in [0.1, 0.2, 1.0 / 3.0] {
-        assert_matches_brute_force(&NonlocalParameters::new(ls), &pos, &vol, &grp, &field);
+        assert_matches_brute_force(&NonlocalSpec::new(ls), &pos, &vol, &grp, &field);
     }
 }
 
@@ -415,7 +415,7 @@ fn nonlocal_deterministic_across_thread_counts() {
     let mut rng = Rng(11);
     let (pos, vol, grp) = random_cloud(&mut rng, 20_000, 10.0, 10.0, 2);
     let field = diagonal_band(&mut rng, &pos);
-    let params = NonlocalParameters::new(0.15);
+    let params = NonlocalSpec::new(0.15);
     let run = |threads: usize| {
         in_pool(threads, || {
             let nl = NonlocalAverager::new(&params, &pos, &vol, &grp).unwrap();
@@ -455,7 +455,7 @@ fn nonlocal_isolated_point_keeps_own_value() {
     ];
     let vol = [1.0, 2.0, 3.0, 1.0, 1.0];
     let grp = [0, 0, 0, 0, 1];
-    let nl = NonlocalAverager::new(&NonlocalParameters::new(0.1), &pos, &vol, &grp).unwrap();
+    let nl = NonlocalAverager::new(&NonlocalSpec::new(0.1), &pos, &vol, &grp).unwrap();
     let field = [1.0, 0.0, 0.0, 0.25, -4.0];
     let mut out = [0.0; 5];
     nl.average(&field, &mut out).unwrap();
@@ -484,7 +484,7 @@ fn nonlocal_groups_never_mix() {
         .iter()
         .map(|&g| if g == 0 { rng.range(0.5, 1.0) } else { 0.0 })
         .collect();
-    let params = NonlocalParameters::new(0.2);
+    let params = NonlocalSpec::new(0.2);
     let nl = NonlocalAverager::new(&params, &pos, &vol, &grp).unwrap();
     let mut out = vec![0.0; pos.len()];
     nl.average(&field, &mut out).unwrap();
@@ -509,16 +509,16 @@ fn nonlocal_input_validation() {
     let pos = [[0.0, 0.0], [1.0, 0.0]];
     let vol = [1.0, 1.0];
     let grp = [0u16, 0];
-    let ok = NonlocalParameters::new(1.0);
+    let ok = NonlocalSpec::new(1.0);
     for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
-        let p = NonlocalParameters::new(bad);
+        let p = NonlocalSpec::new(bad);
         assert!(matches!(
             NonlocalAverager::new(&p, &pos, &vol, &grp),
             Err(NonlocalError::InvalidLengthScale(_))
         ));
-        let p = NonlocalParameters {
-            length_scale: 1.0,
+        let p = NonlocalSpec {
             cutoff_factor: bad,
+            ..NonlocalSpec::new(1.0)
         };
         assert!(matches!(
             NonlocalAverager::new(&p, &pos, &vol, &grp),
@@ -576,9 +576,9 @@ fn nonlocal_neighbour_count_stats_on_lattice() {
     }
     let vol = vec![s * s; pos.len()];
     let grp = vec![0u16; pos.len()];
-    let params = NonlocalParameters {
-        length_scale: 0.1,
+    let params = NonlocalSpec {
         cutoff_factor: 3.05,
+        ..NonlocalSpec::new(0.1)
     }; // R_c = 3.05 s
     let nl = NonlocalAverager::new(&params, &pos, &vol, &grp).unwrap();
     // Lattice points (i, j) ≠ 0 with i² + j² ≤ 3.05² = 9.3: |i|,|j| ≤ 3 gives 48, minus
@@ -647,9 +647,9 @@ fn nonlocal_cached_matches_brute_force() {
     let dense: Vec<f64> = (0..n).map(|_| rng.range(-1.0, 2.0)).collect();
     for ls in [0.05, 0.2, 0.7] {
         for cutoff in [3.0, 1.3] {
-            let params = NonlocalParameters {
-                length_scale: ls,
+            let params = NonlocalSpec {
                 cutoff_factor: cutoff,
+                ..NonlocalSpec::new(ls)
             };
             for field in [&sparse, &dense] {
                 let mut nl = NonlocalAverager::new(&params, &pos, &vol, &grp).unwrap();
@@ -681,7 +681,7 @@ fn nonlocal_cached_equals_uncached_when_sources_change() {
     let mut rng = Rng(22);
     let (pos, vol, grp) = cache_cloud(&mut rng, 4000);
     let n = pos.len();
-    let params = NonlocalParameters::new(0.2);
+    let params = NonlocalSpec::new(0.2);
     let mut nl = NonlocalAverager::new(&params, &pos, &vol, &grp).unwrap();
     let first = sparse_field(&mut rng, n, 0.15);
     nl.cache_sources(&first).unwrap();
@@ -749,7 +749,7 @@ fn nonlocal_cache_budget_exceeded_still_correct() {
     let mut rng = Rng(23);
     let (pos, vol, grp) = cache_cloud(&mut rng, 3000);
     let n = pos.len();
-    let params = NonlocalParameters::new(0.2);
+    let params = NonlocalSpec::new(0.2);
     let field = sparse_field(&mut rng, n, 0.3);
     let nonzero = field.iter().filter(|&&v| v != 0.0).count();
     let mut full = NonlocalAverager::new(&params, &pos, &vol, &grp).unwrap();
@@ -812,7 +812,7 @@ fn nonlocal_cached_deterministic_across_thread_counts() {
         })
         .collect();
     let dense: Vec<f64> = pos.iter().map(|p| 1.0 + 0.1 * p[0] - 0.05 * p[1]).collect();
-    let params = NonlocalParameters::new(0.15);
+    let params = NonlocalSpec::new(0.15);
     let run = |threads: usize| {
         in_pool(threads, || {
             let mut nl = NonlocalAverager::new(&params, &pos, &vol, &grp).unwrap();
@@ -840,12 +840,12 @@ fn nonlocal_cached_deterministic_across_thread_counts() {
 fn nonlocal_cache_sources_validates_length() {
     let pos = [[0.0, 0.0], [1.0, 0.0]];
     let mut nl =
-        NonlocalAverager::new(&NonlocalParameters::new(1.0), &pos, &[1.0, 1.0], &[0, 0]).unwrap();
+        NonlocalAverager::new(&NonlocalSpec::new(1.0), &pos, &[1.0, 1.0], &[0, 0]).unwrap();
     assert!(matches!(
         nl.cache_sources(&[1.0]),
         Err(NonlocalError::FieldLengthMismatch { .. })
     ));
-    let mut empty = NonlocalAverager::new(&NonlocalParameters::new(1.0), &[], &[], &[]).unwrap();
+    let mut empty = NonlocalAverager::new(&NonlocalSpec::new(1.0), &[], &[], &[]).unwrap();
     assert_eq!(empty.cache_sources(&[]).unwrap(), 0);
 }
 
@@ -856,7 +856,7 @@ fn nonlocal_zero_field_needs_no_denominators() {
     let mut rng = Rng(25);
     let (pos, vol, grp) = cache_cloud(&mut rng, 500);
     let n = pos.len();
-    let params = NonlocalParameters::new(0.3);
+    let params = NonlocalSpec::new(0.3);
     let mut nl = NonlocalAverager::new(&params, &pos, &vol, &grp).unwrap();
     let mut out = vec![1.0; n];
     assert_eq!(nl.cache_sources(&vec![0.0; n]).unwrap(), 0);
@@ -936,7 +936,7 @@ fn nonlocal_first_average_fuses_denominators_and_numerators() {
     let mut rng = Rng(31);
     let (pos, vol, grp) = cache_cloud(&mut rng, 2000);
     let n = pos.len();
-    let params = NonlocalParameters::new(0.4);
+    let params = NonlocalSpec::new(0.4);
     let field = sparse_field(&mut rng, n, 0.1);
     let fused = NonlocalAverager::new(&params, &pos, &vol, &grp).unwrap();
     let mut a = vec![0.0; n];

@@ -59,68 +59,7 @@ pub struct LimitsSpec {
     pub max_steps: Option<u64>,
 }
 
-/// When the nonlocal variable is updated (theory §6).
-#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, Eq)]
-#[serde(rename_all = "snake_case")]
-pub enum NonlocalUpdate {
-    /// Every Newton iteration, lagged by one (theory D36).
-    #[default]
-    Iteration,
-    /// Once per step after convergence (strength frozen at κ̄(n)); explicit runs always.
-    Step,
-}
-
-/// `[nonlocal]`: averaging of the equivalent plastic strain (paper eq. 6, theory §6).
-#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct NonlocalSpec {
-    /// Length scale l_s, m (> cell size; ≥ 5 cells recommended, the paper's 0.2 l_s rule).
-    pub length_scale: f64,
-    /// Cutoff radius in units of l_s (theory §6: 3).
-    #[serde(default = "default_cutoff")]
-    pub cutoff_factor: f64,
-    /// `iteration` (default) or `step`.
-    #[serde(default)]
-    pub update: NonlocalUpdate,
-    /// ε_κ of theory D18 (third criterion).
-    #[serde(default = "default_kappa_tolerance")]
-    pub tolerance: f64,
-    /// Over-nonlocal factor m in [1, 3] (Vermeer & Brinkgreve 1994): κ̄ = κ̄(n) +
-    /// m Σ_q W_pq Δκ_q + (1 − m) Δκ_p. The default 1 is theory D35.
-    #[serde(default = "default_over_nonlocal")]
-    pub over_nonlocal: f64,
-    /// Memory for the weights cached within a step (D36), MiB (default 512;
-    /// 0 caches none). Pairs beyond it are evaluated on the fly, with the
-    /// same result to round-off; the run's memory estimate counts it.
-    #[serde(default = "default_weight_cache_mb")]
-    pub weight_cache_mb: f64,
-}
-
-fn default_over_nonlocal() -> f64 {
-    1.0
-}
-
-fn default_weight_cache_mb() -> f64 {
-    (crate::nonlocal::DEFAULT_PAIR_BUDGET * std::mem::size_of::<f64>()) as f64 / MIB
-}
-
-/// Bytes per MiB.
-const MIB: f64 = (1u64 << 20) as f64;
-
-impl NonlocalSpec {
-    /// `weight_cache_mb` as a number of stored weights (8 bytes each).
-    pub fn weight_budget(&self) -> usize {
-        (self.weight_cache_mb * MIB / std::mem::size_of::<f64>() as f64) as usize
-    }
-}
-
-fn default_cutoff() -> f64 {
-    3.0
-}
-
-fn default_kappa_tolerance() -> f64 {
-    1e-3
-}
+pub use crate::nonlocal::{NonlocalSpec, NonlocalUpdate};
 
 /// `[smoothing]`.
 #[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
@@ -1049,7 +988,7 @@ pub enum MonitorKind {
     /// Total elastic strain energy Σ ½ V_p σ_pᵀ C σ_p, kJ/m.
     StrainEnergy,
     /// Work of the pressures, rigid bodies and gravity on the soil so far,
-    /// kJ/m (see `Model::external_work`).
+    /// kJ/m (see `State::external_work`).
     ExternalWork,
     /// Work of the stresses on the strain increments so far (elastic energy
     /// stored plus dissipation), kJ/m.
