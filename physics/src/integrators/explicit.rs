@@ -60,8 +60,13 @@ const BODY: usize = 5;
 struct Workspace {
     /// Shape functions and bins of the step.
     setup: StepSetup,
-    /// The points' shape functions in compact form, when they apply
-    /// ([`StepSetup::compact_applies`]; `setup.shapes` is then empty).
+    /// Whether the points' shape functions are kept in compact form,
+    /// decided once when the integrator is built
+    /// ([`StepSetup::compact_applies`]: bilinear shapes, no rigid body, no
+    /// double mapping; none of these changes during a run).
+    compact_form: bool,
+    /// The points' shape functions in compact form, when `compact_form`
+    /// (`setup.shapes` is then empty).
     compact: Vec<BilinearShape>,
     /// The nodal and per-point arrays of the step.
     buffers: Buffers,
@@ -125,9 +130,11 @@ impl ExplicitIntegrator {
     /// limit of the material at rest in its initial configuration is refused
     /// before the run; the velocity term and later drops are checked every step.
     pub fn new(model: &Model) -> Result<Self, SceneError> {
+        let mut integrator = Self::default();
+        integrator.work.compact_form = StepSetup::compact_applies(model);
         if let Some(dt) = model.settings.run.dt {
             let Ok(setup) = StepSetup::new(model) else {
-                return Ok(Self::default()); // points outside the grid are reported by the validation
+                return Ok(integrator); // points outside the grid are reported by the validation
             };
             let mass = transfer::nodal_mass(
                 &model.grid,
@@ -149,7 +156,7 @@ impl ExplicitIntegrator {
                 });
             }
         }
-        Ok(Self::default())
+        Ok(integrator)
     }
 
     /// One MUSL step (theory §4), in the order of paper Fig. 1.
@@ -161,6 +168,7 @@ impl ExplicitIntegrator {
             setup,
             compact: compact_shapes,
             buffers,
+            ..
         } = work;
         let usage = &mut self.usage;
         let (dt, removed) = if compact {
@@ -186,14 +194,12 @@ impl Workspace {
     /// The step's shape functions and bins at the start-of-step positions;
     /// returns whether the points' shapes are the compact ones.
     fn refresh(&mut self, model: &Model) -> Result<bool, StepError> {
-        if StepSetup::compact_applies(model) {
+        if self.compact_form {
             self.setup.refresh_compact(model, &mut self.compact)?;
-            Ok(true)
         } else {
-            self.compact.clear();
             self.setup.refresh(model)?;
-            Ok(false)
         }
+        Ok(self.compact_form)
     }
 }
 
