@@ -218,6 +218,26 @@ pub fn brittleness(curve: &[(f64, f64)], delta_end: f64) -> Result<f64> {
     Ok((fp - fe) / fp)
 }
 
+/// M3 drop length Δδ_½ = δ_½ − δ_peak: the travel from the peak to where the
+/// load first falls to half the peak after it, interpolated linearly between
+/// the bracketing points (theory §9, M3). `None` where the load stays above
+/// half the peak; negative where the curve snaps back (path following).
+pub fn half_peak_drop(curve: &[(f64, f64)]) -> Result<Option<f64>> {
+    if curve.len() < 2 {
+        return Err(MetricsError::Empty("curve"));
+    }
+    let (delta_peak, load_peak) = peak(curve)?;
+    if load_peak <= 0.0 {
+        return Err(MetricsError::Degenerate("peak load is not positive"));
+    }
+    let half = 0.5 * load_peak;
+    let start = curve.iter().position(|p| p.1 == load_peak).unwrap_or(0);
+    Ok(curve[start..].windows(2).find_map(|pair| {
+        let ((d0, f0), (d1, f1)) = (pair[0], pair[1]);
+        (f1 <= half).then(|| d0 + (d1 - d0) * (f0 - half) / (f0 - f1) - delta_peak)
+    }))
+}
+
 // ---------------------------------------------------------------------------
 // M4: shear-band width
 // ---------------------------------------------------------------------------

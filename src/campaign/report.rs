@@ -240,6 +240,9 @@ pub struct RunMetrics {
     pub peak_spread: Option<f64>,
     /// M3 brittleness.
     pub brittleness: Option<f64>,
+    /// M3 drop length: δ from the peak to where the load first halves after
+    /// it (`None`: it never halves).
+    pub half_peak_drop: Option<f64>,
     /// M4 band width, m.
     pub band_width: Option<f64>,
     /// M4 applied to the nonlocal variable κ̄ instead of εq (nonlocal runs), m:
@@ -294,6 +297,7 @@ pub fn compute_metrics(runs: &[CampaignRun], benchmark: Benchmark) -> Vec<RunMet
                 m.peak_spread = metrics::peak_spread(&run.curve, &reference.curve).ok();
             }
             m.brittleness = metrics::brittleness(&run.curve, delta_end).ok();
+            m.half_peak_drop = metrics::half_peak_drop(&run.curve).ok().flatten();
             if !run.positions.is_empty() {
                 let eps_q = metrics::clip_outliers(&run.eps_q, 0.99);
                 m.band_width = metrics::shear_band_width(
@@ -407,7 +411,7 @@ pub(super) fn profiles_section(runs: &[CampaignRun]) -> String {
 }
 
 /// Header of a load-curve campaign's `metrics.csv`.
-const METRICS_HEADER: &str = "run,family,cell_size_m,length_scale_m,status,wall_s,initial_slope_kN_per_m2,peak_delta_m,peak_load_kN_per_m,final_load_kN_per_m,M1_discrepancy_1,M2_peak_spread_1,M3_brittleness_1,M4_band_width_m,M4_band_width_kappa_bar_m,load_curve_work_kJ_per_m,M5_dissipation_kJ_per_m,external_work_kJ_per_m,internal_work_kJ_per_m,kinetic_energy_kJ_per_m,energy_loss_1,soil_inside_footing_m2_per_m,corner_band_reach_left_1,corner_band_reach_right_1\n";
+const METRICS_HEADER: &str = "run,family,cell_size_m,length_scale_m,status,wall_s,initial_slope_kN_per_m2,peak_delta_m,peak_load_kN_per_m,final_load_kN_per_m,M1_discrepancy_1,M2_peak_spread_1,M3_brittleness_1,M3_half_peak_drop_m,M4_band_width_m,M4_band_width_kappa_bar_m,load_curve_work_kJ_per_m,M5_dissipation_kJ_per_m,external_work_kJ_per_m,internal_work_kJ_per_m,kinetic_energy_kJ_per_m,energy_loss_1,soil_inside_footing_m2_per_m,corner_band_reach_left_1,corner_band_reach_right_1\n";
 
 /// The fields of `metrics.csv` after `run` and `family`.
 fn metrics_fields(r: &CampaignRun, mm: &RunMetrics, status: &str) -> Vec<String> {
@@ -423,6 +427,7 @@ fn metrics_fields(r: &CampaignRun, mm: &RunMetrics, status: &str) -> Vec<String>
         optional(mm.discrepancy),
         optional(mm.peak_spread),
         optional(mm.brittleness),
+        optional(mm.half_peak_drop),
         optional(mm.band_width),
         optional(mm.band_width_kappa_bar),
         optional(mm.external_work),
@@ -500,7 +505,7 @@ fn metrics_and_report(
 ) -> (String, String) {
     let (unit, scale) = benchmark.length_unit();
     let mut csv = String::from(METRICS_HEADER);
-    let mut md = format!("# Mesh-objectivity report\n\nReference of each family: its finest completed mesh (theory §9). h and δ in {unit}, loads in kN/m, band width w (M4 on εq) and w_κ̄ (M4 on the nonlocal variable κ̄) in {unit}.\n\n| run | h ({unit}) | status | wall (s) | slope (kN/m/m) | peak F | δ_peak | F_end | β (M3) | M1 e_h | M2 | w ({unit}) | w/l_s | w_κ̄ ({unit}) | D (kJ/m, M5) |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    let mut md = format!("# Mesh-objectivity report\n\nReference of each family: its finest completed mesh (theory §9). h and δ in {unit}, loads in kN/m, band width w (M4 on εq) and w_κ̄ (M4 on the nonlocal variable κ̄) in {unit}; Δδ_½ the travel from the peak to where the load first falls to half of it (– where it stays above).\n\n| run | h ({unit}) | status | wall (s) | slope (kN/m/m) | peak F | δ_peak | F_end | β (M3) | Δδ_½ (M3) | M1 e_h | M2 | w ({unit}) | w/l_s | w_κ̄ ({unit}) | D (kJ/m, M5) |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     for (r, mm) in runs.iter().zip(m) {
         let family = family(r);
         let status = if r.error.is_some() {
@@ -520,7 +525,7 @@ fn metrics_and_report(
         };
         let _ = writeln!(
             md,
-            "| {} | {:.3} | {status} | {:.1} | {:.0} | {:.3} | {:.3} | {:.3} | {} | {} | {} | {} | {ratio} | {} | {} |",
+            "| {} | {:.3} | {status} | {:.1} | {:.0} | {:.3} | {:.3} | {:.3} | {} | {} | {} | {} | {} | {ratio} | {} | {} |",
             r.name,
             r.cell_size * scale,
             r.wall_seconds,
@@ -529,6 +534,7 @@ fn metrics_and_report(
             mm.peak.0 * scale,
             mm.final_load,
             fmt_opt(mm.brittleness, 1.0, 3),
+            fmt_opt(mm.half_peak_drop, scale, 3),
             fmt_opt(mm.discrepancy, 1.0, 4),
             fmt_opt(mm.peak_spread, 1.0, 4),
             fmt_opt(mm.band_width, scale, 3),

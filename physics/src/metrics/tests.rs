@@ -125,6 +125,25 @@ fn m3_brittleness_of_known_curve() {
     assert!(brittleness(&neg, 1.0).is_err());
 }
 
+/// The drop to half the peak: interpolated between the bracketing points,
+/// measured from the peak's δ, negative on a snap-back, absent where the
+/// load never halves.
+#[test]
+fn m3_half_peak_drop_of_known_curves() {
+    // 20 at 1 mm, 10 (half) at 2 mm: exactly 1 mm
+    let c = soft_curve();
+    assert!((half_peak_drop(&c).unwrap().unwrap() - 1e-3).abs() < 1e-12);
+    // falls from 20 to 4 between 2 and 3: half (10) at 2 + 10/16
+    let c = vec![(0.0, 0.0), (1.0, 18.0), (2.0, 20.0), (3.0, 4.0)];
+    assert!((half_peak_drop(&c).unwrap().unwrap() - 0.625).abs() < 1e-12);
+    // a snap-back: the travel turns back as the load halves
+    let c = vec![(0.0, 0.0), (2.0, 20.0), (1.8, 12.0), (1.6, 8.0)];
+    assert!((half_peak_drop(&c).unwrap().unwrap() + 0.3).abs() < 1e-12);
+    // never below half the peak after it (an earlier rise through 10 does not count)
+    let c = vec![(0.0, 0.0), (1.0, 20.0), (2.0, 11.0)];
+    assert_eq!(half_peak_drop(&c).unwrap(), None);
+}
+
 // ---------------------------------------------------------------------------
 // M4
 // ---------------------------------------------------------------------------
