@@ -18,8 +18,16 @@ pub struct DofMap {
 impl DofMap {
     /// Number the free dofs of active nodes in grid-dof order (deterministic).
     pub fn new(bins: &ParticleBins, constraints: &Constraints) -> Self {
-        let mut index = vec![NONE; constraints.dof.len()];
-        let mut n_free = 0;
+        let mut dofs = Self::default();
+        dofs.renumber(bins, constraints);
+        dofs
+    }
+
+    /// [`Self::new`] in place, reusing the index array.
+    pub fn renumber(&mut self, bins: &ParticleBins, constraints: &Constraints) {
+        self.index.clear();
+        self.index.resize(constraints.dof.len(), NONE);
+        self.n_free = 0;
         for (node, &active) in bins.node_active.iter().enumerate() {
             if !active {
                 continue;
@@ -27,12 +35,11 @@ impl DofMap {
             for c in 0..2 {
                 let d = 2 * node + c;
                 if constraints.dof[d] == DofConstraint::Free {
-                    index[d] = n_free as u32;
-                    n_free += 1;
+                    self.index[d] = self.n_free as u32;
+                    self.n_free += 1;
                 }
             }
         }
-        Self { index, n_free }
     }
 
     /// Make the constrained grid dof `d` an unknown, numbered after the

@@ -11,7 +11,7 @@ use super::commit::{commit, NodalResults};
 use super::converged_stresses::converged_stresses;
 use super::g2p::{g2p, GridMotion, VelocityUpdate};
 use super::newton::{self, NewtonBuffers, Solution};
-use super::p2g::{external_force, nodal_kinematics, KinematicsBuffers};
+use super::p2g::{external_force_into, nodal_kinematics, KinematicsBuffers};
 use super::path::{PathConstraint, PathRecord, MAX_RELEARNED};
 use super::step_control::{LocalError, StepControlRecord, StepController};
 use super::step_system::{Newmark, NewtonError, NodalKinematics, StepSystem};
@@ -34,9 +34,8 @@ pub struct ImplicitIntegrator {
     tangent: Tangent,
     /// ε_bg · K_cell^el (theory D19).
     background_block: [f64; 64],
-    /// The step setup, refreshed in place each (sub-)step (its shape
-    /// functions and bins reuse the previous step's arrays).
-    setup: StepSetup,
+    /// What a (sub-)step builds, refilled in place by the next.
+    buffers: StepBuffers,
     /// Factorisations, Newton iterations, halvings.
     pub usage: SolverUsage,
     /// ‖R‖ per Newton iteration of the last converged (sub-)step, kN/m, and the
@@ -44,8 +43,6 @@ pub struct ImplicitIntegrator {
     pub last_residuals: (Vec<f64>, f64),
     /// The Newton iterates' buffers, kept from one (sub-)step to the next.
     newton_buffers: NewtonBuffers,
-    /// The P2G pass's buffers, kept from one (sub-)step to the next.
-    p2g: KinematicsBuffers,
     /// The step-size controller (`[solver] time_step = "adaptive"`).
     control: Option<StepController>,
     /// Path following: the travel and load change of the last attempt
@@ -85,6 +82,26 @@ enum Attempt {
     Rejected(f64),
 }
 
+/// What a (sub-)step builds, kept by the integrator so that the next
+/// (sub-)step refills the same arrays instead of allocating new ones.
+#[derive(Default)]
+struct StepBuffers {
+    /// Shape functions and bins at the start-of-step positions.
+    setup: StepSetup,
+    /// The numbering of the unknowns, frictional nodes closed.
+    free_dofs: DofMap,
+    /// P2G's patch and nodal sums.
+    p2g: KinematicsBuffers,
+    /// P2G's nodal kinematics, as mapped.
+    mapped: NodalKinematics,
+    /// The step system's copies of `free_dofs` and `mapped` (a contact pass
+    /// opens frictional nodes and zeroes the fixed dofs on them).
+    system_dofs: DofMap,
+    system_nodal: NodalKinematics,
+    /// The converged step's nodal fields.
+    fields: GridFields,
+}
+
 impl ImplicitIntegrator {
     /// The integrator for `model`'s scene.
     pub fn new(model: &Model) -> Result<Self, crate::scene::SceneError> {
@@ -94,11 +111,10 @@ impl ImplicitIntegrator {
             newmark: dynamic.then(|| Newmark::from_solver(&model.settings.solver)),
             tangent: Tangent::new(model)?,
             background_block: background_block(&model.settings, &model.grid),
-            setup: StepSetup::default(),
+            buffers: StepBuffers::default(),
             usage: SolverUsage::default(),
             last_residuals: (Vec::new(), 0.0),
             newton_buffers: NewtonBuffers::default(),
-            p2g: KinematicsBuffers::default(),
             control: StepController::of(&model.settings),
             path_jump: None,
         })
@@ -191,7 +207,7 @@ impl ImplicitIntegrator {
                 velocity_scale: record.velocity_scale,
                 keep_any: model.state.step == 0 || dt <= control.dt_min * (1.0 + 1e-9),
             };
-            match self.substep(model, profile, t0, dt, Control::Error(judge), &mut report) {
+            match self.substep(model, profile, (t0, dt), Control::Error(judge), &mut report) {
                 Ok(Attempt::Committed(iterations, local)) => {
                     report.iterations += iterations;
                     report.substeps += 1;
@@ -264,8 +280,7 @@ impl ImplicitIntegrator {
             match self.substep(
                 model,
                 profile,
-                t,
-                dt,
+                (t, dt),
                 Control::Path(constraint),
                 &mut report,
             ) {
@@ -339,7 +354,7 @@ impl ImplicitIntegrator {
         depth: usize,
         report: &mut StepReport,
     ) -> Result<(), StepError> {
-        match self.substep(model, profile, t, dt, Control::Fixed, report) {
+        match self.substep(model, profile, (t, dt), Control::Fixed, report) {
             // a fixed step is not judged for its error
             Ok(Attempt::Rejected(_)) => Err(StepError::NotAvailable(
                 "a fixed step was rejected for its error",
@@ -359,109 +374,72 @@ impl ImplicitIntegrator {
         }
     }
 
-    /// One (sub-)step from `t` to `t + dt`, in the order of paper Fig. 1.
-    /// With error control (adaptive steps: whether to keep the step whatever
-    /// its error) the converged step's error is estimated, and a step that
-    /// fails the tolerance is rejected before anything is committed; with a
-    /// path constraint the step ends at `t + Δτ`, Δτ chosen by the
-    /// constraint. The step setup is the integrator's, refreshed in place.
+    /// One (sub-)step from `t` to `t + dt`, the stages of paper Fig. 1. With
+    /// error control (adaptive steps: whether to keep the step whatever its
+    /// error) the converged step's error is estimated, and a step that fails
+    /// the tolerance is rejected before anything is committed; with a path
+    /// constraint the step ends at `t + Δτ`, Δτ chosen by the constraint.
+    /// The step's arrays are the integrator's, refilled in place.
     fn substep(
-        &mut self,
-        model: &mut Model,
-        profile: &Profile,
-        t: f64,
-        dt: f64,
-        control: Control,
-        report: &mut StepReport,
-    ) -> Result<Attempt, NewtonError> {
-        let mut setup = std::mem::take(&mut self.setup);
-        let result = self.substep_with(model, profile, (t, dt), control, report, &mut setup);
-        self.setup = setup;
-        result
-    }
-
-    /// [`Self::substep`] with the step setup `setup` (refreshed here).
-    fn substep_with(
         &mut self,
         model: &mut Model,
         profile: &Profile,
         (t, dt): (f64, f64),
         control: Control,
         report: &mut StepReport,
-        setup: &mut StepSetup,
     ) -> Result<Attempt, NewtonError> {
-        let mut free_dofs = profile.time(Stage::Setup, || refresh_setup(model, setup))?;
+        let StepBuffers {
+            setup,
+            free_dofs,
+            p2g,
+            mapped,
+            system_dofs,
+            system_nodal,
+            fields,
+        } = &mut self.buffers;
+        profile.time(Stage::Setup, || refresh_setup(model, setup, free_dofs))?;
         let setup = &*setup;
-        let mut mapped = profile.time(Stage::P2G, || {
-            self.map_to_grid(model, setup, t + dt, profile)
+        profile.time(Stage::P2G, || {
+            map_to_grid(model, setup, self.newmark, t + dt, (p2g, mapped), profile)
         });
-        let mut open = open_at_start(model, setup, &mapped, dt);
-        let mut pass = 1;
-        let (mut system, solution, mut nonlocal) = loop {
-            // without frictional edges there is one pass: nothing to copy
-            let (dofs, mut nodal) = if model.friction.is_empty() {
-                (std::mem::take(&mut free_dofs), std::mem::take(&mut mapped))
-            } else {
-                (released(free_dofs.clone(), model, &open), mapped.clone())
-            };
-            hold_fixed_dofs(&mut nodal, model, setup, &dofs, self.newmark);
-            let mut nonlocal =
-                NonlocalStep::start(model, false, profile).map_err(StepError::from)?;
-            let mut system = self.system(model, setup, dofs, nodal, t, dt);
-            if let Control::Path(constraint) = control {
-                system.path = Some(constraint.starting_from(&system));
-            }
-            let solution = profile.time(Stage::Newton, || {
-                newton::solve(
-                    &system,
-                    &mut self.tangent,
-                    nonlocal.as_mut(),
-                    &mut self.usage,
-                    profile,
-                    &mut self.newton_buffers,
-                )
-            })?;
-            let changes = contact_changes(&system, &open, &solution);
-            if changes.is_empty() || pass == MAX_CONTACT_PASSES {
-                break (system, solution, nonlocal);
-            }
-            pass += 1;
-            self.usage.contact_resolves += 1;
-            for k in changes {
-                open[k] = !open[k];
-            }
-            self.newton_buffers.recycle(solution.trial);
-        };
-        // path following: the step ends where the constraint put the anchors,
-        // unless it jumped off the path (PF5)
-        let dt = solution.travel;
-        if let Some(path) = system.path {
-            let load_change = system.driven_load(&solution.du, dt) - path.start_load;
-            if !path.accepts(system.dt, dt, load_change) {
-                self.path_jump = Some([dt, load_change]);
-                self.newton_buffers.recycle(solution.trial);
-                return Ok(Attempt::Rejected(f64::INFINITY));
-            }
+        let (system, solution, mut nonlocal) = ContactPasses {
+            tangent: &mut self.tangent,
+            usage: &mut self.usage,
+            newton: &mut self.newton_buffers,
+            newmark: self.newmark,
+            background_block: self.background_block,
         }
-        let removed_velocity = std::mem::take(&mut system.nodal.removed_velocity);
-        let boundary_work = system.nodal.removed_energy;
-        let grid = ConvergedGrid::new(&system, solution);
-        let boundary_work = boundary_work + system.friction_work(&grid.du);
-        let mut local = None;
-        if let (Control::Error(control), Some(newmark), Some(a)) =
-            (control, self.newmark, grid.acceleration.as_deref())
-        {
-            let error = LocalError::of(&system, &newmark, &grid.du, a);
-            let estimate = error.relative(dt, control.velocity_scale);
-            report.error_estimate = Some(estimate);
-            local = Some(error);
-            if !control.controller.accepts(estimate) && !control.keep_any {
+        .solve(
+            model,
+            setup,
+            (mapped, free_dofs),
+            (system_dofs, system_nodal),
+            (t, dt),
+            control,
+            profile,
+        )?;
+        let dt = solution.travel;
+        if let Some(jump) = path_jump(&system, &solution) {
+            self.path_jump = Some(jump);
+            (*system_dofs, *system_nodal) = (system.dofs, system.nodal);
+            self.newton_buffers.recycle(solution.trial);
+            return Ok(Attempt::Rejected(f64::INFINITY));
+        }
+        let grid = ConvergedGrid::new(&system, solution, std::mem::take(fields));
+        let boundary_work = system.nodal.removed_energy + system.friction_work(&grid.du);
+        let local = local_error(&system, &grid, control, self.newmark, dt);
+        (*system_dofs, *system_nodal) = (system.dofs, system.nodal);
+        if let (Some((_, estimate)), Control::Error(judge)) = (&local, control) {
+            report.error_estimate = Some(*estimate);
+            if !judge.controller.accepts(*estimate) && !judge.keep_any {
+                *fields = grid.fields;
                 self.newton_buffers.recycle(grid.trial);
-                return Ok(Attempt::Rejected(estimate));
+                return Ok(Attempt::Rejected(*estimate));
             }
         }
         self.last_residuals = (grid.history.clone(), grid.reference);
         let mut motion = grid.motion(dt, self.newmark);
+        let removed_velocity = &system_nodal.removed_velocity;
         motion.velocity_removed = (!removed_velocity.is_empty()).then_some(&removed_velocity[..]);
         profile.time(Stage::G2P, || {
             g2p(&mut model.state.particles, &setup.shapes, &motion)
@@ -471,7 +449,7 @@ impl ImplicitIntegrator {
         })?;
         let removed = profile.time(Stage::Commit, || {
             let nodal = NodalResults {
-                reaction: &grid.reaction,
+                reaction: &grid.fields.reaction,
                 increment: &grid.du,
                 contact_motion: &grid.du,
                 gravity: model.settings.loads.gravity_at(t + dt),
@@ -483,54 +461,12 @@ impl ImplicitIntegrator {
         })?;
         report.removed_points.extend(removed);
         model.state.time = t + dt;
+        *fields = grid.fields;
         self.newton_buffers.recycle(grid.trial);
-        Ok(Attempt::Committed(grid.iterations, local))
-    }
-
-    /// The nonlinear system of a (sub-)step.
-    fn system<'a>(
-        &self,
-        model: &'a Model,
-        setup: &'a StepSetup,
-        dofs: DofMap,
-        nodal: NodalKinematics,
-        t: f64,
-        dt: f64,
-    ) -> StepSystem<'a> {
-        StepSystem {
-            model,
-            setup,
-            dofs,
-            nodal,
-            t,
-            dt,
-            newmark: self.newmark,
-            background_block: self.background_block,
-            held_sticks: Default::default(),
-            path: None,
-        }
-    }
-
-    /// P2G: nodal mass, v_n and a_n (dynamic only, in one pass; the mass
-    /// counted in `profile`) and the external force at `t1` (theory D10).
-    /// The constrained dofs are held by [`hold_fixed_dofs`].
-    fn map_to_grid(
-        &mut self,
-        model: &Model,
-        setup: &StepSetup,
-        t1: f64,
-        profile: &Profile,
-    ) -> NodalKinematics {
-        let Some(newmark) = self.newmark else {
-            return NodalKinematics {
-                external: external_force(model, setup, t1),
-                ..Default::default()
-            };
-        };
-        let carry_force = newmark.is_generalised_alpha();
-        let nodal = nodal_kinematics(model, setup, t1, carry_force, &mut self.p2g);
-        profile.count(Work::MassMatrix, 1);
-        nodal
+        Ok(Attempt::Committed(
+            grid.iterations,
+            local.map(|(error, _)| error),
+        ))
     }
 
     /// The next step's linearisation at a given free-dof displacement increment
@@ -546,16 +482,29 @@ impl ImplicitIntegrator {
     ) -> Result<(Vec<f64>, SparseMatrix), StepError> {
         let (t, dt) = (model.state.time, self.dt);
         let profile = Profile::default();
-        let (setup, dofs) = step_setup(model)?;
-        if free_increment.len() != dofs.n_free {
+        let StepBuffers {
+            setup,
+            free_dofs,
+            p2g,
+            mapped,
+            ..
+        } = &mut StepBuffers::default();
+        refresh_setup(model, setup, free_dofs)?;
+        if free_increment.len() != free_dofs.n_free {
             return Err(StepError::WrongLength {
                 what: "linearize",
                 given: free_increment.len(),
-                expected: dofs.n_free,
+                expected: free_dofs.n_free,
             });
         }
-        let nodal = self.map_to_grid(model, &setup, t + dt, &profile);
-        let system = self.system(model, &setup, dofs, nodal, t, dt);
+        map_to_grid(model, setup, self.newmark, t + dt, (p2g, mapped), &profile);
+        let system = step_system(
+            model,
+            setup,
+            (std::mem::take(free_dofs), std::mem::take(mapped)),
+            (t, dt),
+            (self.newmark, self.background_block),
+        );
         let du = system.initial_increment(free_increment);
         let mut trial = TrialStresses::default();
         let res = system
@@ -570,8 +519,150 @@ impl ImplicitIntegrator {
 
     /// Number of unknowns of the next step.
     pub fn unknowns(model: &Model) -> Result<usize, StepError> {
-        Ok(step_setup(model)?.1.n_free)
+        let (mut setup, mut dofs) = (StepSetup::default(), DofMap::default());
+        refresh_setup(model, &mut setup, &mut dofs)?;
+        Ok(dofs.n_free)
     }
+}
+
+/// The nonlinear system of a (sub-)step from `t` over `dt` on the numbering
+/// `dofs` and the mapped kinematics `nodal`, with the integrator's Newmark
+/// parameters and background block (theory D19).
+fn step_system<'a>(
+    model: &'a Model,
+    setup: &'a StepSetup,
+    (dofs, nodal): (DofMap, NodalKinematics),
+    (t, dt): (f64, f64),
+    (newmark, background_block): (Option<Newmark>, [f64; 64]),
+) -> StepSystem<'a> {
+    StepSystem {
+        model,
+        setup,
+        dofs,
+        nodal,
+        t,
+        dt,
+        newmark,
+        background_block,
+        held_sticks: Default::default(),
+        path: None,
+    }
+}
+
+/// P2G into `nodal`: nodal mass, v_n and a_n (dynamic only, in one pass;
+/// the mass counted in `profile`) and the external force at `t1` (theory
+/// D10). The constrained dofs are held by [`hold_fixed_dofs`].
+fn map_to_grid(
+    model: &Model,
+    setup: &StepSetup,
+    newmark: Option<Newmark>,
+    t1: f64,
+    (sums, nodal): (&mut KinematicsBuffers, &mut NodalKinematics),
+    profile: &Profile,
+) {
+    let Some(newmark) = newmark else {
+        external_force_into(model, setup, t1, &mut nodal.external);
+        return;
+    };
+    let carry_force = newmark.is_generalised_alpha();
+    nodal_kinematics(model, setup, t1, carry_force, sums, nodal);
+    profile.count(Work::MassMatrix, 1);
+}
+
+/// The Newton solves of one (sub-)step with the frictional nodes opened or
+/// closed (FR7), with the integrator's solver state.
+struct ContactPasses<'s> {
+    tangent: &'s mut Tangent,
+    usage: &'s mut SolverUsage,
+    newton: &'s mut NewtonBuffers,
+    newmark: Option<Newmark>,
+    background_block: [f64; 64],
+}
+
+impl ContactPasses<'_> {
+    /// Solve the step from the P2G kinematics `mapped` on the numbering
+    /// `free_dofs`: the first pass with the start's guess of the open
+    /// frictional nodes, then one per change of the contact set, up to
+    /// [`MAX_CONTACT_PASSES`]. Each pass's system takes `dofs` and `nodal`
+    /// as its copies of `free_dofs` and `mapped` (the last pass's are
+    /// returned in its system; the others are put back).
+    #[allow(clippy::too_many_arguments)]
+    fn solve<'a>(
+        &mut self,
+        model: &'a Model,
+        setup: &'a StepSetup,
+        (mapped, free_dofs): (&NodalKinematics, &DofMap),
+        (dofs, nodal): (&mut DofMap, &mut NodalKinematics),
+        (t, dt): (f64, f64),
+        control: Control,
+        profile: &Profile,
+    ) -> Result<(StepSystem<'a>, Solution, Option<NonlocalStep>), NewtonError> {
+        let mut open = open_at_start(model, setup, mapped, dt);
+        let mut pass = 1;
+        loop {
+            let (mut pass_dofs, mut pass_nodal) = (std::mem::take(dofs), std::mem::take(nodal));
+            pass_dofs.clone_from(free_dofs);
+            release_open(&mut pass_dofs, model, &open);
+            pass_nodal.clone_from(mapped);
+            hold_fixed_dofs(&mut pass_nodal, model, setup, &pass_dofs, self.newmark);
+            let mut nonlocal =
+                NonlocalStep::start(model, false, profile).map_err(StepError::from)?;
+            let parameters = (self.newmark, self.background_block);
+            let mut system =
+                step_system(model, setup, (pass_dofs, pass_nodal), (t, dt), parameters);
+            if let Control::Path(constraint) = control {
+                system.path = Some(constraint.starting_from(&system));
+            }
+            let solution = profile.time(Stage::Newton, || {
+                newton::solve(
+                    &system,
+                    self.tangent,
+                    nonlocal.as_mut(),
+                    self.usage,
+                    profile,
+                    self.newton,
+                )
+            })?;
+            let changes = contact_changes(&system, &open, &solution);
+            if changes.is_empty() || pass == MAX_CONTACT_PASSES {
+                return Ok((system, solution, nonlocal));
+            }
+            pass += 1;
+            self.usage.contact_resolves += 1;
+            for k in changes {
+                open[k] = !open[k];
+            }
+            self.newton.recycle(solution.trial);
+            (*dofs, *nodal) = (system.dofs, system.nodal);
+        }
+    }
+}
+
+/// Path following: the travel and load change of a converged step that
+/// jumped off the path (PF5), `None` where it stays on it or no path is
+/// followed.
+fn path_jump(system: &StepSystem, solution: &Solution) -> Option<[f64; 2]> {
+    let path = system.path?;
+    let travel = solution.travel;
+    let load_change = system.driven_load(&solution.du, travel) - path.start_load;
+    (!path.accepts(system.dt, travel, load_change)).then_some([travel, load_change])
+}
+
+/// With error control (adaptive steps, dynamic), the converged step's local
+/// error and its estimate relative to the velocity scale.
+fn local_error(
+    system: &StepSystem,
+    grid: &ConvergedGrid,
+    control: Control,
+    newmark: Option<Newmark>,
+    dt: f64,
+) -> Option<(LocalError, f64)> {
+    let (Control::Error(judge), Some(newmark)) = (control, newmark) else {
+        return None;
+    };
+    let error = LocalError::of(system, &newmark, &grid.du, &grid.fields.acceleration);
+    let estimate = error.relative(dt, judge.velocity_scale);
+    Some((error, estimate))
 }
 
 /// At a jump of the stepped gravity just after the start of a step, the
@@ -592,17 +683,26 @@ fn restart_at_gravity_jump(model: &mut Model, newmark: Option<Newmark>) {
     }
 }
 
+/// The nodal fields of a converged (sub-)step that G2P and the commit read,
+/// kept by the integrator from one (sub-)step to the next.
+#[derive(Default)]
+struct GridFields {
+    /// a_{n+1} per grid node (dynamic runs; else empty).
+    acceleration: Vec<[f64; 2]>,
+    /// M⁻¹(f_ext − f_int) at t_{n+1} per grid node (generalised-α runs;
+    /// else empty).
+    force_per_mass: Vec<[f64; 2]>,
+    /// Support reactions per grid node: −R, and at the frictional edges' free
+    /// tangential dofs the friction force T (FR1).
+    reaction: Vec<[f64; 2]>,
+}
+
 /// A converged (sub-)step's nodal solution, for the G2P and commit stages.
 struct ConvergedGrid {
     /// Δu per grid node.
     du: Vec<[f64; 2]>,
-    /// a_{n+1} per grid node (dynamic runs).
-    acceleration: Option<Vec<[f64; 2]>>,
-    /// M⁻¹(f_ext − f_int) at t_{n+1} per grid node (generalised-α runs).
-    force_per_mass: Option<Vec<[f64; 2]>>,
-    /// Support reactions per grid node: −R, and at the frictional edges' free
-    /// tangential dofs the friction force T (FR1).
-    reaction: Vec<[f64; 2]>,
+    /// The nodal fields at Δu.
+    fields: GridFields,
     /// Stresses, states and tangents at Δu.
     trial: TrialStresses,
     /// Newton iterations.
@@ -614,7 +714,9 @@ struct ConvergedGrid {
 }
 
 impl ConvergedGrid {
-    fn new(system: &StepSystem, solution: Solution) -> Self {
+    /// The converged `solution` of `system`, its nodal fields refilled into
+    /// `fields`.
+    fn new(system: &StepSystem, solution: Solution, mut fields: GridFields) -> Self {
         let Solution {
             du,
             trial,
@@ -623,18 +725,21 @@ impl ConvergedGrid {
             history,
             ..
         } = solution;
-        let mut reaction: Vec<[f64; 2]> =
-            residual.residual.iter().map(|r| [-r[0], -r[1]]).collect();
-        system.add_friction_reactions(&du, &mut reaction);
+        fields.reaction.clear();
+        fields
+            .reaction
+            .extend(residual.residual.iter().map(|r| [-r[0], -r[1]]));
+        system.add_friction_reactions(&du, &mut fields.reaction);
+        fields.acceleration.clear();
+        fields.force_per_mass.clear();
+        if let Some(newmark) = system.newmark {
+            system.nodal_acceleration_into(&newmark, &du, &mut fields.acceleration);
+            if newmark.is_generalised_alpha() {
+                system.nodal_inertial_acceleration_into(&newmark, &du, &mut fields.force_per_mass);
+            }
+        }
         Self {
-            acceleration: system
-                .newmark
-                .map(|newmark| system.nodal_acceleration(&newmark, &du)),
-            force_per_mass: system
-                .newmark
-                .filter(Newmark::is_generalised_alpha)
-                .map(|newmark| system.nodal_inertial_acceleration(&newmark, &du)),
-            reaction,
+            fields,
             reference: residual.reference,
             du,
             trial,
@@ -646,12 +751,14 @@ impl ConvergedGrid {
     /// G2P (theory §3): x_p += Σ N Δu_i; dynamic: a_p = Σ N a_i, Newmark v_p.
     fn motion(&self, dt: f64, newmark: Option<Newmark>) -> GridMotion<'_> {
         let rule = newmark.map(|n| VelocityUpdate::Newmark { gamma: n.gamma });
+        let fields = &self.fields;
         GridMotion {
             dt,
             displacement: &self.du,
             scale: 1.0,
-            acceleration: self.acceleration.as_deref().zip(rule),
-            force_per_mass: self.force_per_mass.as_deref(),
+            acceleration: rule.map(|rule| (&fields.acceleration[..], rule)),
+            force_per_mass: (!fields.force_per_mass.is_empty())
+                .then_some(&fields.force_per_mass[..]),
             velocity_removed: None,
         }
     }
@@ -699,7 +806,9 @@ fn hold_fixed_dofs(
         let v = nodal.velocity[node][c];
         if v != 0.0 {
             if nodal.removed_velocity.is_empty() {
-                nodal.removed_velocity = vec![[0.0; 2]; nodal.velocity.len()];
+                nodal
+                    .removed_velocity
+                    .resize(nodal.velocity.len(), [0.0; 2]);
             }
             nodal.removed_velocity[node][c] = v;
         }
@@ -726,12 +835,11 @@ fn open_at_start(model: &Model, setup: &StepSetup, mapped: &NodalKinematics, dt:
     )
 }
 
-/// `dofs` with the normal dofs of the `open` frictional nodes released.
-fn released(mut dofs: DofMap, model: &Model, open: &[bool]) -> DofMap {
+/// Release the normal dofs of the `open` frictional nodes in `dofs`.
+fn release_open(dofs: &mut DofMap, model: &Model, open: &[bool]) {
     for (contact, _) in model.friction.nodes.iter().zip(open).filter(|(_, &o)| o) {
         dofs.release(2 * contact.node + contact.normal);
     }
-    dofs
 }
 
 /// The frictional nodes whose contact the converged `solution` changes
@@ -752,16 +860,10 @@ fn contact_changes(system: &StepSystem, open: &[bool], solution: &Solution) -> V
     )
 }
 
-/// The shared step setup and the numbering of the unknowns.
-fn step_setup(model: &Model) -> Result<(StepSetup, DofMap), StepError> {
-    let mut setup = StepSetup::default();
-    let dofs = refresh_setup(model, &mut setup)?;
-    Ok((setup, dofs))
-}
-
-/// [`step_setup`] into `setup` (reusing its arrays); returns the numbering
-/// of the unknowns.
-fn refresh_setup(model: &Model, setup: &mut StepSetup) -> Result<DofMap, StepError> {
+/// Refresh the step setup `setup` (reusing its arrays) and number the
+/// unknowns into `dofs`.
+fn refresh_setup(model: &Model, setup: &mut StepSetup, dofs: &mut DofMap) -> Result<(), StepError> {
     setup.refresh(model)?;
-    Ok(DofMap::new(&setup.bins, &model.constraints))
+    dofs.renumber(&setup.bins, &model.constraints);
+    Ok(())
 }

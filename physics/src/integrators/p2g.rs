@@ -10,22 +10,23 @@ use crate::grid::ShapeAt;
 use crate::model::Model;
 use crate::transfer::{self, NodalField, NODES_PER_TASK};
 
-/// f_i^ext at time `t`: body force Σ_p N_ip m_p b(t) (when gravity is on) plus
-/// the follower pressures of the traction points, per grid node (theory D10).
-pub fn external_force(model: &Model, setup: &StepSetup, t: f64) -> Vec<[f64; 2]> {
+/// f_i^ext at time `t` into `external`: body force Σ_p N_ip m_p b(t) (when
+/// gravity is on) plus the follower pressures of the traction points, per
+/// grid node (theory D10). Without gravity the buffer is refilled in place.
+pub fn external_force_into(model: &Model, setup: &StepSetup, t: f64, external: &mut Vec<[f64; 2]>) {
     let grid = &model.grid;
     let p = &model.state.particles;
     let g = model.settings.loads.gravity_at(t);
-    let mut external = if g != 0.0 {
-        transfer::body_force(grid, &setup.bins, &setup.shapes, &p.mass, [0.0, -g])
+    if g != 0.0 {
+        *external = transfer::body_force(grid, &setup.bins, &setup.shapes, &p.mass, [0.0, -g]);
     } else {
-        vec![[0.0; 2]; grid.node_count()]
-    };
+        external.clear();
+        external.resize(grid.node_count(), [0.0; 2]);
+    }
     model
         .state
         .traction
-        .add_forces(&setup.traction_shapes, &mut external);
-    external
+        .add_forces(&setup.traction_shapes, external);
 }
 
 /// Nodal sums of the implicit dynamic step's P2G pass, per node: m_i,
@@ -54,15 +55,17 @@ pub struct KinematicsBuffers {
 /// an implicit dynamic step, per grid node (zero at the nodes no point
 /// reaches), the point sums in one pass: the same values, bit for bit, as
 /// [`transfer::nodal_mass`], [`transfer::nodal_mass_weighted`] of v and a
-/// divided by the mass, and [`external_force`]; with `carry_force` also the
-/// points' force per mass q, mass-weighted (generalised-α).
+/// divided by the mass, and [`external_force_into`]; with `carry_force` also the
+/// points' force per mass q, mass-weighted (generalised-α). Refills `nodal`
+/// in place.
 pub fn nodal_kinematics(
     model: &Model,
     setup: &StepSetup,
     t: f64,
     carry_force: bool,
     buffers: &mut KinematicsBuffers,
-) -> NodalKinematics {
+    nodal: &mut NodalKinematics,
+) {
     let p = &model.state.particles;
     let g = model.settings.loads.gravity_at(t);
     let (mass, velocity, acceleration) = (&p.mass, &p.velocity, &p.acceleration);
@@ -87,42 +90,37 @@ pub fn nodal_kinematics(
     };
     let KinematicsBuffers { cells, sums } = buffers;
     transfer::scatter_into_field(&model.grid, &setup.bins, &setup.shapes, add, cells, sums);
-    let per_node = |f: fn(&KinematicSums) -> [f64; 2]| -> Vec<[f64; 2]> {
+    let per_node = |f: fn(&KinematicSums) -> [f64; 2], out: &mut Vec<[f64; 2]>| {
         sums.par_iter()
             .with_min_len(NODES_PER_TASK)
             .map(f)
-            .collect()
+            .collect_into_vec(out)
     };
-    let mut external = if g != 0.0 {
-        per_node(|s| [0.0, s[BODY]])
+    if g != 0.0 {
+        per_node(|s| [0.0, s[BODY]], &mut nodal.external);
     } else {
-        vec![[0.0; 2]; sums.len()]
-    };
+        nodal.external.clear();
+        nodal.external.resize(sums.len(), [0.0; 2]);
+    }
     model
         .state
         .traction
-        .add_forces(&setup.traction_shapes, &mut external);
-    NodalKinematics {
-        mass: sums
-            .par_iter()
-            .with_min_len(NODES_PER_TASK)
-            .map(|s| s[MASS])
-            .collect(),
-        velocity: per_node(|s| per_mass(s, MOMENTUM)),
-        acceleration: per_node(|s| per_mass(s, MASS_ACCELERATION)),
-        force_per_mass: if carry_force {
-            per_node(|s| per_mass(s, FORCE_PER_MASS))
-        } else {
-            Vec::new()
-        },
-        external,
-        removed_velocity: Vec::new(),
-        removed_energy: 0.0,
+        .add_forces(&setup.traction_shapes, &mut nodal.external);
+    sums.par_iter()
+        .with_min_len(NODES_PER_TASK)
+        .map(|s| s[MASS])
+        .collect_into_vec(&mut nodal.mass);
+    per_node(|s| per_mass(s, MOMENTUM), &mut nodal.velocity);
+    per_node(|s| per_mass(s, MASS_ACCELERATION), &mut nodal.acceleration);
+    if carry_force {
+        per_node(|s| per_mass(s, FORCE_PER_MASS), &mut nodal.force_per_mass);
+    } else {
+        nodal.force_per_mass.clear();
     }
+    nodal.removed_velocity.clear();
+    nodal.removed_energy = 0.0;
 }
 
-/// The mass-weighted sum at `place` divided by the nodal mass (zero where
-/// there is no mass).
 fn per_mass(sums: &KinematicSums, place: usize) -> [f64; 2] {
     let m = sums[MASS];
     if m > 0.0 {
@@ -188,10 +186,12 @@ mod tests {
             let (velocity, acceleration) = (per_mass(&p.velocity), per_mass(&p.acceleration));
             assert!(mass.iter().filter(|&&m| m > 0.0).count() > 100);
             let mut buffers = KinematicsBuffers::default();
+            // the second time refills the buffers of the first
+            let (mut one_pass, mut external) = (NodalKinematics::default(), Vec::new());
             for t in [0.001, 0.002] {
-                let external = external_force(&model, &setup, t);
+                external_force_into(&model, &setup, t, &mut external);
                 assert!(external.iter().any(|f| f[0] != 0.0), "pressures act");
-                let one_pass = nodal_kinematics(&model, &setup, t, false, &mut buffers);
+                nodal_kinematics(&model, &setup, t, false, &mut buffers, &mut one_pass);
                 assert_eq!(one_pass.mass, mass);
                 assert_eq!(one_pass.velocity, velocity);
                 assert_eq!(one_pass.acceleration, acceleration);

@@ -408,27 +408,41 @@ impl StepSystem<'_> {
         )
     }
 
-    /// ā at every active node (zero elsewhere): at convergence the nodal
-    /// M⁻¹(f_ext − f_int) of t_{n+1}, which G2P carries to the points
-    /// (generalised-α).
-    pub fn nodal_inertial_acceleration(&self, newmark: &Newmark, du: &[[f64; 2]]) -> Vec<[f64; 2]> {
-        self.at_active_nodes(|node, c| self.inertial_acceleration(newmark, du, node, c))
+    /// ā at every active node (zero elsewhere) into `field`: at convergence
+    /// the nodal M⁻¹(f_ext − f_int) of t_{n+1}, which G2P carries to the
+    /// points (generalised-α).
+    pub fn nodal_inertial_acceleration_into(
+        &self,
+        newmark: &Newmark,
+        du: &[[f64; 2]],
+        field: &mut Vec<[f64; 2]>,
+    ) {
+        self.at_active_nodes(field, |node, c| {
+            self.inertial_acceleration(newmark, du, node, c)
+        })
     }
 
-    /// a_{n+1} at every active node (zero elsewhere), for the G2P stage.
-    pub fn nodal_acceleration(&self, newmark: &Newmark, du: &[[f64; 2]]) -> Vec<[f64; 2]> {
-        self.at_active_nodes(|node, c| self.acceleration(newmark, du, node, c))
+    /// a_{n+1} at every active node (zero elsewhere) into `field`, for the
+    /// G2P stage.
+    pub fn nodal_acceleration_into(
+        &self,
+        newmark: &Newmark,
+        du: &[[f64; 2]],
+        field: &mut Vec<[f64; 2]>,
+    ) {
+        self.at_active_nodes(field, |node, c| self.acceleration(newmark, du, node, c))
     }
 
-    /// The nodal field `value(node, component)` at the active nodes, zero elsewhere.
-    fn at_active_nodes(&self, value: impl Fn(usize, usize) -> f64) -> Vec<[f64; 2]> {
-        let mut field = vec![[0.0; 2]; self.model.grid.node_count()];
+    /// The nodal field `value(node, component)` at the active nodes, zero
+    /// elsewhere, refilled into `field`.
+    fn at_active_nodes(&self, field: &mut Vec<[f64; 2]>, value: impl Fn(usize, usize) -> f64) {
+        field.clear();
+        field.resize(self.model.grid.node_count(), [0.0; 2]);
         for (node, at_node) in field.iter_mut().enumerate() {
             if self.setup.bins.node_active[node] {
                 *at_node = [value(node, 0), value(node, 1)];
             }
         }
-        field
     }
 
     /// Residual R = f_ext + f_pen − f_int − M a (theory D16), the anchors
