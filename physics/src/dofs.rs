@@ -7,12 +7,29 @@ use crate::grid::Grid;
 use crate::transfer::{ParticleBins, NONE};
 
 /// Numbering of the free dofs of the active nodes for one step.
-#[derive(Clone, Debug, Default)]
+#[derive(Debug, Default)]
 pub struct DofMap {
     /// For every grid dof, its index in the system, or [`NONE`].
     pub index: Vec<u32>,
     /// Number of unknowns.
     pub n_free: usize,
+}
+
+/// `clone_from` refills the index array in place (a derived one would
+/// allocate anew): the implicit step copies the numbering into its system
+/// each contact pass.
+impl Clone for DofMap {
+    fn clone(&self) -> Self {
+        Self {
+            index: self.index.clone(),
+            n_free: self.n_free,
+        }
+    }
+
+    fn clone_from(&mut self, source: &Self) {
+        self.index.clone_from(&source.index);
+        self.n_free = source.n_free;
+    }
 }
 
 impl DofMap {
@@ -93,5 +110,29 @@ pub fn gather_free_into(dofs: &DofMap, nodal: &[[f64; 2]], out: &mut Vec<f64>) {
         if index != NONE {
             out[index as usize] = nodal[d / 2][d % 2];
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A copy into a numbering of the same size keeps its index array (the
+    /// contact passes of an implicit step refill it, they do not allocate).
+    #[test]
+    fn clone_from_refills_the_index_in_place() {
+        let source = DofMap {
+            index: (0..10).collect(),
+            n_free: 10,
+        };
+        let mut copy = DofMap {
+            index: vec![NONE; 10],
+            n_free: 0,
+        };
+        let array = copy.index.as_ptr();
+        copy.clone_from(&source);
+        assert_eq!(copy.index, source.index);
+        assert_eq!(copy.n_free, 10);
+        assert_eq!(copy.index.as_ptr(), array);
     }
 }

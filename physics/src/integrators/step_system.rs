@@ -103,7 +103,7 @@ impl Newmark {
 }
 
 /// Start-of-step nodal quantities of an implicit (sub-)step (P2G).
-#[derive(Clone, Default)]
+#[derive(Default)]
 pub struct NodalKinematics {
     /// Lumped nodal mass (dynamic only, else empty).
     pub mass: Vec<f64>,
@@ -122,6 +122,27 @@ pub struct NodalKinematics {
     pub removed_velocity: Vec<[f64; 2]>,
     /// Σ ½ m v² of `removed_velocity`, kJ/m (B1).
     pub removed_energy: f64,
+}
+
+/// `clone_from` refills every array in place (a derived one would allocate
+/// anew): the implicit step copies the mapped kinematics into its system
+/// each contact pass.
+impl Clone for NodalKinematics {
+    fn clone(&self) -> Self {
+        let mut copy = Self::default();
+        copy.clone_from(self);
+        copy
+    }
+
+    fn clone_from(&mut self, source: &Self) {
+        self.mass.clone_from(&source.mass);
+        self.velocity.clone_from(&source.velocity);
+        self.acceleration.clone_from(&source.acceleration);
+        self.force_per_mass.clone_from(&source.force_per_mass);
+        self.external.clone_from(&source.external);
+        self.removed_velocity.clone_from(&source.removed_velocity);
+        self.removed_energy = source.removed_energy;
+    }
 }
 
 /// The nonlinear system of one (sub-)step from `t` to `t + dt`.
