@@ -48,22 +48,27 @@ impl FootingGeometry {
 }
 
 /// Soil area (m² per m) inside the footing's outline above its base at
-/// penetration `delta`: Σ V_p over the points with x in the footprint and y
-/// above the base y = surface − δ. The paper's footing is 3 m high, so this
-/// is soil that its sides would have kept out.
+/// penetration `delta`: Σ V_p⁰ over the points with x in the footprint and y
+/// above the base y = surface − δ, V_p⁰ = m_p/ρ the point's undeformed
+/// volume. The paper's footing is 3 m high, so this is soil that its sides
+/// would have kept out. The undeformed volume counts the soil, not the room
+/// it takes: a point softened to the apex of the yield surface carries no
+/// tension and the grid stretches it freely (J = V/V⁰ up to 600 in the
+/// local footing runs at δ = 0.3 m), so Σ V_p would count space between
+/// torn-apart soil.
 pub fn soil_inside_outline(
     footing: &FootingGeometry,
     delta: f64,
     positions: &[[f64; 2]],
-    volumes: &[f64],
+    initial_volumes: &[f64],
 ) -> f64 {
     let base = footing.surface - delta;
     positions
         .iter()
-        .zip(volumes)
+        .zip(initial_volumes)
         .filter(|(x, _)| x[0] > footing.footprint[0] && x[0] < footing.footprint[1] && x[1] > base)
-        .map(|(_, v)| v)
-        .sum()
+        // from +0 (`sum` starts at −0, which the report would print as −0)
+        .fold(0.0, |area, (_, v)| area + v)
 }
 
 /// Reach of the deviatoric strain under each footing corner at penetration
@@ -137,7 +142,8 @@ mod tests {
         let v = vec![s * s; x.len()];
         let area = soil_inside_outline(&footing(), 0.3, &x, &v);
         assert!((area - 0.1).abs() < 1e-12, "{area}");
-        assert_eq!(soil_inside_outline(&footing(), 0.0, &x, &v), 0.0);
+        let none = soil_inside_outline(&footing(), 0.0, &x, &v);
+        assert!(none == 0.0 && none.is_sign_positive(), "{none}");
     }
 
     #[test]

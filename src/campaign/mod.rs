@@ -157,6 +157,9 @@ pub struct CampaignRun {
     pub fields: Vec<FieldSnapshot>,
     /// Final volume of every material point, m³ per m.
     pub volumes: Vec<f64>,
+    /// Volume of every material point before it deformed (m_p / ρ), m³ per
+    /// m; empty for a record written before it was kept.
+    pub initial_volumes: Vec<f64>,
     /// The rigid footing's outline (footing benchmark).
     pub footing: Option<FootingGeometry>,
     /// Steps taken, Newton iterations, step halvings (implicit cut-backs).

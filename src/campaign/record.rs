@@ -52,6 +52,11 @@ pub struct RunRecord {
     pub kappa_bar: Vec<f64>,
     /// Final volume of every point, m³ per m.
     pub volumes: Vec<f64>,
+    /// Volume of every point before it deformed, m_p / ρ (its material's
+    /// density), m³ per m: the amount of soil it stands for however far the
+    /// grid stretched it. Empty in records written before it existed.
+    #[serde(default)]
+    pub initial_volumes: Vec<f64>,
     /// Fields at the scene's `[output] snapshot_times`.
     pub fields: Vec<FieldSnapshot>,
     /// Points removed on leaving the grid: (count, removed mass / initial mass).
@@ -95,6 +100,7 @@ impl RunRecord {
             eps_q: Vec::new(),
             kappa_bar: Vec::new(),
             volumes: Vec::new(),
+            initial_volumes: Vec::new(),
             fields: Vec::new(),
             lost_points: (0, 0.0),
             wall_seconds: 0.0,

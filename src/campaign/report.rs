@@ -250,8 +250,9 @@ pub struct RunMetrics {
     pub band_width_kappa_bar: Option<f64>,
     /// External work W = ∫F dδ, kJ/m.
     pub external_work: Option<f64>,
-    /// Footing: soil area inside the footing's outline above its base at
-    /// the last δ, m² per m ([`soil_inside_outline`]).
+    /// Footing: soil area (undeformed) inside the footing's outline above
+    /// its base at the last δ, m² per m ([`soil_inside_outline`]; `None`
+    /// for a record without the points' undeformed volumes).
     pub soil_inside_footing: Option<f64>,
     /// Footing: depth (in B below the base) that the deviatoric strain
     /// reaches under the left and the right corner ([`corner_band_reach`]).
@@ -269,12 +270,15 @@ pub fn compute_metrics(runs: &[CampaignRun], benchmark: Benchmark) -> Vec<RunMet
                 ..Default::default()
             };
             if let (Some(footing), false) = (&run.footing, run.positions.is_empty()) {
-                m.soil_inside_footing = Some(soil_inside_outline(
-                    footing,
-                    delta_end,
-                    &run.positions,
-                    &run.volumes,
-                ));
+                m.soil_inside_footing =
+                    (run.initial_volumes.len() == run.positions.len()).then(|| {
+                        soil_inside_outline(
+                            footing,
+                            delta_end,
+                            &run.positions,
+                            &run.initial_volumes,
+                        )
+                    });
                 m.corner_band = Some(corner_band_reach(
                     footing,
                     delta_end,
@@ -298,7 +302,7 @@ pub fn compute_metrics(runs: &[CampaignRun], benchmark: Benchmark) -> Vec<RunMet
             }
             m.brittleness = metrics::brittleness(&run.curve, delta_end).ok();
             m.half_peak_drop = metrics::half_peak_drop(&run.curve).ok().flatten();
-            if !run.positions.is_empty() {
+            if !run.positions.is_empty() && benchmark.has_one_band() {
                 let eps_q = metrics::clip_outliers(&run.eps_q, 0.99);
                 m.band_width = metrics::shear_band_width(
                     &run.positions,
@@ -309,7 +313,11 @@ pub fn compute_metrics(runs: &[CampaignRun], benchmark: Benchmark) -> Vec<RunMet
                 .ok()
                 .map(|b| b.width);
             }
-            if let (false, Some(l_s)) = (run.kappa_bar.is_empty(), run.length_scale) {
+            if let (false, Some(l_s), true) = (
+                run.kappa_bar.is_empty(),
+                run.length_scale,
+                benchmark.has_one_band(),
+            ) {
                 m.band_width_kappa_bar =
                     metrics::shear_band_width(&run.positions, &run.kappa_bar, run.cell_size, l_s)
                         .ok()
@@ -326,7 +334,7 @@ pub fn compute_metrics(runs: &[CampaignRun], benchmark: Benchmark) -> Vec<RunMet
 fn footing_section(runs: &[CampaignRun], m: &[RunMetrics]) -> String {
     use super::footing::{CORNER_BAND_STRAIN, CORNER_STRIP_HALF_WIDTH};
     let mut md = format!(
-        "\n## Footing: soil over the base and the corner band\n\nSoil inside the outline = area of soil inside the footing's footprint above its base at the last δ (the paper's 3 m footing is not modelled, so nothing keeps heaving soil out of it). Corner-band reach = depth below the base, in units of B, of the deepest point with εq ≥ {} in a vertical strip {:.2} B wide under each footing corner: the Prandtl mechanism alone reaches about 1.1 B there (its outer log-spiral); the paper's \"secondary vertical band below the footing corner\" reaches deeper.\n\n| run | soil inside outline (m²/m) | corner-band reach left (B) | corner-band reach right (B) |\n|---|---|---|---|\n",
+        "\n## Footing: soil over the base and the corner band\n\nSoil inside the outline = undeformed area (Σ m_p/ρ) of the soil inside the footing's footprint above its base at the last δ (the paper's 3 m footing is not modelled, so nothing keeps heaving soil out of it; – for a record without the points' undeformed volumes). Corner-band reach = depth below the base, in units of B, of the deepest point with εq ≥ {} in a vertical strip {:.2} B wide under each footing corner: the Prandtl mechanism alone reaches about 1.1 B there (its outer log-spiral); the paper's \"secondary vertical band below the footing corner\" reaches deeper.\n\n| run | soil inside outline (m²/m) | corner-band reach left (B) | corner-band reach right (B) |\n|---|---|---|---|\n",
         CORNER_BAND_STRAIN,
         2.0 * CORNER_STRIP_HALF_WIDTH,
     );
@@ -505,7 +513,11 @@ fn metrics_and_report(
 ) -> (String, String) {
     let (unit, scale) = benchmark.length_unit();
     let mut csv = String::from(METRICS_HEADER);
-    let mut md = format!("# Mesh-objectivity report\n\nReference of each family: its finest completed mesh (theory §9). h and δ in {unit}, loads in kN/m, band width w (M4 on εq) and w_κ̄ (M4 on the nonlocal variable κ̄) in {unit}; Δδ_½ the travel from the peak to where the load first falls to half of it (– where it stays above).\n\n| run | h ({unit}) | status | wall (s) | slope (kN/m/m) | peak F | δ_peak | F_end | β (M3) | Δδ_½ (M3) | M1 e_h | M2 | w ({unit}) | w/l_s | w_κ̄ ({unit}) | D (kJ/m, M5) |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    let mut md = format!("# Mesh-objectivity report\n\nReference of each family: its finest completed mesh (theory §9). h and δ in {unit}, loads in kN/m, band width w (M4 on εq) and w_κ̄ (M4 on the nonlocal variable κ̄) in {unit}{}; Δδ_½ the travel from the peak to where the load first falls to half of it (– where it stays above).\n\n| run | h ({unit}) | status | wall (s) | slope (kN/m/m) | peak F | δ_peak | F_end | β (M3) | Δδ_½ (M3) | M1 e_h | M2 | w ({unit}) | w/l_s | w_κ̄ ({unit}) | D (kJ/m, M5) |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n", if benchmark.has_one_band() {
+        ""
+    } else {
+        " (not measured here: at the last δ the mechanism has collapsed and no single band crosses it, theory §9)"
+    });
     for (r, mm) in runs.iter().zip(m) {
         let family = family(r);
         let status = if r.error.is_some() {

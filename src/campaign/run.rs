@@ -404,6 +404,7 @@ fn execute(
     let p = &model.state.particles;
     record.positions = p.position.clone();
     record.volumes = p.volume.clone();
+    record.initial_volumes = initial_volumes(p, &model.material_names, &planned.scene);
     let usage = outcome.simulation.integrator.usage();
     record.effort = Effort {
         steps: model.state.step,
@@ -432,6 +433,25 @@ fn execute(
     Ok(Executed::Finished(record))
 }
 
+/// Volume of every point before it deformed, m_p / ρ of its material
+/// (NaN for a material the scene does not name, which a built model never
+/// has).
+fn initial_volumes(
+    p: &crate::particles::Particles,
+    material_names: &[String],
+    scene: &Scene,
+) -> Vec<f64> {
+    let density: Vec<f64> = material_names
+        .iter()
+        .map(|name| scene.materials.get(name).map_or(f64::NAN, |m| m.density()))
+        .collect();
+    p.mass
+        .iter()
+        .zip(&p.material)
+        .map(|(m, &k)| m / density[k as usize])
+        .collect()
+}
+
 /// The checkpointed run of `planned`'s scene in `out`, if there is one.
 fn resumable(planned: &Planned, out: &Path) -> Option<Resumable> {
     if !out.join(crate::checkpoint::CHECKPOINT_FILE).is_file() {
@@ -458,6 +478,7 @@ fn gather(
         history: None,
         fields: record.fields,
         volumes: record.volumes,
+        initial_volumes: record.initial_volumes,
         // the footing's numbers belong to the footing benchmark only (a biaxial
         // platen is a rigid body too)
         footing: (benchmark == Benchmark::Footing)
@@ -507,4 +528,30 @@ fn gather(
         _ => None,
     };
     Ok(run)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::Model;
+
+    /// m_p/ρ recovers the seeded volume (h²/n² per point) after the points
+    /// are stretched 600-fold, with the material's own (overridden) density.
+    #[test]
+    fn initial_volumes_are_the_seeded_volumes_however_stretched() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("validation/footing/local_h250.toml");
+        let overrides = ["materials.soil.density=1.7".to_string()];
+        let scene = Scene::load(&path, &overrides).expect("footing scene");
+        let mut model = Model::new(&scene).expect("model");
+        let seeded = (scene.grid.cell_size / scene.grid.points_per_cell as f64).powi(2);
+        for v in model.state.particles.volume.iter_mut() {
+            *v *= 600.0;
+        }
+        let p = &model.state.particles;
+        let v0 = initial_volumes(p, &model.material_names, &scene);
+        assert_eq!(v0.len(), p.len());
+        for v in v0 {
+            assert!((v / seeded - 1.0).abs() < 1e-12, "{v} against {seeded}");
+        }
+    }
 }

@@ -35,6 +35,7 @@ fn blank_run(
         history: None,
         fields: Vec::new(),
         volumes: Vec::new(),
+        initial_volumes: Vec::new(),
         footing: None,
         effort: Effort::default(),
     }
