@@ -50,7 +50,7 @@ use bincode::Options;
 use codec::fnv1a64;
 
 /// Version of the checkpoint layout this build writes and reads.
-pub const FORMAT_VERSION: u32 = 5;
+pub const FORMAT_VERSION: u32 = 6;
 /// First bytes of every checkpoint.
 pub const MAGIC: [u8; 8] = *b"MPMGEOCK";
 /// The checkpoint file in a run directory.

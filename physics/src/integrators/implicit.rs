@@ -172,7 +172,11 @@ impl ImplicitIntegrator {
             dt,
             ..Default::default()
         };
-        self.advance(model, profile, t0, dt, 0, &mut report)?;
+        if model.settings.solver.remember_halvings {
+            self.remembered_halvings(model, profile, t0, dt, &mut report)?;
+        } else {
+            self.advance(model, profile, t0, dt, 0, &mut report)?;
+        }
         model.state.step += 1;
         model.state.time = t0 + dt;
         report.time = model.state.time;
@@ -372,6 +376,47 @@ impl ImplicitIntegrator {
             }
             Err(e) => Err(e.into_step_error(depth)),
         }
+    }
+
+    /// A fixed step with remembered halvings (theory §3, "Remembered
+    /// halvings"): 2^d equal substeps at the depth d the last step left,
+    /// each halved further on a Newton failure as in [`Self::advance`]. A
+    /// step that needed no halving lets the next start one level coarser;
+    /// one that did starts the next at the deepest level it reached.
+    fn remembered_halvings(
+        &mut self,
+        model: &mut Model,
+        profile: &Profile,
+        t0: f64,
+        dt: f64,
+        report: &mut StepReport,
+    ) -> Result<(), StepError> {
+        let depth = self
+            .usage
+            .start_depth
+            .min(model.settings.solver.max_halvings);
+        let pieces = 1usize << depth;
+        let piece = dt / pieces as f64;
+        let halvings_before = self.usage.halvings;
+        let mut deepest = depth;
+        for k in 0..pieces {
+            let substeps_before = report.substeps;
+            let halvings = self.usage.halvings;
+            self.advance(model, profile, t0 + k as f64 * piece, piece, depth, report)?;
+            // a piece halved h times over s substeps went at least
+            // ⌈log2 s⌉ levels deeper
+            let extra = report.substeps - substeps_before;
+            if self.usage.halvings > halvings {
+                deepest = deepest.max(depth + extra.next_power_of_two().trailing_zeros() as usize);
+            }
+        }
+        self.usage.remembered_substeps += if depth > 0 { pieces } else { 0 };
+        self.usage.start_depth = if self.usage.halvings > halvings_before {
+            deepest
+        } else {
+            depth.saturating_sub(1)
+        };
+        Ok(())
     }
 
     /// One (sub-)step from `t` to `t + dt`, the stages of paper Fig. 1. With

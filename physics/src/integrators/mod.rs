@@ -107,6 +107,13 @@ pub struct SolverUsage {
     pub step_control: Option<step_control::StepControlRecord>,
     /// Path-following runs: where the path stands and what it did.
     pub path: Option<path::PathRecord>,
+    /// Fixed steps with `solver.remember_halvings`: the halving depth the
+    /// next step starts at (2^depth equal substeps).
+    pub start_depth: usize,
+    /// Fixed steps with `solver.remember_halvings`: the pieces that steps
+    /// were split into from their start, at a remembered depth (each may
+    /// still be halved).
+    pub remembered_substeps: usize,
 }
 
 /// The integrator of a run, chosen by `scene.analysis`.

@@ -367,6 +367,11 @@ pub struct SolverSpec {
     pub max_iterations: Option<usize>,
     /// Number of step halvings allowed when Newton fails (theory §3: 4, i.e. 1/16).
     pub max_halvings: usize,
+    /// Fixed steps: a step that needed halvings starts the next one at the
+    /// depth that converged, 2^k equal substeps, and each step that passes
+    /// at its starting depth lets the next try one level coarser (theory
+    /// §3, "Remembered halvings"). Off: every step starts whole.
+    pub remember_halvings: bool,
     /// `auto`, `cholesky`, `lu`, `pcg` or `ldl`.
     pub linear_solver: LinearSolverChoice,
     /// faer's `auto`, `supernodal` or `simplicial` factorisation.
@@ -464,6 +469,7 @@ impl Default for SolverSpec {
             tolerance_energy: 1e-10,
             max_iterations: None,
             max_halvings: 4,
+            remember_halvings: false,
             linear_solver: LinearSolverChoice::Auto,
             factorization: FactorizationChoice::Auto,
             ordering: OrderingChoice::Default,

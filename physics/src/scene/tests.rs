@@ -626,3 +626,26 @@ fn a_path_following_run_is_estimated_at_its_step_budget() {
         capped.steps_reason
     );
 }
+
+/// `solver.remember_halvings` belongs to fixed implicit steps: with adaptive
+/// steps it is refused naming the field; on its own it is accepted.
+#[test]
+fn remembered_halvings_are_refused_with_adaptive_steps() {
+    let set = |extra: &[&str]| {
+        let mut o = vec!["solver.remember_halvings=true".to_string()];
+        o.extend(extra.iter().map(|s| s.to_string()));
+        Scene::from_str_with_overrides(MINIMAL, "t", &o)
+    };
+    assert!(set(&[]).unwrap().solver.remember_halvings);
+    let e = set(&[
+        r#"scene.analysis="implicit_dynamic""#,
+        "scene.dt=0.1",
+        r#"solver.time_step="adaptive""#,
+    ])
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("solver.remember_halvings") && e.contains("fixed implicit steps only"),
+        "{e}"
+    );
+}

@@ -318,6 +318,16 @@ impl Scene {
                 );
             }
         }
+        check(
+            e,
+            "solver.remember_halvings",
+            !s.remember_halvings
+                || (!s.adaptive()
+                    && !s.follows_path()
+                    && self.scene.analysis != AnalysisKind::Explicit),
+            "applies to fixed implicit steps only (not with time_step = \"adaptive\", path following or explicit runs)"
+                .to_string(),
+        );
         if !s.adaptive() {
             return;
         }
