@@ -378,7 +378,7 @@ impl ImplicitIntegrator {
         }
     }
 
-    /// A fixed step with remembered halvings (theory §3, "Remembered
+    /// A fixed step with remembered halvings (theory §3.3, "Remembered
     /// halvings"): 2^d equal substeps at the depth d the last step left,
     /// each halved further on a Newton failure as in [`Self::advance`]. A
     /// step that needed no halving lets the next start one level coarser;
