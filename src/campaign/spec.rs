@@ -114,7 +114,7 @@ impl CampaignSpec {
 impl Benchmark {
     /// Whether the last step holds one band whose width M4 measures (theory
     /// §9). Not the footing: at δ = 0.3 m its mechanism has collapsed (the
-    /// load is 1–2 % of the peak) and the strain fills the whole Prandtl
+    /// load is 0.5–2 % of the peak) and the strain fills the whole Prandtl
     /// zone and the soil heaved around the footing, with no single band to
     /// cross; Fig. 7's claims are read from the field plots and the
     /// corner-band reach instead.
