@@ -14,10 +14,14 @@
 //!   per-Newton-iteration cost, [D36]), sparse = 10 % band, dense = nonzero everywhere;
 //! * `uncached_sparse` / `uncached_dense`: `average_uncached` (every nonzero source evaluated
 //!   on the fly, the evaluation before caching);
+//! * `grid_new_average_sparse` / `grid_new_average_dense`: the grid averaging (theory §6.1,
+//!   NG1–NG3, spacing 0.1 l_s): a fresh operator and one average, the explicit step's cost
+//!   with `averaging = "grid"` (the kernel's spectrum is kept between calls, as in a run);
+//! * `grid_average_sparse`: one grid average with a built operator (a Newton iteration's);
 //! * `brute_force`: the O(N²) reference pass (sparse field).
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
-use mpm_physics::nonlocal::{NonlocalAverager, NonlocalSpec};
+use mpm_physics::nonlocal::{GridAverager, NonlocalAverager, NonlocalSpec};
 use std::hint::black_box;
 use std::time::Duration;
 
@@ -165,7 +169,22 @@ fn bench_nonlocal(c: &mut Criterion) {
             group.bench_function(BenchmarkId::new(format!("uncached_{name}"), n), |b| {
                 b.iter(|| nl.average_uncached(black_box(field), &mut out).unwrap())
             });
+            group.bench_function(
+                BenchmarkId::new(format!("grid_new_average_{name}"), n),
+                |b| {
+                    b.iter(|| {
+                        let grid = GridAverager::new(&s.params, black_box(&s.pos), &s.vol, &s.grp)
+                            .unwrap();
+                        grid.average(field, &mut out).unwrap();
+                        grid
+                    })
+                },
+            );
         }
+        let grid = GridAverager::new(&s.params, &s.pos, &s.vol, &s.grp).unwrap();
+        group.bench_function(BenchmarkId::new("grid_average_sparse", n), |b| {
+            b.iter(|| grid.average(black_box(&s.sparse), &mut out).unwrap())
+        });
         group.bench_function(BenchmarkId::new("brute_force", n), |b| {
             b.iter(|| {
                 NonlocalAverager::average_brute_force(

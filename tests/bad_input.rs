@@ -266,6 +266,14 @@ fn out_of_range_nonlocal_settings_lost_point_policy_and_volume_bound_are_refused
             "nonlocal.weight_cache_mb=-1",
             ["nonlocal.weight_cache_mb", "[0, 1e6]"],
         ),
+        (
+            "nonlocal.grid_spacing_factor=0",
+            ["nonlocal.grid_spacing_factor", "(0, 1]"],
+        ),
+        (
+            "nonlocal.averaging=\"fft\"",
+            ["nonlocal.averaging", "points"],
+        ),
         // below a point's initial volume (1/2² of a cell), and not finite
         (
             "grid.max_point_volume=0.2",

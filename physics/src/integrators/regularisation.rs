@@ -5,7 +5,7 @@
 
 use crate::constitutive::StrengthVariable;
 use crate::model::Model;
-use crate::nonlocal::{NonlocalAverager, NonlocalError};
+use crate::nonlocal::{GridAverager, NonlocalAverager, NonlocalAveraging, NonlocalError};
 use crate::particles::Particles;
 use crate::profile::{Profile, Stage, Work};
 use crate::scene::{NonlocalSpec, NonlocalUpdate};
@@ -27,9 +27,15 @@ impl NonlocalStrength<'_> {
     }
 }
 
+/// The step's averaging operator: over point pairs (D34) or on a grid (NG1–NG3).
+enum Operator {
+    Points(Box<NonlocalAverager>),
+    Grid(GridAverager),
+}
+
 /// Nonlocal bookkeeping of one step.
 pub struct NonlocalStep {
-    averager: NonlocalAverager,
+    averager: Operator,
     /// κ̄(n), committed at the start of the step.
     start: Vec<f64>,
     /// κ̄(n) + m Σ_q W_pq Δκ_q of the previous iteration (D36; for m = 1 the κ̄
@@ -75,13 +81,15 @@ impl NonlocalStep {
         particles: &Particles,
         force_step_update: bool,
     ) -> Result<Self, NonlocalError> {
-        let mut averager = NonlocalAverager::new(
-            spec,
-            &particles.position,
-            &particles.volume,
-            &particles.material,
-        )?;
-        averager.set_pair_budget(spec.weight_budget());
+        let (x, v, g) = (&particles.position, &particles.volume, &particles.material);
+        let averager = match spec.averaging {
+            NonlocalAveraging::Points => {
+                let mut averager = NonlocalAverager::new(spec, x, v, g)?;
+                averager.set_pair_budget(spec.weight_budget());
+                Operator::Points(Box::new(averager))
+            }
+            NonlocalAveraging::Grid => Operator::Grid(GridAverager::new(spec, x, v, g)?),
+        };
         let start: Vec<f64> = particles
             .state
             .iter()
@@ -140,18 +148,24 @@ impl NonlocalStep {
         if same {
             return Ok(&self.scratch_average);
         }
-        let had_weights = self.averager.has_weights();
-        if self.update == NonlocalUpdate::Iteration {
-            let cached = self.averager.cache_sources(&self.scratch_increment)?;
-            profile.count(Work::WeightCaches, u64::from(cached > 0));
+        match &mut self.averager {
+            Operator::Points(averager) => {
+                let had_weights = averager.has_weights();
+                if self.update == NonlocalUpdate::Iteration {
+                    let cached = averager.cache_sources(&self.scratch_increment)?;
+                    profile.count(Work::WeightCaches, u64::from(cached > 0));
+                }
+                averager.average(&self.scratch_increment, &mut self.scratch_average)?;
+                profile.count(
+                    Work::NonlocalWeights,
+                    u64::from(!had_weights && averager.has_weights()),
+                );
+            }
+            Operator::Grid(averager) => {
+                averager.average(&self.scratch_increment, &mut self.scratch_average)?;
+            }
         }
-        self.averager
-            .average(&self.scratch_increment, &mut self.scratch_average)?;
         profile.count(Work::NonlocalAverages, 1);
-        profile.count(
-            Work::NonlocalWeights,
-            u64::from(!had_weights && self.averager.has_weights()),
-        );
         self.memo_increment.copy_from_slice(&self.scratch_increment);
         self.memo_valid = true;
         Ok(&self.scratch_average)
@@ -236,6 +250,8 @@ mod tests {
             tolerance: 1e-3,
             over_nonlocal,
             weight_cache_mb: 512.0,
+            averaging: NonlocalAveraging::Points,
+            grid_spacing_factor: 0.1,
         }
     }
 

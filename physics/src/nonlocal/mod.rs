@@ -59,6 +59,7 @@
 //!   22.1 → 18.3–19.0 s → 18.1 s.
 
 mod averager;
+mod grid;
 mod kernel;
 mod parameters;
 mod plan;
@@ -66,8 +67,9 @@ mod plan;
 mod tests;
 
 pub use averager::{CacheStats, NonlocalAverager};
+pub use grid::GridAverager;
 pub use kernel::weight;
-pub use parameters::{NonlocalError, NonlocalSpec, NonlocalUpdate};
+pub use parameters::{NonlocalAveraging, NonlocalError, NonlocalSpec, NonlocalUpdate};
 
 // the private items the tests reach through `use super::*`
 #[cfg(test)]

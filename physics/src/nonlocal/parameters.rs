@@ -15,6 +15,18 @@ pub enum NonlocalUpdate {
     Step,
 }
 
+/// How the average \[D34\] is evaluated (theory §6, §6.1).
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum NonlocalAveraging {
+    /// Over every pair of points within `R_c` (\[D34\] as written).
+    #[default]
+    Points,
+    /// On an auxiliary grid of spacing `grid_spacing_factor · l_s`, by FFT (NG1–NG3): an
+    /// approximation whose error falls as the spacing squared.
+    Grid,
+}
+
 /// `[nonlocal]`: averaging of the equivalent plastic strain (paper eq. 6,
 /// theory §6): the scene's table and the parameters of the averaging
 /// (theory \[D33\]–\[D36\]).
@@ -41,6 +53,16 @@ pub struct NonlocalSpec {
     /// same result to round-off; the run's memory estimate counts it.
     #[serde(default = "default_weight_cache_mb")]
     pub weight_cache_mb: f64,
+    /// `points` (default, \[D34\]) or `grid` (NG1–NG3).
+    #[serde(default)]
+    pub averaging: NonlocalAveraging,
+    /// Spacing of the grid of `averaging = "grid"`, in units of l_s (default 0.1).
+    #[serde(default = "default_grid_spacing_factor")]
+    pub grid_spacing_factor: f64,
+}
+
+fn default_grid_spacing_factor() -> f64 {
+    0.1
 }
 
 fn default_over_nonlocal() -> f64 {
@@ -80,7 +102,14 @@ impl NonlocalSpec {
             tolerance: default_kappa_tolerance(),
             over_nonlocal: default_over_nonlocal(),
             weight_cache_mb: default_weight_cache_mb(),
+            averaging: NonlocalAveraging::default(),
+            grid_spacing_factor: default_grid_spacing_factor(),
         }
+    }
+
+    /// Spacing Δ of the grid of `averaging = "grid"` (m), theory §6.1.
+    pub fn grid_spacing(&self) -> f64 {
+        self.grid_spacing_factor * self.length_scale
     }
 
     /// Cutoff radius `R_c = cutoff_factor · l_s` (m), theory §6.
@@ -99,6 +128,9 @@ impl NonlocalSpec {
         if !(self.cutoff_radius().is_finite() && self.cutoff_radius() > 0.0) {
             return Err(NonlocalError::InvalidCutoffFactor(self.cutoff_factor));
         }
+        if !(self.grid_spacing_factor > 0.0 && self.grid_spacing_factor <= 1.0) {
+            return Err(NonlocalError::InvalidGridSpacing(self.grid_spacing_factor));
+        }
         Ok(())
     }
 }
@@ -112,6 +144,17 @@ pub enum NonlocalError {
     /// The cutoff factor is not finite or not strictly positive (theory §6).
     #[error("nonlocal cutoff factor must be finite and > 0, got {0}")]
     InvalidCutoffFactor(f64),
+    /// The grid spacing factor is not in (0, 1] (theory §6.1).
+    #[error("nonlocal grid spacing factor must lie in (0, 1], got {0}")]
+    InvalidGridSpacing(f64),
+    /// The points of one group spread over more grid nodes than the grid averaging allows.
+    #[error("the nonlocal grid averaging would need {nodes} nodes of {spacing} m (at most 2^26): the points spread too far for it; use averaging = \"points\" or a larger grid_spacing_factor")]
+    GridTooLarge {
+        /// Nodes the grid would need.
+        nodes: usize,
+        /// Its spacing, m.
+        spacing: f64,
+    },
     /// Positions, volumes and groups of the MPs have different lengths.
     #[error(
         "nonlocal input lengths differ: {positions} positions, {volumes} volumes, {groups} groups"

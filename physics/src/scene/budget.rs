@@ -30,6 +30,9 @@ const BYTES_PER_PAIR: f64 = 8.0;
 /// entries beyond the cutoff (measured 0.59 on the biaxial lattice: 16.6M weights for
 /// 6,000 points × 4,704 neighbours).
 const STORED_PER_PAIR: f64 = 0.6;
+/// Bytes per node of the nonlocal averaging grid (theory §6.1): the spread fields, their
+/// transposed transform and the kernel's spectrum, 16 bytes each.
+const BYTES_PER_AVERAGING_NODE: f64 = 48.0;
 /// Bytes per stored nonzero of the tangent (value, index; assembly and CSR copies).
 const BYTES_PER_NONZERO: f64 = 32.0;
 /// Factor entries ≈ `FILL_COEFFICIENT` · n^`FILL_EXPONENT` (LU with COLAMD on
@@ -226,11 +229,34 @@ impl Scene {
                 fields: vec!["grid.size".into(), "grid.cell_size".into()],
             },
         ];
-        let neighbour_pairs = self.nonlocal.as_ref().map(|nl| {
-            let radius = nl.cutoff_factor * nl.length_scale;
-            let neighbours = (std::f64::consts::PI * radius * radius * density).min(points);
-            (points * neighbours, nl.weight_budget() as f64)
-        });
+        let grid_averaging = self
+            .nonlocal
+            .as_ref()
+            .filter(|nl| nl.averaging == crate::nonlocal::NonlocalAveraging::Grid);
+        if let Some(nl) = grid_averaging {
+            // theory §6.1: the whole grid padded by R_c, three arrays of complex numbers
+            let spacing = nl.grid_spacing();
+            let side = |a: usize| (g.size[a] + nl.cutoff_radius()) / spacing + 2.0;
+            let grid_nodes = side(0) * side(1);
+            parts.push(MemoryPart {
+                what: format!("{grid_nodes:.3e} nodes of the nonlocal averaging grid"),
+                bytes: grid_nodes * BYTES_PER_AVERAGING_NODE,
+                fields: vec![
+                    "nonlocal.grid_spacing_factor".into(),
+                    "nonlocal.length_scale".into(),
+                    "grid.size".into(),
+                ],
+            });
+        }
+        let neighbour_pairs = self
+            .nonlocal
+            .as_ref()
+            .filter(|_| grid_averaging.is_none())
+            .map(|nl| {
+                let radius = nl.cutoff_factor * nl.length_scale;
+                let neighbours = (std::f64::consts::PI * radius * radius * density).min(points);
+                (points * neighbours, nl.weight_budget() as f64)
+            });
         if let Some((pairs, budget)) = neighbour_pairs {
             let cached = (STORED_PER_PAIR * pairs).min(budget);
             parts.push(MemoryPart {

@@ -170,6 +170,15 @@ impl Scene {
             );
             check(
                 &mut e,
+                "nonlocal.grid_spacing_factor",
+                nl.grid_spacing_factor > 0.0 && nl.grid_spacing_factor <= 1.0,
+                format!(
+                    "must lie in (0, 1] (got {}; the grid averaging's spacing in units of l_s)",
+                    nl.grid_spacing_factor
+                ),
+            );
+            check(
+                &mut e,
                 "grid.cell_size",
                 self.grid.cell_size <= nl.length_scale,
                 format!("{} m exceeds the nonlocal length scale {} m: the averaging needs cells no larger than l_s", self.grid.cell_size, nl.length_scale),
