@@ -7,7 +7,9 @@ use rayon::prelude::*;
 
 use super::kernel::kernel;
 use super::parameters::{NonlocalError, NonlocalSpec};
-use super::plan::{block_times, sub_bins_per_side, validate_inputs, SymmetricPlan, Tile};
+use super::plan::{
+    block_times, check_field_lengths, sub_bins_per_side, validate_inputs, SymmetricPlan, Tile,
+};
 use super::{BIN_SAFETY, DEFAULT_PAIR_BUDGET, MIN_CHUNK};
 use crate::shape::floor_int;
 
@@ -355,15 +357,7 @@ impl NonlocalAverager {
     }
 
     fn check_field(&self, field: &[f64], out_len: usize) -> Result<(), NonlocalError> {
-        let n = self.len();
-        if field.len() != n || out_len != n {
-            return Err(NonlocalError::FieldLengthMismatch {
-                expected: n,
-                field: field.len(),
-                out: out_len,
-            });
-        }
-        Ok(())
+        check_field_lengths(self.len(), field, out_len)
     }
 
     fn average_impl(
@@ -649,13 +643,7 @@ impl NonlocalAverager {
         params.validate()?;
         validate_inputs(positions, volumes, groups)?;
         let n = positions.len();
-        if field.len() != n || out.len() != n {
-            return Err(NonlocalError::FieldLengthMismatch {
-                expected: n,
-                field: field.len(),
-                out: out.len(),
-            });
-        }
+        check_field_lengths(n, field, out.len())?;
         let rc = params.cutoff_radius();
         let rc2 = rc * rc;
         let inv_l2 = 1.0 / (params.length_scale * params.length_scale);

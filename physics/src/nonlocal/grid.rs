@@ -17,7 +17,7 @@ use rustfft::{Fft, FftPlanner};
 
 use super::kernel::kernel;
 use super::parameters::{NonlocalError, NonlocalSpec};
-use super::plan::validate_inputs;
+use super::plan::{check_field_lengths, validate_inputs};
 use crate::shape::floor_int;
 
 /// Most nodes of one group's auxiliary grid (16 bytes each, twice): a run whose points
@@ -155,13 +155,7 @@ impl GridAverager {
     /// [`NonlocalError::FieldLengthMismatch`] if `field` or `out` does not have
     /// [`Self::len`] entries.
     pub fn average(&self, field: &[f64], out: &mut [f64]) -> Result<(), NonlocalError> {
-        if field.len() != self.n || out.len() != self.n {
-            return Err(NonlocalError::FieldLengthMismatch {
-                expected: self.n,
-                field: field.len(),
-                out: out.len(),
-            });
-        }
+        check_field_lengths(self.n, field, out.len())?;
         if field.iter().all(|&f| f == 0.0) {
             out.fill(0.0);
             return Ok(());

@@ -347,6 +347,22 @@ pub(super) fn sub_bins_per_side(n: usize, bins: impl Iterator<Item = (u16, [i64;
     ((per_bin / TILE as f64).sqrt().ceil() as i64).clamp(1, 64)
 }
 
+/// A field and an output of one entry per MP each (`n` MPs).
+pub(super) fn check_field_lengths(
+    n: usize,
+    field: &[f64],
+    out_len: usize,
+) -> Result<(), NonlocalError> {
+    if field.len() != n || out_len != n {
+        return Err(NonlocalError::FieldLengthMismatch {
+            expected: n,
+            field: field.len(),
+            out: out_len,
+        });
+    }
+    Ok(())
+}
+
 pub(super) fn validate_inputs(
     positions: &[[f64; 2]],
     volumes: &[f64],
