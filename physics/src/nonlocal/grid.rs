@@ -20,7 +20,7 @@ use super::parameters::{NonlocalError, NonlocalSpec};
 use super::plan::{check_field_lengths, validate_inputs};
 use crate::shape::floor_int;
 
-/// Most nodes of one group's auxiliary grid (16 bytes each, twice): a run whose points
+/// Most nodes of one group's auxiliary grid (three arrays of 16 bytes a node): a run whose points
 /// spread so far that the grid would pass it is refused rather than swapping.
 const MAX_NODES: usize = 1 << 26;
 
