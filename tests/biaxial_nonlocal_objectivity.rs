@@ -36,11 +36,7 @@ fn run(cells_per_metre: usize) -> Outcome {
     assert_eq!(l_s, LENGTH_SCALE);
     let h = sim.model.grid.cell_size;
     let p = &sim.model.state.particles;
-    let kappa_bar: Vec<f64> = p
-        .state
-        .iter()
-        .map(|s| s.plastic_strain_eq_nonlocal)
-        .collect();
+    let kappa_bar = common::kappa_bar(&sim);
     let eps_q: Vec<f64> = p.def_grad.iter().map(deviatoric_hencky_strain).collect();
     let eps_q = clip_outliers(&eps_q, 0.99);
     let band_kappa_bar = shear_band_width(&p.position, &kappa_bar, h, l_s)

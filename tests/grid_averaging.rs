@@ -30,11 +30,7 @@ fn run(scene: &str, averaging: &str) -> Outcome {
     let l_s = sim.scene.nonlocal.as_ref().unwrap().length_scale;
     let h = sim.model.grid.cell_size;
     let p = &sim.model.state.particles;
-    let kappa_bar: Vec<f64> = p
-        .state
-        .iter()
-        .map(|s| s.plastic_strain_eq_nonlocal)
-        .collect();
+    let kappa_bar = common::kappa_bar(&sim);
     let eps_q = clip_outliers(
         &p.def_grad
             .iter()

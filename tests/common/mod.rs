@@ -29,6 +29,17 @@ pub fn simulation(path: &str, overrides: &[&str]) -> Simulation {
     Simulation::new(scene(path, overrides)).unwrap_or_else(|e| panic!("{e}"))
 }
 
+/// The nonlocal strength variable κ̄ of every point (theory D35).
+pub fn kappa_bar(sim: &Simulation) -> Vec<f64> {
+    sim.model
+        .state
+        .particles
+        .state
+        .iter()
+        .map(|s| s.plastic_strain_eq_nonlocal)
+        .collect()
+}
+
 /// Run to the end, recording (time, monitor values) after every step (and at t = 0).
 pub fn run_history(sim: &mut Simulation) -> Vec<(f64, Vec<f64>)> {
     let mut history = vec![(sim.model.state.time, sim.monitor_values())];
