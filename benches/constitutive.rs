@@ -1,5 +1,7 @@
 //! Stress-update throughput of the HMC model (theory §5.6): elastic branch and plastic
 //! (softening) branch, reported by criterion as updates per second (throughput in elements).
+//! The `*_no_tangent` rows are the explicit integrator's update ([`ConstitutiveModel::update_stress`]);
+//! `over_nonlocal` solves for the point's own κ with the weight 1 − m = −0.1 of the scenes' m = 1.1.
 //!
 //! Run: `cargo bench --bench constitutive`.
 
@@ -74,6 +76,37 @@ fn bench(c: &mut Criterion) {
                         .update(black_box(stress), black_box(increment), state, kbar)
                         .expect("update");
                     acc += u.stress[1] + u.tangent[1][1];
+                }
+                black_box(acc)
+            })
+        });
+    }
+    for (name, strength) in [
+        ("plastic_softening_local_no_tangent", None),
+        ("plastic_softening_over_nonlocal_no_tangent", Some(-0.1)),
+    ] {
+        group.throughput(Throughput::Elements(plastic.len() as u64));
+        group.bench_function(name, |b| {
+            b.iter(|| {
+                let mut acc = 0.0;
+                for (stress, increment, state) in plastic.iter() {
+                    let strength = strength.map_or(StrengthVariable::Local, |own_weight| {
+                        StrengthVariable::Nonlocal {
+                            neighbours: state.plastic_strain_eq,
+                            own_weight,
+                        }
+                    });
+                    let (mut s, mut st) = (*stress, *state);
+                    model
+                        .update_stress(
+                            black_box(stress),
+                            black_box(increment),
+                            state,
+                            strength,
+                            (&mut s, &mut st),
+                        )
+                        .expect("update");
+                    acc += s[1];
                 }
                 black_box(acc)
             })

@@ -167,8 +167,10 @@ impl<const N: usize> Div for Dual<N> {
     type Output = Self;
     #[inline(always)]
     fn div(self, o: Self) -> Self {
+        // the value as f64 divides it (not times 1/o): a dual evaluation's value
+        // part is then the f64 evaluation's, bit for bit
         let inv = 1.0 / o.re;
-        let re = self.re * inv;
+        let re = self.re / o.re;
         let mut eps = self.eps;
         for (e, oe) in eps.iter_mut().zip(o.eps) {
             *e = (*e - re * oe) * inv;
@@ -219,8 +221,7 @@ impl<const N: usize> Div<f64> for Dual<N> {
     type Output = Self;
     #[inline(always)]
     fn div(self, o: f64) -> Self {
-        let inv = 1.0 / o;
-        self.chain(self.re * inv, inv)
+        self.chain(self.re / o, 1.0 / o)
     }
 }
 

@@ -15,7 +15,7 @@ use super::dense_lu::DenseLu;
 use super::dual::{Dual, Real};
 use super::flow_rule::{strain_norm, PressureScaledFlow};
 use super::softening::ThreeLevelSoftening;
-use super::yield_surface::{HyperbolicMohrCoulomb, Invariants, SurfaceStrength};
+use super::yield_surface::{FrictionShapeFit, HyperbolicMohrCoulomb, Invariants, SurfaceStrength};
 use super::{
     mat4_mul_vec, ConstitutiveError, ConstitutiveModel, LinearElastic, Mat4, ParameterProblem,
     PointState, StrengthVariable, StressUpdate, Voigt,
@@ -283,6 +283,8 @@ pub struct Hmc {
     flow: PressureScaledFlow,
     softening: bool,
     fixed_strength: SurfaceStrength<f64>,
+    /// tanφ, X, Y along [φ_res, φ_peak] (theory §5.3); `None`: D25 directly.
+    friction_shape: Option<FrictionShapeFit>,
 }
 
 /// A strength with its κ-derivative (one lane) as five-lane duals whose lane 4 is κ
@@ -301,6 +303,13 @@ fn kappa_lane_of_five(s: &SurfaceStrength<Dual<1>>) -> SurfaceStrength<Dual<5>> 
         shape_x: widen(s.shape_x),
         shape_y: widen(s.shape_y),
     }
+}
+
+/// h = ‖m‖ε (D3); the tiny shift keeps a dual derivative finite where m = 0 (ω = 0 at the
+/// tip). One function for the f64 and dual evaluations, so that their values agree bit for bit.
+#[inline]
+fn flow_norm<T: Real>(m: &[T; 4]) -> T {
+    (m[0] * m[0] + m[1] * m[1] + m[2] * m[2] + m[3] * m[3] * 0.5 + 1e-300).sqrt()
 }
 
 /// The strength argument κ_s as an affine function of the point's own κ, fixed
@@ -392,7 +401,9 @@ struct PlasticStep {
     kappa: f64,
     plastic_multiplier: f64,
     flow_direction: Voigt,
-    jacobian: DenseLu<6>,
+    /// The factorised Jacobian of D30 at the solution, for the tangent (D32); `None`
+    /// where none was asked for.
+    jacobian: Option<DenseLu<6>>,
 }
 
 /// Result of integrating the whole increment with `n` sub-steps.
@@ -454,6 +465,7 @@ impl Hmc {
             flow: PressureScaledFlow { omega: p.omega },
             softening: true,
             fixed_strength: SurfaceStrength::new(0.0, 0.1, 0.0),
+            friction_shape: FrictionShapeFit::new(friction_law.residual, friction_law.peak),
         };
         model.fixed_strength = model.strength(0.0);
         model.softening = softening;
@@ -486,7 +498,9 @@ impl Hmc {
     }
 
     /// Surface strength at κ: D28 with the c floor c ≥ 1e−3 c_peak and the clamp
-    /// 0 ≤ p_t ≤ (c − c_min)/tanφ (theory §5.2, §5.5); generic for exact κ-derivatives.
+    /// 0 ≤ p_t ≤ (c − c_min)/tanφ (theory §5.2, §5.5); tanφ, X and Y from the series along
+    /// the softening path (theory §5.3) where it reached its accuracy; generic for exact
+    /// κ-derivatives.
     #[inline]
     fn strength<T: Real>(&self, kappa: T) -> SurfaceStrength<T> {
         if !self.softening {
@@ -498,14 +512,29 @@ impl Hmc {
             .cohesion_law
             .value_with_decays(decays)
             .max_by_value(T::cst(self.cohesion_min));
-        let (sin_phi, cos_phi) = self.friction_law.value_with_decays(decays).sin_cos();
-        let tensile_max = (cohesion - self.cohesion_min) * cos_phi / sin_phi;
-        let tensile = self
-            .tensile_law
-            .value_with_decays(decays)
-            .min_by_value(tensile_max)
-            .max_by_value(T::cst(0.0));
-        SurfaceStrength::from_sin_cos(cohesion, sin_phi, cos_phi, tensile)
+        let friction = self.friction_law.value_with_decays(decays);
+        let tensile = |tan_friction: T| {
+            let tensile_max = (cohesion - self.cohesion_min) / tan_friction;
+            self.tensile_law
+                .value_with_decays(decays)
+                .min_by_value(tensile_max)
+                .max_by_value(T::cst(0.0))
+        };
+        let Some(fit) = &self.friction_shape else {
+            let (sin_phi, cos_phi) = friction.sin_cos();
+            let tensile_strength = tensile(sin_phi / cos_phi);
+            return SurfaceStrength::from_sin_cos(cohesion, sin_phi, cos_phi, tensile_strength);
+        };
+        let [tan_friction, shape_x, shape_y] = fit.evaluate(friction);
+        let tensile_strength = tensile(tan_friction);
+        SurfaceStrength {
+            cohesion,
+            tan_friction,
+            tensile_strength,
+            hyperbola_a: cohesion - tensile_strength * tan_friction,
+            shape_x,
+            shape_y,
+        }
     }
 
     /// Strength parameters at equivalent plastic strain κ (theory D28, floor and clamp included).
@@ -553,8 +582,7 @@ impl Hmc {
         };
         let (f, gradient) = self.surface.value_and_gradient(&sigma, &strength);
         let m = self.flow.direction(&gradient, strength.tan_friction);
-        // ‖m‖ε (D3); the tiny shift keeps the dual derivative finite if m = 0 (ω = 0 at the tip).
-        let h = (m[0] * m[0] + m[1] * m[1] + m[2] * m[2] + m[3] * m[3] * 0.5 + 1e-300).sqrt();
+        let h = flow_norm(&m);
         Linearisation {
             f: f.re,
             f_sigma: std::array::from_fn(|i| gradient[i].re),
@@ -568,20 +596,27 @@ impl Hmc {
         }
     }
 
-    /// Residual of D29 (strain-like components) at y = (σ, κ, Δλ) from f64 evaluations only.
+    /// f, m and h = ‖m‖ε at (σ, κ) from f64 evaluations only: the value part of
+    /// [`Self::linearise`], bit for bit.
     #[inline]
-    fn residual(
-        &self,
-        stress: &Voigt,
-        kappa: f64,
-        multiplier: f64,
-        trial: &Voigt,
-        kappa_n: f64,
-        arg: StrengthArg,
-    ) -> (Vec6, f64) {
+    fn evaluate(&self, stress: &Voigt, kappa: f64, arg: StrengthArg) -> (f64, Voigt, f64) {
         let strength = self.strength_f64(arg.at(kappa));
         let (f, gradient) = self.surface.value_and_gradient(stress, &strength);
         let m = self.flow.direction(&gradient, strength.tan_friction);
+        (f, m, flow_norm(&m))
+    }
+
+    /// Residual of D29 (strain-like components) at y = (σ, κ, Δλ) from f64 evaluations
+    /// only, with f, m and h.
+    #[inline]
+    fn residual(
+        &self,
+        (stress, kappa, multiplier): (&Voigt, f64, f64),
+        trial: &Voigt,
+        kappa_n: f64,
+        arg: StrengthArg,
+    ) -> (Vec6, f64, Voigt, f64) {
+        let (f, m, h) = self.evaluate(stress, kappa, arg);
         let r = self.assemble_residual(
             stress,
             kappa,
@@ -590,10 +625,10 @@ impl Hmc {
             kappa_n,
             arg.couples_kappa(),
             &m,
-            strain_norm(&m),
+            h,
             f,
         );
-        (r, f)
+        (r, f, m, h)
     }
 
     /// Residual vector of D29 from already evaluated m, h = ‖m‖ε and f.
@@ -698,51 +733,67 @@ impl Hmc {
     }
 
     /// Closest-point projection of one (sub)step of trial stress `trial` (theory D29–D30), the
-    /// Newton iteration started at `start`.
+    /// Newton iteration started at `start`. With `want_jacobian` false (explicit steps) the
+    /// Jacobian at the solution is not formed, and an iterate that the quadratic convergence
+    /// of the last two predicts to be the solution is first checked with the f64 residual,
+    /// whose values are the linearisation's bit for bit (the same iterates and solution).
     fn plastic_step(
         &self,
-        trial: &Voigt,
-        kappa_n: f64,
+        (trial, kappa_n): (&Voigt, f64),
         arg: StrengthArg,
         tolerance: f64,
         start: NewtonStart,
+        want_jacobian: bool,
     ) -> Result<PlasticStep, &'static str> {
         let local = arg.couples_kappa();
         let e = self.parameters.youngs_modulus;
+        // residual in units of the tolerance: converged at ≤ 1
+        let error = |r: &Vec6, f: f64| {
+            let r_sigma = r[0].abs().max(r[1].abs()).max(r[2].abs()).max(r[3].abs());
+            (r_sigma * e / tolerance)
+                .max(f.abs() / tolerance)
+                .max(r[4].abs() / KAPPA_TOLERANCE)
+        };
+        let solution = |(stress, kappa, multiplier): (Voigt, f64, f64), m: Voigt, h: f64| {
+            if multiplier < 0.0 {
+                return Err("negative plastic multiplier");
+            }
+            Ok(PlasticStep {
+                stress,
+                kappa: if local {
+                    kappa
+                } else {
+                    kappa_n + multiplier * h
+                },
+                plastic_multiplier: multiplier,
+                flow_direction: m,
+                jacobian: None,
+            })
+        };
         let NewtonStart {
             mut stress,
             mut kappa,
             mut multiplier,
         } = start;
         let mut lin = self.linearise(&stress, kappa, arg);
+        let mut previous_error = 0.0;
         for _ in 0..MAX_NEWTON_ITERATIONS {
             let r = self.assemble_residual(
                 &stress, kappa, multiplier, trial, kappa_n, local, &lin.m, lin.h, lin.f,
             );
-            let r_sigma = r[0].abs().max(r[1].abs()).max(r[2].abs()).max(r[3].abs());
-            let jacobian = self.jacobian(&lin, multiplier, local);
-            let lu = DenseLu::new(jacobian);
-            if r_sigma * e <= tolerance && lin.f.abs() <= tolerance && r[4].abs() <= KAPPA_TOLERANCE
-            {
-                if multiplier < 0.0 {
-                    return Err("negative plastic multiplier");
+            let current_error = error(&r, lin.f);
+            if current_error <= 1.0 {
+                let mut step = solution((stress, kappa, multiplier), lin.m, lin.h)?;
+                if want_jacobian {
+                    let lu = DenseLu::new(self.jacobian(&lin, multiplier, local));
+                    if !lu.is_invertible() {
+                        return Err("singular Jacobian at the converged state");
+                    }
+                    step.jacobian = Some(lu);
                 }
-                if !lu.is_invertible() {
-                    return Err("singular Jacobian at the converged state");
-                }
-                let kappa_new = if local {
-                    kappa
-                } else {
-                    kappa_n + multiplier * lin.h
-                };
-                return Ok(PlasticStep {
-                    stress,
-                    kappa: kappa_new,
-                    plastic_multiplier: multiplier,
-                    flow_direction: lin.m,
-                    jacobian: lu,
-                });
+                return Ok(step);
             }
+            let lu = DenseLu::new(self.jacobian(&lin, multiplier, local));
             let step = lu
                 .solve(std::array::from_fn(|i| -r[i]))
                 .ok_or("singular Jacobian")?;
@@ -761,7 +812,18 @@ impl Hmc {
                 };
                 (s_try, k_try, multiplier + alpha * step[5])
             };
-            let (s_full, k_full, l_full) = point(1.0);
+            let full = point(1.0);
+            let (s_full, k_full, l_full) = full;
+            // quadratic convergence: e_{k+1} ≈ e_k² (e_k / e_{k−1}²)
+            let predicted_last = current_error.powi(3) <= previous_error * previous_error;
+            previous_error = current_error;
+            if !want_jacobian && predicted_last {
+                let (r_full, f_full, m_full, h_full) =
+                    self.residual((&s_full, k_full, l_full), trial, kappa_n, arg);
+                if error(&r_full, f_full) <= 1.0 && r_full.norm() <= (1.0 - 1e-4) * norm0 {
+                    return solution(full, m_full, h_full);
+                }
+            }
             let lin_full = self.linearise(&s_full, k_full, arg);
             let r_full = self.assemble_residual(
                 &s_full,
@@ -783,7 +845,7 @@ impl Hmc {
             for halving in 1..=MAX_LINE_SEARCH_HALVINGS {
                 alpha *= 0.5;
                 let (s_try, k_try, l_try) = point(alpha);
-                let (r_try, _) = self.residual(&s_try, k_try, l_try, trial, kappa_n, arg);
+                let (r_try, ..) = self.residual((&s_try, k_try, l_try), trial, kappa_n, arg);
                 let norm = r_try.norm();
                 if (norm.is_finite() && norm <= (1.0 - 1e-4 * alpha) * norm0)
                     || halving == MAX_LINE_SEARCH_HALVINGS
@@ -857,14 +919,20 @@ impl Hmc {
             // theory §5.6 step 2 from y⁰ = (σ_trial, κ, 0); where that fails beyond the apex,
             // with the `apex_start` option once more from the apex before the sub-stepping of
             // step 3
-            let step = match self.plastic_step(&trial, kappa, arg, tolerance, from_trial) {
+            let step = match self.plastic_step(
+                (&trial, kappa),
+                arg,
+                tolerance,
+                from_trial,
+                want_tangent,
+            ) {
                 Ok(step) => step,
                 Err(reason) if !self.parameters.apex_start => return Err(reason),
                 Err(reason) => {
                     let from_apex = self
                         .apex_start((&stress, &sub_increment, &trial), kappa, arg)
                         .ok_or(reason)?;
-                    self.plastic_step(&trial, kappa, arg, tolerance, from_apex)?
+                    self.plastic_step((&trial, kappa), arg, tolerance, from_apex, want_tangent)?
                 }
             };
             for (p, m) in plastic.iter_mut().zip(step.flow_direction) {
@@ -892,6 +960,7 @@ impl Hmc {
             }
             let sol = step
                 .jacobian
+                .ok_or("no Jacobian for the tangent")?
                 .solve_columns(&rhs)
                 .ok_or("singular Jacobian in the tangent")?;
             s_sigma = [sol[0], sol[1], sol[2], sol[3]];

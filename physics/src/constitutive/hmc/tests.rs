@@ -618,7 +618,8 @@ fn dual_second_derivatives_match_central_differences() {
 /// elastic strain scale, tension and compression, local and nonlocal, four models) all return a
 /// finite stress with f ≤ 1e-8 c_ref (or, in the allowed cases, a ReturnMappingFailed error; the
 /// count of those must be 0 here). The tangent-free update of explicit steps
-/// ([`ConstitutiveModel::update_stress`]) returns the same bits as the full one.
+/// ([`ConstitutiveModel::update_stress`]) returns the same bits as the full one, local,
+/// frozen and over-nonlocal (m = 1.1).
 #[test]
 fn robustness_sweep() {
     let models = [
@@ -696,6 +697,28 @@ fn robustness_sweep() {
                     "case {k}"
                 );
                 assert_eq!(state, u.state, "case {k}");
+                // and so does the over-nonlocal update (m = 1.1), which solves for κ
+                let over = StrengthVariable::Nonlocal {
+                    neighbours: frozen.unwrap_or(kappa0),
+                    own_weight: -0.1,
+                };
+                if let Ok(full) = m.update(&stress0, &inc, &state0, over) {
+                    let mut no_tangent = (stress, state);
+                    m.update_stress(
+                        &stress0,
+                        &inc,
+                        &state0,
+                        over,
+                        (&mut no_tangent.0, &mut no_tangent.1),
+                    )
+                    .expect("the update with the tangent succeeded");
+                    assert_eq!(
+                        no_tangent.0.map(f64::to_bits),
+                        full.stress.map(f64::to_bits),
+                        "case {k}, m = 1.1"
+                    );
+                    assert_eq!(no_tangent.1, full.state, "case {k}, m = 1.1");
+                }
                 let f = m.yield_function(&u.stress, frozen.unwrap_or(u.state.plastic_strain_eq));
                 assert!(f <= 1e-8 * m.strength_scale(), "case {k}: f = {f}");
                 assert!(u
@@ -808,7 +831,7 @@ fn apex_start_rescues_a_creeping_return() {
         multiplier: 0.0,
     };
     assert!(
-        m.plastic_step(&trial, kappa_n, arg, tolerance, from_trial)
+        m.plastic_step((&trial, kappa_n), arg, tolerance, from_trial, true)
             .is_err(),
         "the case no longer exercises the apex start"
     );
@@ -816,7 +839,7 @@ fn apex_start_rescues_a_creeping_return() {
         .apex_start((&stress_n, &increment, &trial), kappa_n, arg)
         .expect("beyond the apex");
     assert!(m
-        .plastic_step(&trial, kappa_n, arg, tolerance, start)
+        .plastic_step((&trial, kappa_n), arg, tolerance, start, true)
         .is_ok());
 
     // theory §5.6 as written sub-steps this update; with the option it takes one step
