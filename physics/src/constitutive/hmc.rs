@@ -527,14 +527,7 @@ impl Hmc {
         };
         let [tan_friction, shape_x, shape_y] = fit.evaluate(friction);
         let tensile_strength = tensile(tan_friction);
-        SurfaceStrength {
-            cohesion,
-            tan_friction,
-            tensile_strength,
-            hyperbola_a: cohesion - tensile_strength * tan_friction,
-            shape_x,
-            shape_y,
-        }
+        SurfaceStrength::from_shape(cohesion, tan_friction, (shape_x, shape_y), tensile_strength)
     }
 
     /// Strength parameters at equivalent plastic strain κ (theory D28, floor and clamp included).

@@ -175,8 +175,19 @@ impl<T: Real> SurfaceStrength<T> {
     /// [`SurfaceStrength::new`] from sin φ and cos φ of the friction angle.
     #[inline]
     pub fn from_sin_cos(cohesion: T, sin_phi: T, cos_phi: T, tensile_strength: T) -> Self {
-        let tan_friction = sin_phi / cos_phi;
-        let (shape_x, shape_y) = van_eekelen_shape_sin_cos(sin_phi, cos_phi);
+        let shape = van_eekelen_shape_sin_cos(sin_phi, cos_phi);
+        Self::from_shape(cohesion, sin_phi / cos_phi, shape, tensile_strength)
+    }
+
+    /// The strength from cohesion, tan φ, the van Eekelen constants (X, Y) of D25 and the
+    /// tensile strength; a = c − p_t tanφ (D23).
+    #[inline]
+    pub fn from_shape(
+        cohesion: T,
+        tan_friction: T,
+        (shape_x, shape_y): (T, T),
+        tensile_strength: T,
+    ) -> Self {
         Self {
             cohesion,
             tan_friction,
