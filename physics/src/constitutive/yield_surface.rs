@@ -64,7 +64,7 @@ const FIT_CHECK_SAMPLES: usize = 2001;
 /// along the softening path"): a return mapping evaluates the strength at every Newton
 /// iterate, and the series replaces the two powers and the sine and cosine of D25 by
 /// three short polynomial sums. The degree is the lowest whose error on a dense sample of
-/// the interval is at most [`FIT_TOLERANCE_ULP`] machine epsilons; a dual argument carries
+/// the interval is at most 16 machine epsilons; a dual argument carries
 /// the series' exact derivative.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FrictionShapeFit {
@@ -77,9 +77,9 @@ pub struct FrictionShapeFit {
 }
 
 impl FrictionShapeFit {
-    /// The fit on [`lowest`, `highest`] (radians), or `None` when no degree up to
-    /// [`FIT_MAX_DEGREE`] reaches the accuracy (a friction angle near zero, where tanφ and Y
-    /// vanish): the caller then evaluates D25 directly.
+    /// The fit on the interval from `lowest` to `highest` (radians), or `None` when no degree
+    /// up to 24 reaches the accuracy (a wide path reaching down to about 1°): the caller then
+    /// evaluates D25 directly.
     pub fn new(lowest: f64, highest: f64) -> Option<Self> {
         let exact = |phi: f64| {
             let (x, y) = van_eekelen_shape(phi);
