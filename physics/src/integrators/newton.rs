@@ -313,6 +313,11 @@ pub fn solve(
             usage,
             profile,
         )?;
+        let mut correction = correction;
+        if let Some(cells) = model.settings.solver.max_correction {
+            let longest = cells * model.grid.cell_size;
+            limit_nodal_corrections(&system.dofs.index, &mut correction, longest);
+        }
         let loaded = loaded_residual(&free_residual, path.as_ref(), travel_correction);
         if correction.iter().any(|v| !v.is_finite()) || !travel_correction.is_finite() {
             let cause = NewtonFailure::NonFinite("solution of the linear system");
@@ -488,6 +493,29 @@ fn corrected_increment(
     }
 }
 
+/// The correction limit of theory §3.3: every node whose correction
+/// (its free components, `index` mapping dof 2 node + c to the unknown or
+/// [`NONE`]) is longer than `longest` has it scaled to that length, keeping
+/// its direction; the other nodes' corrections are left as they are. Returns
+/// the number of nodes scaled.
+fn limit_nodal_corrections(index: &[u32], correction: &mut [f64], longest: f64) -> usize {
+    let mut scaled = 0;
+    for dofs in index.chunks_exact(2) {
+        let free = |d: u32| (d != NONE).then_some(d as usize);
+        let (x, y) = (free(dofs[0]), free(dofs[1]));
+        let component = |i: Option<usize>| i.map_or(0.0, |i| correction[i]);
+        let length = component(x).hypot(component(y));
+        if length > longest {
+            let factor = longest / length;
+            for i in [x, y].into_iter().flatten() {
+                correction[i] *= factor;
+            }
+            scaled += 1;
+        }
+    }
+    scaled
+}
+
 /// True when each of the last three iterations changed the residual norm by
 /// less than 1 %.
 fn stagnating(history: &[f64]) -> bool {
@@ -503,7 +531,23 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
 
 #[cfg(test)]
 mod tests {
-    use super::stagnating;
+    use super::{limit_nodal_corrections, stagnating, NONE};
+
+    /// A node whose correction is longer than the limit is scaled to it along
+    /// its own direction, with one held dof or both free; the other nodes'
+    /// corrections keep their bits.
+    #[test]
+    fn only_long_nodal_corrections_are_scaled() {
+        // node 0: both free, length 5; node 1: y held, |x| = 2; node 2: short
+        let index = [0, 1, 2, NONE, 3, 4];
+        let mut correction = [3.0, -4.0, -2.0, 0.1, 0.2];
+        let short = correction[3..].to_vec();
+        let scaled = limit_nodal_corrections(&index, &mut correction, 1.0);
+        assert_eq!(scaled, 2);
+        assert!((correction[0] - 0.6).abs() < 1e-15 && (correction[1] + 0.8).abs() < 1e-15);
+        assert_eq!(correction[2], -1.0);
+        assert_eq!(correction[3..], short[..]);
+    }
 
     /// The residual histories of the local h = 1/700 biaxial run with 3×3
     /// points per cell (step 114, stagnating at 8.6e-7 after a 1.8e8 reduction)

@@ -367,6 +367,10 @@ pub struct SolverSpec {
     pub max_iterations: Option<usize>,
     /// Number of step halvings allowed when Newton fails (theory §3: 4, i.e. 1/16).
     pub max_halvings: usize,
+    /// The largest Newton correction of one node, in cell sizes: a node
+    /// whose correction is longer has it scaled to this length, the other
+    /// nodes keep theirs (theory §3.3, "Correction limit"); unset: none.
+    pub max_correction: Option<f64>,
     /// Fixed steps: a step that needed halvings starts the next one at the
     /// depth that converged, 2^k equal substeps, and each step that passes
     /// at its starting depth lets the next try one level coarser (theory
@@ -469,6 +473,7 @@ impl Default for SolverSpec {
             tolerance_energy: 1e-10,
             max_iterations: None,
             max_halvings: 4,
+            max_correction: None,
             remember_halvings: false,
             linear_solver: LinearSolverChoice::Auto,
             factorization: FactorizationChoice::Auto,

@@ -627,6 +627,38 @@ fn a_path_following_run_is_estimated_at_its_step_budget() {
     );
 }
 
+/// `solver.max_correction` must be a positive number of cells and belongs
+/// to implicit Newton steps without path following: otherwise it is refused
+/// naming the field; on its own it is accepted.
+#[test]
+fn correction_limit_is_checked() {
+    let set = |extra: &[&str]| {
+        let o: Vec<String> = extra.iter().map(|s| s.to_string()).collect();
+        Scene::from_str_with_overrides(MINIMAL, "t", &o)
+    };
+    assert_eq!(
+        set(&["solver.max_correction=0.5"])
+            .unwrap()
+            .solver
+            .max_correction,
+        Some(0.5)
+    );
+    for (extra, message) in [
+        (vec!["solver.max_correction=0"], "must be > 0"),
+        (vec!["solver.max_correction=-1"], "must be > 0"),
+        (
+            vec!["solver.max_correction=0.5", r#"scene.analysis="explicit""#],
+            "without path following",
+        ),
+    ] {
+        let e = set(&extra).unwrap_err().to_string();
+        assert!(
+            e.contains("solver.max_correction") && e.contains(message),
+            "{e}"
+        );
+    }
+}
+
 /// `solver.remember_halvings` belongs to fixed implicit steps: with adaptive
 /// steps it is refused naming the field; on its own it is accepted.
 #[test]

@@ -327,6 +327,21 @@ impl Scene {
                 );
             }
         }
+        if let Some(v) = s.max_correction {
+            check(
+                e,
+                "solver.max_correction",
+                v > 0.0 && v.is_finite(),
+                format!("must be > 0 cell sizes (got {v})"),
+            );
+            check(
+                e,
+                "solver.max_correction",
+                !s.follows_path() && self.scene.analysis != AnalysisKind::Explicit,
+                "applies to implicit Newton steps without path following (its bordered correction is solved whole)"
+                    .to_string(),
+            );
+        }
         check(
             e,
             "solver.remember_halvings",
