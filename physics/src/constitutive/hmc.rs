@@ -770,6 +770,8 @@ impl Hmc {
         } = start;
         let mut lin = self.linearise(&stress, kappa, arg);
         let mut previous_error = 0.0;
+        // a full Newton step was refused in an earlier iteration
+        let mut searched = false;
         for _ in 0..MAX_NEWTON_ITERATIONS {
             let r = self.assemble_residual(
                 &stress, kappa, multiplier, trial, kappa_n, local, &lin.m, lin.h, lin.f,
@@ -793,9 +795,13 @@ impl Hmc {
             if step.iter().any(|x| !x.is_finite()) {
                 return Err("non-finite Newton step");
             }
-            // Backtracking line search on ‖r‖ (theory §5.6 step 2). The full step is evaluated
-            // with the dual linearisation, which is reused by the next iteration when accepted.
+            // Backtracking line search on ‖r‖ (theory §5.6 step 2).
             let norm0 = r.norm();
+            // sufficient decrease at the fraction `alpha` of the step
+            let takes = |r: &Vec6, alpha: f64| {
+                let norm = r.norm();
+                norm.is_finite() && norm <= (1.0 - 1e-4 * alpha) * norm0
+            };
             let point = |alpha: f64| {
                 let s_try: Voigt = std::array::from_fn(|i| stress[i] + alpha * step[i]);
                 let k_try = if local {
@@ -806,44 +812,50 @@ impl Hmc {
                 (s_try, k_try, multiplier + alpha * step[5])
             };
             let full = point(1.0);
-            let (s_full, k_full, l_full) = full;
             // quadratic convergence: e_{k+1} ≈ e_k² (e_k / e_{k−1}²)
             let predicted_last = current_error.powi(3) <= previous_error * previous_error;
             previous_error = current_error;
-            if !want_jacobian && predicted_last {
+            // The full step is judged by the f64 residual (the linearisation's values bit
+            // for bit, so the same iterates) where it may be the solution of an explicit
+            // step, or where a full step was refused already: its dual linearisation is
+            // then formed only when the step is taken.
+            if (!want_jacobian && predicted_last) || searched {
                 let (r_full, f_full, m_full, h_full) =
-                    self.residual((&s_full, k_full, l_full), trial, kappa_n, arg);
-                if error(&r_full, f_full) <= 1.0 && r_full.norm() <= (1.0 - 1e-4) * norm0 {
-                    return solution(full, m_full, h_full);
+                    self.residual((&full.0, full.1, full.2), trial, kappa_n, arg);
+                if takes(&r_full, 1.0) {
+                    if !want_jacobian && error(&r_full, f_full) <= 1.0 {
+                        return solution(full, m_full, h_full);
+                    }
+                    (stress, kappa, multiplier) = full;
+                    lin = self.linearise(&stress, kappa, arg);
+                    continue;
+                }
+            } else {
+                let lin_full = self.linearise(&full.0, full.1, arg);
+                let r_full = self.assemble_residual(
+                    &full.0,
+                    full.1,
+                    full.2,
+                    trial,
+                    kappa_n,
+                    local,
+                    &lin_full.m,
+                    lin_full.h,
+                    lin_full.f,
+                );
+                if takes(&r_full, 1.0) {
+                    (stress, kappa, multiplier, lin) = (full.0, full.1, full.2, lin_full);
+                    continue;
                 }
             }
-            let lin_full = self.linearise(&s_full, k_full, arg);
-            let r_full = self.assemble_residual(
-                &s_full,
-                k_full,
-                l_full,
-                trial,
-                kappa_n,
-                local,
-                &lin_full.m,
-                lin_full.h,
-                lin_full.f,
-            );
-            let norm_full = r_full.norm();
-            if norm_full.is_finite() && norm_full <= (1.0 - 1e-4) * norm0 {
-                (stress, kappa, multiplier, lin) = (s_full, k_full, l_full, lin_full);
-                continue;
-            }
+            searched = true;
             let mut alpha = 1.0;
             for halving in 1..=MAX_LINE_SEARCH_HALVINGS {
                 alpha *= 0.5;
                 let (s_try, k_try, l_try) = point(alpha);
                 let (r_try, ..) = self.residual((&s_try, k_try, l_try), trial, kappa_n, arg);
-                let norm = r_try.norm();
-                if (norm.is_finite() && norm <= (1.0 - 1e-4 * alpha) * norm0)
-                    || halving == MAX_LINE_SEARCH_HALVINGS
-                {
-                    if !norm.is_finite() {
+                if takes(&r_try, alpha) || halving == MAX_LINE_SEARCH_HALVINGS {
+                    if !r_try.norm().is_finite() {
                         return Err("non-finite residual in the line search");
                     }
                     (stress, kappa, multiplier) = (s_try, k_try, l_try);

@@ -2,6 +2,8 @@
 //! point, Δε and ω from the nodal displacement increment (theory D12), Jaumann
 //! rotation of the stored stress (D13), and the constitutive update (§5).
 
+use std::sync::atomic::{AtomicUsize, Ordering};
+
 use rayon::prelude::*;
 
 use super::regularisation::NonlocalStrength;
@@ -61,7 +63,8 @@ impl TrialStresses {
 /// point's dilatation is its cell's average ([`volumetric`] B1–B2). Returns what the
 /// updates did: [`UpdateTally::counted`] records it in the profile and gives
 /// the lowest-index failing point, if any (deterministic whatever the thread
-/// count).
+/// count). After a failure the trial arrays are incomplete: points above
+/// the failing one may be left as they were ([`FirstFailure`]).
 pub fn evaluate_stresses(
     model: &Model,
     setup: &StepSetup,
@@ -122,6 +125,7 @@ fn evaluate<S: Support>(
     let n = particles.len();
     let gradient_known = prepare_trial(model, setup, shapes, du, trial);
     let correction = &trial.volumetric_correction;
+    let first_failure = FirstFailure::default();
     // Each task takes a run of points in two passes: the gradients and the
     // rotated stresses first (a loop without calls, so the divisions of
     // consecutive points' rotations overlap), then the constitutive updates.
@@ -141,6 +145,9 @@ fn evaluate<S: Support>(
                         (stress, state): (&mut Voigt, &mut PointState),
                         (rotated, l): (&Voigt, &[f64; 4]),
                         tangent: Option<&mut Mat4>| {
+        if first_failure.decided_before(p) {
+            return;
+        }
         let strain = transfer::strain_and_spin(l).0;
         let strain_increment = match correction.get(p) {
             Some(&c) => volumetric::corrected_strain(&strain, c),
@@ -159,7 +166,10 @@ fn evaluate<S: Support>(
         };
         match updated {
             Ok(yielded) => tally.return_mappings += u64::from(yielded),
-            Err(e) => tally.fail(p, e),
+            Err(e) => {
+                first_failure.record(p);
+                tally.fail(p, e);
+            }
         }
     };
     let runs = trial
@@ -262,6 +272,34 @@ fn spin_sensitivities(model: &Model, compliances: Option<&[Mat4]>, trial: &mut T
     }
 }
 
+/// The lowest index of a point whose update has failed so far in one
+/// evaluation, shared by its threads. A failed update rejects the whole
+/// increment, and only the lowest failing index is reported, so a point above
+/// a known failure need not be updated: every point below the final lowest
+/// failure is still updated, and the reported failure is the one a full
+/// evaluation finds, whatever the thread count. Its cost is one relaxed
+/// load per point; it saves the updates of a rejected line-search
+/// candidate after its first failure (with one thread, all of them).
+struct FirstFailure(AtomicUsize);
+
+impl Default for FirstFailure {
+    fn default() -> Self {
+        Self(AtomicUsize::new(usize::MAX))
+    }
+}
+
+impl FirstFailure {
+    /// Whether a point with a lower index than `p` has failed already.
+    fn decided_before(&self, p: usize) -> bool {
+        self.0.load(Ordering::Relaxed) < p
+    }
+
+    /// Point `p`'s update failed.
+    fn record(&self, p: usize) {
+        self.0.fetch_min(p, Ordering::Relaxed);
+    }
+}
+
 /// Points of one run of [`evaluate`]: their gradients and rotated stresses
 /// are formed in one pass, then their constitutive updates.
 const POINTS_PER_RUN: usize = 32;
@@ -311,5 +349,60 @@ impl UpdateTally {
             self.fail(p, error);
         }
         self
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::Scene;
+
+    const BIAXIAL: &str = include_str!("../../../validation/biaxial/local_h300.toml");
+
+    /// A nodal increment with non-finite values at two nodes, one low and one
+    /// high in the node order, fails the updates of the points they reach.
+    /// The evaluation reports the lowest such point (found here from the
+    /// points' gradients alone) on one thread and on two; on one thread it
+    /// updates no point after it ([`FirstFailure`]).
+    #[test]
+    fn the_lowest_failing_point_is_reported_and_later_points_are_skipped() {
+        let scene = Scene::from_str_with_overrides(BIAXIAL, "biaxial", &[]).unwrap();
+        let model = Model::new(&scene).unwrap();
+        let setup = StepSetup::new(&model).unwrap();
+        let nodes = model.grid.node_count();
+        let mut du: Vec<[f64; 2]> = (0..nodes).map(|i| [1e-7 * (i % 7) as f64, -1e-6]).collect();
+        let active = &setup.bins.active_nodes;
+        let (low, high) = (
+            active[active.len() / 3] as usize,
+            active[2 * active.len() / 3] as usize,
+        );
+        du[low] = [f64::NAN, 0.0];
+        du[high] = [0.0, f64::INFINITY];
+        let reached: Vec<usize> = (0..model.state.particles.len())
+            .filter(|&p| {
+                let l = transfer::gradient(&setup.shapes[p], &du);
+                l.iter().any(|x| !x.is_finite())
+            })
+            .collect();
+        assert!(reached.len() >= 2, "both nodes reach points: {reached:?}");
+        for threads in [1, 2] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            let profile = Profile::default();
+            let mut trial = TrialStresses::default();
+            let tally =
+                pool.install(|| evaluate_stresses(&model, &setup, &du, None, false, &mut trial));
+            let outcome = tally.counted(&profile);
+            let (p, _) = outcome.expect_err("non-finite increments fail");
+            assert_eq!(p, reached[0], "{threads} threads");
+            let updates = profile.work_count(Work::StressUpdates);
+            if threads == 1 {
+                assert_eq!(updates, reached[0] as u64 + 1);
+            } else {
+                assert!(updates > reached[0] as u64, "{threads} threads: {updates}");
+            }
+        }
     }
 }
