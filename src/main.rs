@@ -39,7 +39,7 @@ enum Command {
         #[arg(long)]
         quiet: bool,
         /// Print the stage profile and work counters at the end (they are in
-        /// run.json in any case).
+        /// run.json in any case), also with `--quiet`.
         #[arg(long)]
         profile: bool,
         /// Seconds between the plain progress lines printed when stderr is
@@ -78,7 +78,7 @@ enum Command {
         #[arg(long)]
         quiet: bool,
         /// Print the stage profile and work counters at the end (they are in
-        /// run.json in any case).
+        /// run.json in any case), also with `--quiet`.
         #[arg(long)]
         profile: bool,
         /// Seconds between the plain progress lines printed when stderr is
@@ -609,14 +609,15 @@ fn report(
     };
     let sim = &outcome.simulation.model;
     let succeeded = outcome.error.is_none() && outcome.interrupted.is_none();
+    // asked for by name, so `--quiet` keeps it
+    if profile {
+        eprintln!("{}", outcome.simulation.profile.table(outcome.wall_seconds));
+        eprintln!("{}", outcome.simulation.profile.work_line());
+    }
     if quiet && succeeded && outcome.simulation.finished() {
         // warnings only
         print_warnings(&outcome.simulation);
         return ExitCode::SUCCESS;
-    }
-    if profile {
-        eprintln!("{}", outcome.simulation.profile.table(outcome.wall_seconds));
-        eprintln!("{}", outcome.simulation.profile.work_line());
     }
     print_run_summary(&outcome, out);
     print_warnings(&outcome.simulation);

@@ -119,7 +119,7 @@ fn run_json_holds_provenance_and_summary() {
 }
 
 /// Without `--quiet` the summary is printed; the stage profile only with
-/// `--profile`.
+/// `--profile`, and then also with `--quiet` (which drops the summary).
 #[test]
 fn run_prints_its_summary_and_the_profile_on_demand() {
     let plain = |extra: &[&str]| {
@@ -138,6 +138,9 @@ fn run_prints_its_summary_and_the_profile_on_demand() {
         profiled.contains("wall") && profiled.contains("work:"),
         "{profiled}"
     );
+    let quiet = plain(&["--profile", "--quiet"]);
+    assert!(quiet.contains("wall") && quiet.contains("work:"), "{quiet}");
+    assert!(!quiet.contains("30 steps to t = "), "{quiet}");
 }
 
 /// The elastic bar under 1e4 g completes with its points crushed to
