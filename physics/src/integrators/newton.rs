@@ -304,7 +304,7 @@ pub fn solve(
         // path following solves the bordered system (PF4); the energy
         // norm's reference is then the work of the load R + (∂f_pen/∂τ) δτ
         let bordered = path.as_ref().zip(constraint);
-        let (correction, travel_correction) = newton_correction(
+        let (mut correction, travel_correction) = newton_correction(
             system,
             tangent,
             trial,
@@ -313,7 +313,6 @@ pub fn solve(
             usage,
             profile,
         )?;
-        let mut correction = correction;
         if let Some(cells) = model.settings.solver.max_correction {
             let longest = cells * model.grid.cell_size;
             limit_nodal_corrections(&system.dofs.index, &mut correction, longest);
