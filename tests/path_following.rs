@@ -55,6 +55,14 @@ fn rising_load_at(curve: &[[f64; 3]], t: f64) -> f64 {
     a[1] + (b[1] - a[1]) * (t - a[0]) / (b[0] - a[0])
 }
 
+/// The node a Newton failure's message names ("at the node (x, y) m").
+fn named_node(message: &str) -> Option<[f64; 2]> {
+    let rest = &message[message.find("at the node (")? + "at the node (".len()..];
+    let (x, rest) = rest.split_once(", ")?;
+    let (y, _) = rest.split_once(')')?;
+    Some([x.trim().parse().ok()?, y.trim().parse().ok()?])
+}
+
 /// The post-peak branch of a path `path` that stopped with `stop`, as both
 /// tests check it: a stop names its step; past the peak the travel (time ×
 /// `speed`, m per unit time) turns back by more than `back` m while the load
@@ -189,6 +197,17 @@ fn local_footing_passes_its_peak_and_follows_the_snap_back() {
     // without PF6 the jump at 82 % of the peak lost the path
     if let Some(message) = &stop {
         assert!(!message.contains("lost its path"), "{message}");
+    }
+    // Newton stalls at a footing corner, where the band starts: the stop
+    // names the node of the largest residual (measured (8.25, 7.5) m, 0.5 m
+    // from the edge at 7.75 m and below the surface at 8 m)
+    if let Some(message) = &stop {
+        let [x, y] = named_node(message).unwrap_or_else(|| panic!("no node named: {message}"));
+        let to_edge = (x - 6.25).abs().min((x - 7.75).abs());
+        assert!(
+            to_edge <= 1.0 && (7.0..=8.5).contains(&y),
+            "stalled at ({x}, {y}), not at a corner"
+        );
     }
     // the footing moves at 0.0125 m per unit time
     let peak_index = assert_snap_back(&path, stop.as_deref(), 0.0125, 1e-4, 0.85);

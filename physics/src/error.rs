@@ -193,6 +193,38 @@ impl fmt::Display for NewtonFailure {
     }
 }
 
+/// Where an iterate's equilibrium fails most: the largest free component of
+/// the residual R (theory D16) and its node.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LargestResidual {
+    /// R at that dof, kN/m.
+    pub value: f64,
+    /// 0: x, 1: y.
+    pub component: usize,
+    /// The node's position, m.
+    pub node: [f64; 2],
+}
+
+impl fmt::Display for LargestResidual {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "largest residual {:.3e} kN/m in {} at the node ({:.4}, {:.4}) m",
+            self.value,
+            ["x", "y"][self.component.min(1)],
+            self.node[0],
+            self.node[1]
+        )
+    }
+}
+
+/// `"; "` and `largest`, or nothing (the located part of a Newton failure's message).
+fn located(largest: &Option<Box<LargestResidual>>) -> String {
+    largest
+        .as_ref()
+        .map_or_else(String::new, |l| format!("; {l}"))
+}
+
 /// Why a step failed.
 #[derive(Debug, thiserror::Error)]
 pub enum StepError {
@@ -215,7 +247,7 @@ pub enum StepError {
         position: [f64; 2],
     },
     /// Newton–Raphson failed even after the allowed step halvings.
-    #[error("Newton did not converge after {halvings} step halvings: {cause}; residual history {history:?}")]
+    #[error("Newton did not converge after {halvings} step halvings: {cause}{}; residual history {history:?}", located(.largest))]
     NewtonFailed {
         /// Number of halvings tried.
         halvings: usize,
@@ -223,6 +255,9 @@ pub enum StepError {
         cause: NewtonFailure,
         /// ‖R‖ per iteration of the last attempt, kN/m.
         history: Vec<f64>,
+        /// Where the last attempt's last iterate was furthest from
+        /// equilibrium (`None` where no residual was judged).
+        largest: Option<Box<LargestResidual>>,
     },
     /// Path following (theory §3.7) took its step budget without reaching
     /// the end travel.

@@ -103,7 +103,7 @@ error_ids! {
         "a traction or contact point left the background grid";
         "enlarge `grid.size` around the loaded boundary";
     RunNewtonFailed => "RUN_NEWTON_FAILED":
-        "Newton did not converge after every allowed step halving (the residual history is given)";
+        "Newton did not converge after every allowed step halving (the residual history and the node of the largest residual are given)";
         "use smaller steps (`scene.steps`, `scene.dt`), more halvings (`solver.max_halvings`), or check the boundary conditions";
     RunPathBudget => "RUN_PATH_BUDGET":
         "a path-following run used its `solver.path_max_steps` before its rigid bodies reached the end travel (where it stood is given)";

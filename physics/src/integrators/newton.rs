@@ -288,13 +288,16 @@ pub fn solve(
             .as_ref()
             .zip(constraint)
             .is_none_or(|((c, _), g)| c.met(g));
-        if let Verdict::Converged { stagnated } = convergence.judge(
-            iteration,
-            res,
-            &free_residual,
-            constraint_met,
-            kappa_settled,
-        )? {
+        let verdict = convergence
+            .judge(
+                iteration,
+                res,
+                &free_residual,
+                constraint_met,
+                kappa_settled,
+            )
+            .map_err(|e| e.located(&system.dofs, &model.grid, &free_residual))?;
+        if let Verdict::Converged { stagnated } = verdict {
             usage.stagnated_steps += usize::from(stagnated);
             return converged(system, current, iteration, convergence.history);
         }

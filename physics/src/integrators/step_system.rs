@@ -18,8 +18,9 @@ use super::{
 use crate::bc::{DofConstraint, TravelDerivatives};
 use crate::constitutive::ConstitutiveError;
 use crate::dofs::{gather_free_into, DofMap};
-use crate::error::{NewtonFailure, StepError};
+use crate::error::{LargestResidual, NewtonFailure, StepError};
 use crate::friction::ContactState;
+use crate::grid::Grid;
 use crate::model::Model;
 use crate::profile::{Profile, Stage};
 use crate::scene::{PredictorChoice, SolverSpec};
@@ -227,6 +228,8 @@ pub enum NewtonError {
         cause: NewtonFailure,
         /// ‖R‖ per iteration of the attempt, kN/m.
         history: Vec<f64>,
+        /// Where the last iterate's residual is largest (set by `located`).
+        largest: Option<Box<LargestResidual>>,
     },
     /// The stress update failed at a point; retried with a halved step.
     Constitutive(usize, ConstitutiveError),
@@ -241,6 +244,25 @@ impl NewtonError {
         NewtonError::Failed {
             cause,
             history: history.to_vec(),
+            largest: None,
+        }
+    }
+
+    /// A failure of Newton's iteration itself (divergence, iteration limit)
+    /// with the place of the largest free residual component of its last
+    /// iterate, `free_residual` (indexed by `dofs`); other errors unchanged.
+    pub(super) fn located(self, dofs: &DofMap, grid: &Grid, free_residual: &[f64]) -> Self {
+        match self {
+            NewtonError::Failed {
+                cause: cause @ (NewtonFailure::Diverged | NewtonFailure::IterationLimit { .. }),
+                history,
+                largest: None,
+            } => NewtonError::Failed {
+                cause,
+                history,
+                largest: largest_residual(dofs, grid, free_residual).map(Box::new),
+            },
+            other => other,
         }
     }
 
@@ -252,10 +274,15 @@ impl NewtonError {
     /// The step error after `halvings` halvings.
     pub fn into_step_error(self, halvings: usize) -> StepError {
         match self {
-            NewtonError::Failed { cause, history } => StepError::NewtonFailed {
+            NewtonError::Failed {
+                cause,
+                history,
+                largest,
+            } => StepError::NewtonFailed {
                 halvings,
                 cause,
                 history,
+                largest,
             },
             NewtonError::Constitutive(particle, source) => {
                 StepError::Constitutive { particle, source }
@@ -741,9 +768,76 @@ impl StepSystem<'_> {
     }
 }
 
+/// The free dof of largest |R| (the first, in dof order, among equal ones)
+/// and its node; `None` without free dofs.
+fn largest_residual(dofs: &DofMap, grid: &Grid, free_residual: &[f64]) -> Option<LargestResidual> {
+    let mut largest: Option<(usize, f64)> = None;
+    for (d, &index) in dofs.index.iter().enumerate() {
+        if index == NONE {
+            continue;
+        }
+        let value = free_residual[index as usize];
+        if largest.is_none_or(|(_, v)| value.abs() > v.abs()) {
+            largest = Some((d, value));
+        }
+    }
+    largest.map(|(d, value)| LargestResidual {
+        value,
+        component: d % 2,
+        node: grid.node_position(d / 2),
+    })
+}
+
 /// Clear `values` and fill it with `n` zeros (in place: no allocation once
 /// it has grown).
 fn zeroed(values: &mut Vec<[f64; 2]>, n: usize) {
     values.clear();
     values.resize(n, [0.0; 2]);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The located failure names the free dof of largest |R|, skipping held
+    /// dofs whatever their value, with its node's position and component.
+    #[test]
+    fn the_largest_free_residual_is_located_at_its_node() {
+        // 2 × 1 cells of 0.5 m from (1, 2): nodes 0–2 on y = 2, 3–5 on y = 2.5
+        let grid = Grid::bilinear([1.0, 2.0], 0.5, [2, 1]);
+        // node 1's x (dof 2) and node 4's y (dof 9) are held; the rest are
+        // free in dof order
+        let held = [2, 9];
+        let mut index = vec![NONE; 12];
+        let mut n_free = 0;
+        for (d, i) in index.iter_mut().enumerate() {
+            if !held.contains(&d) {
+                *i = n_free as u32;
+                n_free += 1;
+            }
+        }
+        let dofs = DofMap { index, n_free };
+        // R per free dof; −7 (free index 6: dof 7, node 3, y) is the largest
+        let free_residual = [1.0, -2.0, 3.0, 0.5, 4.0, 6.0, -7.0, 2.0, 1.0, 0.0];
+        let largest = largest_residual(&dofs, &grid, &free_residual).expect("free dofs");
+        assert_eq!(largest.value, -7.0);
+        assert_eq!(largest.component, 1);
+        assert_eq!(largest.node, [1.0, 2.5]);
+        let failure = NewtonError::failed(NewtonFailure::Diverged, &[1.0, 2.0])
+            .located(&dofs, &grid, &free_residual)
+            .into_step_error(3);
+        let message = failure.to_string();
+        assert!(
+            message.contains("-7.000e0 kN/m in y at the node (1.0000, 2.5000) m"),
+            "{message}"
+        );
+        // a motion failure keeps its own place (the point), not a residual's
+        let motion = NewtonFailure::Motion {
+            particle: 4,
+            position: [1.2, 2.1],
+            distance: 0.3,
+        };
+        let failure = NewtonError::failed(motion, &[1.0]).located(&dofs, &grid, &free_residual);
+        assert!(matches!(failure, NewtonError::Failed { largest: None, .. }));
+    }
 }
