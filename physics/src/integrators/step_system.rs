@@ -799,8 +799,8 @@ fn zeroed(values: &mut Vec<[f64; 2]>, n: usize) {
 mod tests {
     use super::*;
 
-    /// The located failure names the free dof of largest |R|, skipping held
-    /// dofs whatever their value, with its node's position and component.
+    /// The located failure names the free dof of largest |R| (held dofs have
+    /// no free index and are skipped) with its node's position and component.
     #[test]
     fn the_largest_free_residual_is_located_at_its_node() {
         // 2 × 1 cells of 0.5 m from (1, 2): nodes 0–2 on y = 2, 3–5 on y = 2.5
