@@ -73,7 +73,15 @@ pub fn run_paper(
     options: &CampaignOptions,
 ) -> Result<Vec<PaperOutcome>, CampaignError> {
     let mut outcomes = Vec::new();
-    for benchmark in BENCHMARKS {
+    for (k, benchmark) in BENCHMARKS.into_iter().enumerate() {
+        // the campaigns' own lines do not say which benchmark they belong to
+        eprintln!(
+            "paper: {} ({} of {}, the paper's {})",
+            benchmark.name,
+            k + 1,
+            BENCHMARKS.len(),
+            benchmark.figures
+        );
         let start = Instant::now();
         let dir = root.join(benchmark.name);
         let result = run_campaign(&dir, &campaign_dir(out, benchmark), options);
@@ -85,11 +93,17 @@ pub fn run_paper(
                 (runs.len(), stopped, None)
             }
         };
+        let seconds = start.elapsed().as_secs_f64();
+        eprintln!(
+            "paper: {} {} in {seconds:.0} s",
+            benchmark.name,
+            if error.is_some() { "stopped" } else { "done" }
+        );
         outcomes.push(PaperOutcome {
             benchmark,
             runs,
             stopped,
-            seconds: start.elapsed().as_secs_f64(),
+            seconds,
             error,
         });
     }

@@ -26,14 +26,17 @@ fn short_root(dir: &Path) {
     }
 }
 
-/// `mpm-geo paper` from `root` into `out`, 4 steps a run.
-fn paper(root: &Path, out: &Path) -> std::process::ExitStatus {
-    Command::new(env!("CARGO_BIN_EXE_mpm-geo"))
+/// `mpm-geo paper` from `root` into `out`, 4 steps a run: its exit status
+/// and what it printed to stderr.
+fn paper(root: &Path, out: &Path) -> (std::process::ExitStatus, String) {
+    let output = Command::new(env!("CARGO_BIN_EXE_mpm-geo"))
         .args(["paper", "--from", root.to_str().unwrap(), "--out"])
         .arg(out)
         .args(["--set", "scene.steps=4", "--set", "output.snapshots=[]"])
-        .status()
-        .unwrap()
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr).into_owned();
+    (output.status, stderr)
 }
 
 #[test]
@@ -41,7 +44,28 @@ fn paper_runs_three_campaigns_indexes_them_and_resumes() {
     let dir = tempfile::tempdir().unwrap();
     let (root, out) = (dir.path().join("root"), dir.path().join("out"));
     short_root(&root);
-    assert!(paper(&root, &out).success());
+    let (status, progress) = paper(&root, &out);
+    assert!(status.success(), "{progress}");
+    // the progress names each benchmark before its campaign's lines, in the
+    // paper's order, and says when it is done
+    let mut from = 0;
+    for (k, name) in ["biaxial", "footing", "vertical_cut", "vertical_cut_late"]
+        .iter()
+        .enumerate()
+    {
+        let announced = format!("paper: {name} ({} of 4,", k + 1);
+        let at = progress[from..]
+            .find(&announced)
+            .unwrap_or_else(|| panic!("no {announced:?} after byte {from}:\n{progress}"));
+        from += at;
+        let campaign = progress[from..]
+            .find("campaign: ")
+            .expect("the campaign's lines");
+        let done = progress[from..]
+            .find(&format!("paper: {name} done in "))
+            .expect("done line");
+        assert!(campaign < done, "{progress}");
+    }
     let index = std::fs::read_to_string(out.join("README.md")).unwrap();
     for (name, figures) in [
         ("biaxial", "Figs. 3–5"),
@@ -88,6 +112,6 @@ fn paper_runs_three_campaigns_indexes_them_and_resumes() {
             .collect()
     };
     let first = written(&out);
-    assert!(paper(&root, &out).success());
+    assert!(paper(&root, &out).0.success());
     assert_eq!(written(&out), first, "a finished run was run again");
 }
