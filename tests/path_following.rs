@@ -183,14 +183,14 @@ fn path_following_is_refused_where_it_cannot_apply() {
 
 /// The local footing at h = 0.25 m (`validation/footing/local_h250.toml`)
 /// under path following passes its peak within 1 % of the scene's slowly
-/// loaded dynamic run (0.0125 m/s; it peaks at 2,128 kN/m; measured 2,123,
-/// 0.25 % below), then follows its post-peak branch without inertia: the footing's
-/// travel turns back by more than 0.1 mm (measured 0.77 mm) while the load
-/// falls below 85 % of the peak (measured 81.9 % with PF6, the unloading
-/// stiffness measured by the jump at 82 %), every step dissipating. Where it
-/// stops (measured: Newton stalls at step 37, δ = 0.067 m), the error names
-/// the step; it no longer loses the path there (without PF6 every halving
-/// of step 37 jumped onto the elastic unloading branch).
+/// loaded dynamic run (0.0125 m/s; it peaks at 2,128 kN/m; measured 2,124,
+/// 0.21 % below), then follows its post-peak branch without inertia: the footing's
+/// travel turns back by more than 0.1 mm (measured 0.29 mm) while the load
+/// falls below 85 % of the peak (measured 83.2 %), every step dissipating.
+/// Where it stops (measured: step 31, δ = 0.069 m, the tangent singular
+/// along heaved soil above the footing's left edge), the error names the
+/// step and the node; it does not lose the path there (without PF6 every
+/// halving of the step at 82 % jumped onto the elastic unloading branch).
 #[test]
 fn local_footing_passes_its_peak_and_follows_the_snap_back() {
     let (path, stop) = follow(&mut simulation("footing/local_h250.toml", &PATH));
@@ -198,9 +198,10 @@ fn local_footing_passes_its_peak_and_follows_the_snap_back() {
     if let Some(message) = &stop {
         assert!(!message.contains("lost its path"), "{message}");
     }
-    // Newton stalls at a footing corner, where the band starts: the stop
-    // names the node of the largest residual (measured (8.25, 7.5) m, 0.5 m
-    // from the edge at 7.75 m and below the surface at 8 m)
+    // it stops at a footing corner, where the band starts: the stop names
+    // the node where Newton's residual is largest, or where the singular
+    // tangent's probe deviates most (measured (6.25, 8.25) m, heaved soil
+    // above the edge at 6.25 m and the surface at 8 m)
     if let Some(message) = &stop {
         let [x, y] = named_node(message).unwrap_or_else(|| panic!("no node named: {message}"));
         let to_edge = (x - 6.25).abs().min((x - 7.75).abs());

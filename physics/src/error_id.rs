@@ -121,7 +121,7 @@ error_ids! {
         "the explicit time step is not finite or is above the stability limit";
         "lower `solver.cfl` or `scene.dt`";
     RunLinearSolver => "RUN_LINEAR_SOLVER":
-        "the linear solver failed (a singular tangent: a body not held, a mechanism)";
+        "the linear solver failed (a singular tangent: a body not held, a mechanism; the node where it is most singular is named)";
         "fix the boundary conditions so that every body is held; see `solver.linear_solver`";
     RunNonlocal => "RUN_NONLOCAL":
         "the nonlocal averaging failed (a non-finite position or volume)";

@@ -423,6 +423,7 @@ impl DirectSolver {
                             self.options.pivot_ratio_tol,
                             1.0 / self.options.pivot_ratio_tol
                         ),
+                        unknown: None,
                     })
                 } else {
                     Ok(true)
@@ -551,12 +552,12 @@ impl DirectSolver {
             let mut x = vec![0.0; n];
             k.mul_vec(&p, &mut x);
             self.lu_solve(&mut x);
-            let err = x
-                .iter()
-                .zip(&p)
-                .map(|(a, b)| (a - b).abs())
-                .fold(0.0f64, |m, d| if d.is_nan() { f64::NAN } else { m.max(d) })
-                / 2.0;
+            for (xi, pi) in x.iter_mut().zip(&p) {
+                *xi -= pi;
+            }
+            // the deviation x − p is largest at `unknown` (or first not finite there)
+            let unknown = crate::norms::largest_entry(&x).unwrap_or(0);
+            let err = x.get(unknown).map_or(0.0, |d| d.abs() / 2.0);
             self.stats.last_probe_error = Some(err);
             self.stats.probe_seconds += t.elapsed().as_secs_f64();
             if err.is_nan() || err > self.options.probe_tol {
@@ -566,6 +567,7 @@ impl DirectSolver {
                         "probe solve K x = K p has relative error {err:.3e} > {:.1e}",
                         self.options.probe_tol
                     ),
+                    unknown: (n > 0).then_some(unknown),
                 });
             }
         }
@@ -649,6 +651,7 @@ impl DirectSolver {
             return Err(SolverError::Singular {
                 factor: kind,
                 detail: format!("solution is not finite (first at dof {i})"),
+                unknown: Some(i),
             });
         }
         Ok(())
@@ -675,6 +678,7 @@ fn lu_result(res: Result<(), LuError>) -> Result<(), SolverError> {
         Err(LuError::SymbolicSingular { index }) => Err(SolverError::Singular {
             factor: FactorKind::Lu,
             detail: format!("no pivot available at elimination step {index}"),
+            unknown: None,
         }),
         Err(LuError::Generic(e)) => Err(faer_err(e)),
     }

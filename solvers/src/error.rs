@@ -71,6 +71,10 @@ pub enum SolverError {
         factor: FactorKind,
         /// Human-readable description of the test that failed.
         detail: String,
+        /// The unknown where that test failed most (the probe solve's or the
+        /// refinement's largest deviation, the first non-finite entry of the
+        /// solution), where the test tells one: a caller can name its dof.
+        unknown: Option<usize>,
     },
 
     /// [`crate::DirectSolver::solve_in_place`] was called with no valid factorisation

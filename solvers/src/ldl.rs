@@ -58,6 +58,7 @@ impl LdlSolver {
         let singular = |e: sprs::errors::LinalgError| SolverError::Singular {
             factor: crate::FactorKind::Cholesky,
             detail: format!("sprs_ldl: {e}"),
+            unknown: None,
         };
         self.last_symbolic_seconds = 0.0;
         match (&mut self.numeric, same) {
@@ -113,6 +114,7 @@ impl LdlSolver {
             return Err(SolverError::Singular {
                 factor: crate::FactorKind::Cholesky,
                 detail: format!("sprs_ldl solution is not finite (first at dof {i})"),
+                unknown: Some(i),
             });
         }
         rhs.copy_from_slice(&x);

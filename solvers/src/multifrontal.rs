@@ -305,6 +305,7 @@ impl MultifrontalLu {
                 Some(i) => Err(SolverError::Singular {
                     factor: FactorKind::Cholesky,
                     detail: format!("multifrontal solution is not finite (first at dof {i})"),
+                    unknown: Some(i),
                 }),
                 None => Ok(()),
             };
@@ -330,6 +331,7 @@ impl MultifrontalLu {
                 detail: format!(
                     "multifrontal LU: refinement correction {size:.3e} of the solution exceeds {CORRECTION_LIMIT:.0e}"
                 ),
+                unknown: crate::norms::largest_entry(&r),
             });
         }
         for (x, d) in rhs.iter_mut().zip(&r) {
@@ -782,6 +784,7 @@ fn factor_lu(
                     "multifrontal LU: pivot {pivot:e} at unknown {} (permuted)",
                     first + i
                 ),
+                unknown: None,
             });
         }
     }

@@ -12,6 +12,15 @@ pub(crate) fn norm(v: &[f64]) -> f64 {
     dot(v, v).sqrt()
 }
 
+/// The position of the largest |v_i| (of the first non-finite entry where
+/// there is one); `None` for an empty vector.
+pub(crate) fn largest_entry(v: &[f64]) -> Option<usize> {
+    if let Some(i) = v.iter().position(|x| !x.is_finite()) {
+        return Some(i);
+    }
+    (0..v.len()).reduce(|best, i| if v[i].abs() > v[best].abs() { i } else { best })
+}
+
 /// `‖b − K x‖ / norm_b`.
 pub(crate) fn true_residual(k: &SparseMatrix, x: &[f64], b: &[f64], norm_b: f64) -> f64 {
     let mut kx = vec![0.0; b.len()];

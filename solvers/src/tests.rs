@@ -470,6 +470,37 @@ fn singular_systems_are_errors() {
     }
 }
 
+/// A numerically singular LU is located: in a well-conditioned tridiagonal
+/// system with a nearly singular 2 × 2 block on unknowns 4 and 5 (null
+/// vector (1, −1) there, condition ~1e15), the probe solve's error exceeds
+/// its tolerance and is largest at one of those two unknowns.
+#[test]
+fn a_singular_probe_names_its_unknown() {
+    let n = 10;
+    let mut triplets = Vec::new();
+    for i in 0..n {
+        triplets.push((i, i, 4.0));
+        if i + 1 < n && !(3..=5).contains(&i) {
+            triplets.push((i, i + 1, -1.0));
+            triplets.push((i + 1, i, -1.0));
+        }
+    }
+    // unknowns 4 and 5: [[1, 1], [1, 1 + 1e-15]] instead of 4 on the diagonal
+    for (i, j, v) in [(4, 4, -3.0), (5, 5, -3.0 + 1e-15), (4, 5, 1.0), (5, 4, 1.0)] {
+        triplets.push((i, j, v));
+    }
+    let k = SparseMatrix::from_triplets(n, &triplets).unwrap();
+    let e = DirectSolver::new(SolverPolicy::Lu)
+        .factorize(&k, false)
+        .unwrap_err();
+    match e {
+        SolverError::Singular {
+            unknown: Some(u), ..
+        } => assert!(u == 4 || u == 5, "named unknown {u}"),
+        e => panic!("not a located singular matrix: {e}"),
+    }
+}
+
 #[test]
 fn non_finite_input_is_an_error() {
     let (_, _, mut k) = elastic_system(6, 4);

@@ -5,7 +5,7 @@
 
 use super::path::PathConstraint;
 use super::step_system::{
-    NewtonError, Residual, ResidualScratch, StepSystem, CONTACT_HOLD_ITERATION,
+    singular_placed, NewtonError, Residual, ResidualScratch, StepSystem, CONTACT_HOLD_ITERATION,
 };
 use super::tangent::Tangent;
 use super::{NonlocalStep, SolverUsage, TrialStresses};
@@ -419,16 +419,19 @@ fn newton_correction(
     usage: &mut SolverUsage,
     profile: &Profile,
 ) -> Result<(Vec<f64>, f64), NewtonError> {
+    let place = |e| singular_placed(e, &system.dofs, &system.model.grid);
     Ok(match bordered {
-        Some(((c, derivatives), g)) => tangent.solve_bordered(
-            system,
-            trial,
-            (free_residual, &c.border(derivatives, g)),
-            usage,
-            profile,
-        )?,
+        Some(((c, derivatives), g)) => tangent
+            .solve_bordered(
+                system,
+                trial,
+                (free_residual, &c.border(derivatives, g)),
+                usage,
+                profile,
+            )
+            .map_err(place)?,
         None => (
-            tangent.solve(system, trial, free_residual, usage, profile)?,
+            (tangent.solve(system, trial, free_residual, usage, profile)).map_err(place)?,
             0.0,
         ),
     })

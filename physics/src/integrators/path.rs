@@ -64,13 +64,14 @@ pub struct PathConstraint {
     pub arc: f64,
     /// F_n, the driven load at the start of the step, kN/m.
     pub start_load: f64,
-    /// Newton's start: the last step's nodal increment and travel times
-    /// this factor (0: from Δu = 0, Δτ = 0). A plastic-travel step must
+    /// Newton's start: the last step's nodal increment times this factor
+    /// (0: from Δu = 0), with the travel `start_travel`. A plastic-travel step must
     /// start off the elastic state: at Δu = 0 every point's tangent is
     /// elastic, and along the elastic tangent the plastic travel cannot
     /// change (the bordered system is singular there).
     pub predictor: f64,
-    /// The start's travel Δτ (the last step's times `predictor`).
+    /// The start's travel Δτ: the prescribed travel under displacement
+    /// control, else the last step's times `predictor`.
     pub start_travel: f64,
     /// The longest step (Δτ/Δt, ΔF/F_ref) accepted, scaled (∞: any).
     pub max_step: f64,
@@ -80,6 +81,13 @@ pub struct PathConstraint {
 
 impl PathConstraint {
     /// Displacement control: a step of travel `travel` (in time units).
+    /// Newton starts with the anchors moved over the whole travel (g = 0,
+    /// and with c_F = 0 every correction keeps it 0) and Δu = 0: the step of
+    /// a quasi-static run without path following. From Δτ = 0 instead, the
+    /// line search would weigh the unmet g by D18's reference force, which
+    /// before the first load is tiny: every candidate that moves the anchors
+    /// then looks worse than the start (the local footing at h = 0.1 m failed
+    /// its first step at every one of 8 halvings).
     pub fn travel(dt: f64, travel: f64, start_load: f64) -> Self {
         Self {
             travel_weight: 1.0 / dt,
@@ -87,7 +95,7 @@ impl PathConstraint {
             arc: travel / dt,
             start_load,
             predictor: 0.0,
-            start_travel: 0.0,
+            start_travel: travel,
             max_step: f64::INFINITY,
             load_scale: 1.0,
         }

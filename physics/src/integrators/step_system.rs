@@ -788,6 +788,42 @@ fn largest_residual(dofs: &DofMap, grid: &Grid, free_residual: &[f64]) -> Option
     })
 }
 
+/// A singular tangent's error with the place its test failed most (the
+/// unknown the solver names: a free dof's node and component, or under
+/// path following the travel, unknown n) added to its detail; other errors
+/// unchanged.
+pub(super) fn singular_placed(e: StepError, dofs: &DofMap, grid: &Grid) -> StepError {
+    let StepError::Solver(SolverError::Singular {
+        factor,
+        detail,
+        unknown: Some(unknown),
+    }) = e
+    else {
+        return e;
+    };
+    let dof = dofs.index.iter().position(|&i| i as usize == unknown);
+    let place = match dof {
+        Some(d) => {
+            let [x, y] = grid.node_position(d / 2);
+            let component = ["x", "y"][d % 2];
+            format!("most in {component} at the node ({x:.4}, {y:.4}) m")
+        }
+        None if unknown == dofs.n_free => "most in the travel (path following)".into(),
+        None => {
+            return StepError::Solver(SolverError::Singular {
+                factor,
+                detail,
+                unknown: Some(unknown),
+            })
+        }
+    };
+    StepError::Solver(SolverError::Singular {
+        factor,
+        detail: format!("{detail}, {place}"),
+        unknown: Some(unknown),
+    })
+}
+
 /// Clear `values` and fill it with `n` zeros (in place: no allocation once
 /// it has grown).
 fn zeroed(values: &mut Vec<[f64; 2]>, n: usize) {
@@ -801,12 +837,11 @@ mod tests {
 
     /// The located failure names the free dof of largest |R| (held dofs have
     /// no free index and are skipped) with its node's position and component.
-    #[test]
-    fn the_largest_free_residual_is_located_at_its_node() {
-        // 2 × 1 cells of 0.5 m from (1, 2): nodes 0–2 on y = 2, 3–5 on y = 2.5
+    /// 2 × 1 cells of 0.5 m from (1, 2) (nodes 0–2 on y = 2, 3–5 on
+    /// y = 2.5) with node 1's x (dof 2) and node 4's y (dof 9) held, the
+    /// other dofs free in dof order (10 free).
+    fn two_cells() -> (Grid, DofMap) {
         let grid = Grid::bilinear([1.0, 2.0], 0.5, [2, 1]);
-        // node 1's x (dof 2) and node 4's y (dof 9) are held; the rest are
-        // free in dof order
         let held = [2, 9];
         let mut index = vec![NONE; 12];
         let mut n_free = 0;
@@ -816,7 +851,12 @@ mod tests {
                 n_free += 1;
             }
         }
-        let dofs = DofMap { index, n_free };
+        (grid, DofMap { index, n_free })
+    }
+
+    #[test]
+    fn the_largest_free_residual_is_located_at_its_node() {
+        let (grid, dofs) = two_cells();
         // R per free dof; −7 (free index 6: dof 7, node 3, y) is the largest
         let free_residual = [1.0, -2.0, 3.0, 0.5, 4.0, 6.0, -7.0, 2.0, 1.0, 0.0];
         let largest = largest_residual(&dofs, &grid, &free_residual).expect("free dofs");
@@ -839,5 +879,28 @@ mod tests {
         };
         let failure = NewtonError::failed(motion, &[1.0]).located(&dofs, &grid, &free_residual);
         assert!(matches!(failure, NewtonError::Failed { largest: None, .. }));
+    }
+
+    /// A singular tangent's unknown is named as its node and component
+    /// (free index 6: dof 7, node 3, y), the bordered system's last unknown
+    /// as the travel; a singular matrix without an unknown is unchanged.
+    #[test]
+    fn a_singular_tangent_names_its_node() {
+        let (grid, dofs) = two_cells();
+        let singular = |unknown| {
+            StepError::Solver(SolverError::Singular {
+                factor: mpm_solvers::FactorKind::Lu,
+                detail: "probe".into(),
+                unknown,
+            })
+        };
+        let placed = |unknown| singular_placed(singular(unknown), &dofs, &grid).to_string();
+        assert!(
+            placed(Some(6)).ends_with("probe, most in y at the node (1.0000, 2.5000) m"),
+            "{}",
+            placed(Some(6))
+        );
+        assert!(placed(Some(10)).ends_with("probe, most in the travel (path following)"));
+        assert!(placed(None).ends_with("probe"));
     }
 }
