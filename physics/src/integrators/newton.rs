@@ -431,7 +431,9 @@ fn newton_correction(
             )
             .map_err(place)?,
         None => (
-            (tangent.solve(system, trial, free_residual, usage, profile)).map_err(place)?,
+            tangent
+                .solve(system, trial, free_residual, usage, profile)
+                .map_err(place)?,
             0.0,
         ),
     })

@@ -801,25 +801,22 @@ pub(super) fn singular_placed(e: StepError, dofs: &DofMap, grid: &Grid) -> StepE
     else {
         return e;
     };
-    let dof = dofs.index.iter().position(|&i| i as usize == unknown);
-    let place = match dof {
+    let place = match dofs.index.iter().position(|&i| i as usize == unknown) {
         Some(d) => {
             let [x, y] = grid.node_position(d / 2);
             let component = ["x", "y"][d % 2];
-            format!("most in {component} at the node ({x:.4}, {y:.4}) m")
+            Some(format!(
+                "most in {component} at the node ({x:.4}, {y:.4}) m"
+            ))
         }
-        None if unknown == dofs.n_free => "most in the travel (path following)".into(),
-        None => {
-            return StepError::Solver(SolverError::Singular {
-                factor,
-                detail,
-                unknown: Some(unknown),
-            })
-        }
+        None => (unknown == dofs.n_free).then(|| "most in the travel (path following)".into()),
     };
     StepError::Solver(SolverError::Singular {
         factor,
-        detail: format!("{detail}, {place}"),
+        detail: match place {
+            Some(place) => format!("{detail}, {place}"),
+            None => detail,
+        },
         unknown: Some(unknown),
     })
 }
@@ -835,8 +832,6 @@ fn zeroed(values: &mut Vec<[f64; 2]>, n: usize) {
 mod tests {
     use super::*;
 
-    /// The located failure names the free dof of largest |R| (held dofs have
-    /// no free index and are skipped) with its node's position and component.
     /// 2 × 1 cells of 0.5 m from (1, 2) (nodes 0–2 on y = 2, 3–5 on
     /// y = 2.5) with node 1's x (dof 2) and node 4's y (dof 9) held, the
     /// other dofs free in dof order (10 free).
@@ -854,6 +849,8 @@ mod tests {
         (grid, DofMap { index, n_free })
     }
 
+    /// The located failure names the free dof of largest |R| (held dofs have
+    /// no free index and are skipped) with its node's position and component.
     #[test]
     fn the_largest_free_residual_is_located_at_its_node() {
         let (grid, dofs) = two_cells();
