@@ -193,28 +193,40 @@ impl fmt::Display for NewtonFailure {
     }
 }
 
-/// Where an iterate's equilibrium fails most: the largest free component of
-/// the residual R (theory D16) and its node.
+/// A grid dof named for a user: its component at its node.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct LargestResidual {
-    /// R at that dof, kN/m.
-    pub value: f64,
+pub struct DofPlace {
     /// 0: x, 1: y.
     pub component: usize,
     /// The node's position, m.
     pub node: [f64; 2],
 }
 
-impl fmt::Display for LargestResidual {
+impl fmt::Display for DofPlace {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(
             f,
-            "largest residual {:.3e} kN/m in {} at the node ({:.4}, {:.4}) m",
-            self.value,
+            "in {} at the node ({:.4}, {:.4}) m",
             ["x", "y"][self.component.min(1)],
             self.node[0],
             self.node[1]
         )
+    }
+}
+
+/// Where an iterate's equilibrium fails most: the largest free component of
+/// the residual R (theory D16) and its place.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LargestResidual {
+    /// R at that dof, kN/m.
+    pub value: f64,
+    /// The dof.
+    pub place: DofPlace,
+}
+
+impl fmt::Display for LargestResidual {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "largest residual {:.3e} kN/m {}", self.value, self.place)
     }
 }
 

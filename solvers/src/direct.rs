@@ -556,8 +556,8 @@ impl DirectSolver {
                 *xi -= pi;
             }
             // the deviation x − p is largest at `unknown` (or first not finite there)
-            let unknown = crate::norms::largest_entry(&x).unwrap_or(0);
-            let err = x.get(unknown).map_or(0.0, |d| d.abs() / 2.0);
+            let unknown = crate::norms::largest_entry(&x);
+            let err = unknown.map_or(0.0, |u| x[u].abs() / 2.0);
             self.stats.last_probe_error = Some(err);
             self.stats.probe_seconds += t.elapsed().as_secs_f64();
             if err.is_nan() || err > self.options.probe_tol {
@@ -567,7 +567,7 @@ impl DirectSolver {
                         "probe solve K x = K p has relative error {err:.3e} > {:.1e}",
                         self.options.probe_tol
                     ),
-                    unknown: (n > 0).then_some(unknown),
+                    unknown,
                 });
             }
         }

@@ -18,7 +18,7 @@ use super::{
 use crate::bc::{DofConstraint, TravelDerivatives};
 use crate::constitutive::ConstitutiveError;
 use crate::dofs::{gather_free_into, DofMap};
-use crate::error::{LargestResidual, NewtonFailure, StepError};
+use crate::error::{DofPlace, LargestResidual, NewtonFailure, StepError};
 use crate::friction::ContactState;
 use crate::grid::Grid;
 use crate::model::Model;
@@ -783,9 +783,16 @@ fn largest_residual(dofs: &DofMap, grid: &Grid, free_residual: &[f64]) -> Option
     }
     largest.map(|(d, value)| LargestResidual {
         value,
+        place: dof_place(grid, d),
+    })
+}
+
+/// Grid dof `d` (node d / 2, component d % 2) as a place.
+fn dof_place(grid: &Grid, d: usize) -> DofPlace {
+    DofPlace {
         component: d % 2,
         node: grid.node_position(d / 2),
-    })
+    }
 }
 
 /// A singular tangent's error with the place its test failed most (the
@@ -802,13 +809,7 @@ pub(super) fn singular_placed(e: StepError, dofs: &DofMap, grid: &Grid) -> StepE
         return e;
     };
     let place = match dofs.index.iter().position(|&i| i as usize == unknown) {
-        Some(d) => {
-            let [x, y] = grid.node_position(d / 2);
-            let component = ["x", "y"][d % 2];
-            Some(format!(
-                "most in {component} at the node ({x:.4}, {y:.4}) m"
-            ))
-        }
+        Some(d) => Some(format!("most {}", dof_place(grid, d))),
         None => (unknown == dofs.n_free).then(|| "most in the travel (path following)".into()),
     };
     StepError::Solver(SolverError::Singular {
@@ -858,8 +859,8 @@ mod tests {
         let free_residual = [1.0, -2.0, 3.0, 0.5, 4.0, 6.0, -7.0, 2.0, 1.0, 0.0];
         let largest = largest_residual(&dofs, &grid, &free_residual).expect("free dofs");
         assert_eq!(largest.value, -7.0);
-        assert_eq!(largest.component, 1);
-        assert_eq!(largest.node, [1.0, 2.5]);
+        assert_eq!(largest.place.component, 1);
+        assert_eq!(largest.place.node, [1.0, 2.5]);
         let failure = NewtonError::failed(NewtonFailure::Diverged, &[1.0, 2.0])
             .located(&dofs, &grid, &free_residual)
             .into_step_error(3);
