@@ -291,6 +291,15 @@ pub enum StepError {
         /// Halvings tried.
         cuts: usize,
     },
+    /// A stress update or linear solve (`source`) that failed again at the
+    /// last of the allowed step halvings.
+    #[error("{source} (after {halvings} step halvings)")]
+    Halved {
+        /// Number of halvings tried.
+        halvings: usize,
+        /// The failure of the last attempt.
+        source: Box<StepError>,
+    },
     /// The stress update failed at a material point.
     #[error("stress update failed at material point {particle}: {source}")]
     Constitutive {
@@ -395,6 +404,7 @@ impl Identified for StepError {
             StepError::ParticleLeftGrid { .. } => ErrorId::RunPointLeftGrid,
             StepError::BoundaryPointLeftGrid { .. } => ErrorId::RunBoundaryPointLeftGrid,
             StepError::NewtonFailed { .. } => ErrorId::RunNewtonFailed,
+            StepError::Halved { source, .. } => source.error_id(),
             StepError::PathBudget { .. } => ErrorId::RunPathBudget,
             StepError::PathJump { .. } => ErrorId::RunPathLost,
             StepError::Constitutive { .. } => ErrorId::RunStressUpdate,

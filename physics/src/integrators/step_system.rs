@@ -285,11 +285,23 @@ impl NewtonError {
                 largest,
             },
             NewtonError::Constitutive(particle, source) => {
-                StepError::Constitutive { particle, source }
+                halved(StepError::Constitutive { particle, source }, halvings)
             }
-            NewtonError::Solver(e) => StepError::Solver(e),
+            NewtonError::Solver(e) => halved(StepError::Solver(e), halvings),
             NewtonError::Fatal(e) => e,
         }
+    }
+}
+
+/// `error` as the last attempt's failure after `halvings` halvings (itself
+/// where none was tried).
+fn halved(error: StepError, halvings: usize) -> StepError {
+    match halvings {
+        0 => error,
+        _ => StepError::Halved {
+            halvings,
+            source: Box::new(error),
+        },
     }
 }
 
@@ -832,6 +844,8 @@ fn zeroed(values: &mut Vec<[f64; 2]>, n: usize) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::constitutive::ConstitutiveError;
+    use crate::error_id::{ErrorId, Identified};
 
     /// 2 × 1 cells of 0.5 m from (1, 2) (nodes 0–2 on y = 2, 3–5 on
     /// y = 2.5) with node 1's x (dof 2) and node 4's y (dof 9) held, the
@@ -877,6 +891,32 @@ mod tests {
         };
         let failure = NewtonError::failed(motion, &[1.0]).located(&dofs, &grid, &free_residual);
         assert!(matches!(failure, NewtonError::Failed { largest: None, .. }));
+    }
+
+    /// A linear solve or stress update that failed at the last halving says
+    /// how many halvings were tried and keeps its own identifier; without a
+    /// halving its message is unchanged.
+    #[test]
+    fn a_failure_after_halvings_says_how_many() {
+        let singular = || {
+            NewtonError::Solver(SolverError::Singular {
+                factor: mpm_solvers::FactorKind::Lu,
+                detail: "probe".into(),
+                unknown: None,
+            })
+        };
+        let alone = singular().into_step_error(0);
+        let halved = singular().into_step_error(8);
+        assert!(halved.to_string().starts_with(&alone.to_string()));
+        assert!(halved.to_string().ends_with("(after 8 step halvings)"));
+        assert_eq!(halved.error_id(), alone.error_id());
+        let stress = NewtonError::Constitutive(3, ConstitutiveError::NonFinite("σ".into()));
+        let stress = stress.into_step_error(2);
+        assert!(
+            stress.to_string().ends_with("(after 2 step halvings)"),
+            "{stress}"
+        );
+        assert_eq!(stress.error_id(), ErrorId::RunStressUpdate);
     }
 
     /// A singular tangent's unknown is named as its node and component
