@@ -237,6 +237,13 @@ fn located(largest: &Option<Box<LargestResidual>>) -> String {
         .map_or_else(String::new, |l| format!("; {l}"))
 }
 
+/// ‖R‖ per iteration as `[5.574e0, 4.716e0, …]`: four significant digits,
+/// enough to see how the iteration went.
+fn residual_norms(history: &[f64]) -> String {
+    let norms: Vec<String> = history.iter().map(|r| format!("{r:.3e}")).collect();
+    format!("[{}]", norms.join(", "))
+}
+
 /// Why a step failed.
 #[derive(Debug, thiserror::Error)]
 pub enum StepError {
@@ -259,7 +266,7 @@ pub enum StepError {
         position: [f64; 2],
     },
     /// Newton–Raphson failed even after the allowed step halvings.
-    #[error("Newton did not converge after {halvings} step halvings: {cause}{}; residual history {history:?}", located(.largest))]
+    #[error("Newton did not converge after {halvings} step halvings: {cause}{}; residual history {} kN/m", located(.largest), residual_norms(.history))]
     NewtonFailed {
         /// Number of halvings tried.
         halvings: usize,

@@ -865,7 +865,8 @@ mod tests {
     }
 
     /// The located failure names the free dof of largest |R| (held dofs have
-    /// no free index and are skipped) with its node's position and component.
+    /// no free index and are skipped) with its node's position and component,
+    /// and gives the residual history to four digits.
     #[test]
     fn the_largest_free_residual_is_located_at_its_node() {
         let (grid, dofs) = two_cells();
@@ -881,6 +882,10 @@ mod tests {
         let message = failure.to_string();
         assert!(
             message.contains("-7.000e0 kN/m in y at the node (1.0000, 2.5000) m"),
+            "{message}"
+        );
+        assert!(
+            message.ends_with("residual history [1.000e0, 2.000e0] kN/m"),
             "{message}"
         );
         // a motion failure keeps its own place (the point), not a residual's
