@@ -4,7 +4,7 @@
 //! runs.
 
 use std::path::Path;
-use std::time::Instant;
+use std::time::Duration;
 
 use crate::checkpoint::{io_error, Checkpointer, Resumable, ResumeOptions};
 use crate::run::{OutputObserver, RunOutcome};
@@ -21,7 +21,6 @@ impl Resumable {
         show_progress: bool,
         options: &ResumeOptions,
     ) -> Result<RunOutcome, Box<dyn std::error::Error + Send + Sync>> {
-        let start = Instant::now();
         let Self {
             _lock,
             dir,
@@ -32,18 +31,23 @@ impl Resumable {
             curve,
             earlier,
             mut manifest,
+            opened,
         } = self;
         let left_behind = manifest.temporary_prefixes.clone();
         manifest.add_own_temporary_prefix();
         for name in &options.extra_files {
             manifest.add(name);
         }
+        // the run's wall time goes on from the checkpoint's
+        let before = Duration::try_from_secs_f64(state.wall_seconds).unwrap_or_default();
+        let start = opened.checked_sub(before).unwrap_or(opened);
         let cursor = state.restore(&mut simulation);
         let checkpoints = Checkpointer {
             dir: dir.clone(),
             every: options.checkpoint_every.unwrap_or(every),
             fingerprint: source.fingerprint(),
             curve,
+            run_start: start,
         };
         let stop_after = options.stop_after;
         let lines = crate::run::progress_lines_every(show_progress, options.progress_every);

@@ -558,7 +558,7 @@ pub fn run_scene_with(
     drive(sim, out, drive_options, move |sim, manifest| {
         let checkpoints = match &options.checkpoint {
             Some((source, every)) => Some(
-                Checkpointer::start(out, source, *every)
+                Checkpointer::start(out, source, *every, start)
                     .map_err(|e| e.at(sim.model.state.step, sim.model.state.time))?,
             ),
             None => None,

@@ -198,6 +198,31 @@ fn assert_resume_is_seamless(
         want["solver"]["usage"], got["solver"]["usage"],
         "run.json solver usage"
     );
+    // the stage profile covers every process: the same calls of each stage
+    // of the steps (each process builds the model, the resume writes its
+    // snapshots again), and a wall time that holds every stage's seconds
+    let calls = |run: &serde_json::Value| -> BTreeMap<String, u64> {
+        let rows = run["profile"].as_array().unwrap();
+        rows.iter()
+            .map(|row| {
+                (
+                    row["stage"].as_str().unwrap().to_string(),
+                    row["calls"].as_u64().unwrap(),
+                )
+            })
+            .filter(|(stage, _)| !["build", "output", "other"].contains(&stage.as_str()))
+            .collect()
+    };
+    assert_eq!(calls(&want), calls(&got), "run.json profile calls");
+    let staged: f64 = got["profile"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|row| row["stage"] != "other")
+        .map(|row| row["seconds"].as_f64().unwrap())
+        .sum();
+    let wall = got["wall_seconds"].as_f64().unwrap();
+    assert!(staged <= wall, "stages {staged} s > wall {wall} s");
 }
 
 /// The explicit twin of the nonlocal vertical cut, to t = 0.2 s, as a scene file in `dir`.
@@ -347,8 +372,10 @@ fn a_checkpoint_written_on_request_at_any_step_resumes_identically() {
 
     let overrides: Vec<String> = overrides.iter().map(|s| s.to_string()).collect();
     let source = SceneSource::read(&scene, &overrides).unwrap();
+    let started = std::time::Instant::now();
     let mut sim = Simulation::new(source.scene().unwrap()).unwrap();
-    let checkpoints = Checkpointer::start(&stopped, &source, 0).unwrap_or_else(|e| panic!("{e}"));
+    let checkpoints =
+        Checkpointer::start(&stopped, &source, 0, started).unwrap_or_else(|e| panic!("{e}"));
     let mut observer = OutputObserver::new(&stopped, &sim, false, Manifest::new())
         .unwrap()
         .with_checkpoints(Some(checkpoints), Some(47));

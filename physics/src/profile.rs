@@ -274,6 +274,20 @@ impl Profile {
         format!("work: {}", counts.join(", "))
     }
 
+    /// Calls and seconds of every stage so far, in [`Stage::ALL`] order.
+    pub fn stage_entries(&self) -> Vec<(u64, f64)> {
+        self.entries.iter().map(Cell::get).collect()
+    }
+
+    /// Add `entries` (calls and seconds per stage, in [`Stage::ALL`] order:
+    /// an earlier process's share of a resumed run) to the stages.
+    pub fn add_stage_entries(&self, entries: &[(u64, f64)]) {
+        for (cell, &(calls, seconds)) in self.entries.iter().zip(entries) {
+            let (n, s) = cell.get();
+            cell.set((n + calls, s + seconds));
+        }
+    }
+
     /// Seconds charged to `stage` so far.
     pub fn seconds(&self, stage: Stage) -> f64 {
         self.entries[stage as usize].get().1

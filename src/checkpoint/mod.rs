@@ -8,7 +8,8 @@
 //! - `checkpoint.bin`: the state after the last checkpointed step ([`SavedState`]:
 //!   every material-point variable, boundary devices, time, step, energies,
 //!   removed points, integrator counters, the monitors' points, the work
-//!   counters, and the output cursors), replaced atomically (a temporary
+//!   counters, the stage profile and wall time so far, and the output
+//!   cursors), replaced atomically (a temporary
 //!   file in the same directory, renamed over it) so a kill leaves the
 //!   previous one or the new one, whole.
 //!
@@ -36,6 +37,7 @@ mod state;
 
 use std::io::{Read, Seek, Write};
 use std::path::{Path, PathBuf};
+use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
 
@@ -50,7 +52,7 @@ use bincode::Options;
 use codec::fnv1a64;
 
 /// Version of the checkpoint layout this build writes and reads.
-pub const FORMAT_VERSION: u32 = 6;
+pub const FORMAT_VERSION: u32 = 7;
 /// First bytes of every checkpoint.
 pub const MAGIC: [u8; 8] = *b"MPMGEOCK";
 /// The checkpoint file in a run directory.
@@ -405,13 +407,21 @@ pub struct Checkpointer {
     pub(crate) every: usize,
     pub(crate) fingerprint: u64,
     pub(crate) curve: CurveTracker,
+    /// When the run began (for a resumed run: moved back by the wall time
+    /// its checkpoint carried), for the wall time a checkpoint records.
+    pub(crate) run_start: Instant,
 }
 
 impl Checkpointer {
     /// Checkpoints every `every` steps into `dir` (a new run; `every = 0`:
     /// only when asked): creates `dir`, writes the scene source there and
     /// removes a checkpoint an earlier run left.
-    pub fn start(dir: &Path, source: &SceneSource, every: usize) -> Result<Self, CheckpointError> {
+    pub fn start(
+        dir: &Path,
+        source: &SceneSource,
+        every: usize,
+        run_start: Instant,
+    ) -> Result<Self, CheckpointError> {
         let record = SourceRecord {
             format_version: FORMAT_VERSION,
             checkpoint_every: every,
@@ -433,6 +443,7 @@ impl Checkpointer {
                 bytes: 0,
                 crc: crc32fast::Hasher::new(),
             },
+            run_start,
         })
     }
 
@@ -453,7 +464,8 @@ impl Checkpointer {
         self.curve.advance(&self.dir.join("curve.csv"), None)?;
         cursor.curve_bytes = self.curve.bytes;
         cursor.curve_checksum = self.curve.crc.clone().finalize();
-        let bytes = encode(self.fingerprint, &SavedState::of(sim, cursor));
+        let wall_seconds = self.run_start.elapsed().as_secs_f64();
+        let bytes = encode(self.fingerprint, &SavedState::of(sim, cursor, wall_seconds));
         write_atomically(&self.dir.join(CHECKPOINT_FILE), &bytes)
     }
 }
@@ -486,6 +498,9 @@ pub struct Resumable {
     pub(crate) earlier: Option<Vec<u8>>,
     /// The run's files as its `run.json` records them.
     pub(crate) manifest: Manifest,
+    /// When this process began to build the run again (its wall time
+    /// goes on from there).
+    pub(crate) opened: Instant,
 }
 
 impl Resumable {
@@ -541,6 +556,7 @@ impl Resumable {
             source,
         };
         let scene = source.scene().map_err(scene_error)?;
+        let opened = Instant::now();
         let simulation = Simulation::new(scene).map_err(scene_error)?;
         state
             .check_fits(&simulation)
@@ -581,6 +597,7 @@ impl Resumable {
             curve,
             earlier,
             manifest,
+            opened,
         })
     }
 

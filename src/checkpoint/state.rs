@@ -1,7 +1,7 @@
 //! What a checkpoint holds: every piece of a run's state that a step changes
 //! (the model's material points, boundary devices, time, step, energies and
 //! removed points; the integrator's counters; the monitors' points; the work
-//! counters) and the output cursors, and how it is put back into a freshly
+//! counters; the stage profile and the wall time so far) and the output cursors, and how it is put back into a freshly
 //! built [`Simulation`] of the same scene.
 //!
 //! What a fresh build of the scene gives again is not stored: the grid, the
@@ -14,7 +14,7 @@
 use crate::integrators::{Integrator, SolverUsage};
 use crate::model::State;
 use crate::output::OutputCursor;
-use crate::profile::Work;
+use crate::profile::{Stage, Work};
 use crate::simulation::Simulation;
 
 /// The state of a run after a completed step, as stored in a checkpoint:
@@ -32,6 +32,12 @@ pub struct SavedState {
     pub monitor_points: Vec<Option<usize>>,
     /// Work counters, in [`Work::ALL`] order.
     pub work: Vec<u64>,
+    /// Calls and seconds per stage up to the checkpoint, in [`Stage::ALL`]
+    /// order, the earlier processes' included.
+    pub stages: Vec<(u64, f64)>,
+    /// Wall time of the run up to the checkpoint, s, the earlier processes'
+    /// included (each up to its last checkpoint).
+    pub wall_seconds: f64,
     /// Where the outputs stood.
     pub cursor: OutputCursor,
 }
@@ -41,8 +47,9 @@ pub struct SavedState {
 pub struct Misfit(pub String);
 
 impl SavedState {
-    /// The state of `sim` now, with the output cursor `cursor`.
-    pub fn of(sim: &Simulation, cursor: OutputCursor) -> Self {
+    /// The state of `sim` now, `wall_seconds` into the run, with the output
+    /// cursor `cursor`.
+    pub fn of(sim: &Simulation, cursor: OutputCursor, wall_seconds: f64) -> Self {
         let model = &sim.model;
         let last_residuals = sim
             .integrator
@@ -57,6 +64,8 @@ impl SavedState {
                 .iter()
                 .map(|&w| sim.profile.work_count(w))
                 .collect(),
+            stages: sim.profile.stage_entries(),
+            wall_seconds,
             cursor,
         }
     }
@@ -156,6 +165,9 @@ impl SavedState {
         if self.work.len() != Work::ALL.len() {
             return misfit(format!("{} work counters", self.work.len()));
         }
+        if self.stages.len() != Stage::ALL.len() {
+            return misfit(format!("{} profile stages", self.stages.len()));
+        }
         Ok(())
     }
 
@@ -186,6 +198,9 @@ impl SavedState {
             let now = sim.profile.work_count(work);
             sim.profile.count(work, saved.saturating_sub(now));
         }
+        // the stages' time is added: this process's build and set-up took
+        // time again, and the run's profile covers every process
+        sim.profile.add_stage_entries(&self.stages);
         self.cursor
     }
 }
