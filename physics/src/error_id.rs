@@ -112,7 +112,7 @@ error_ids! {
         "a path-following step jumped off its path (far longer than predicted) at every allowed halving";
         "more halvings (`solver.max_halvings`) or smaller nominal steps (`scene.dt`)";
     RunStressUpdate => "RUN_STRESS_UPDATE":
-        "the stress update (return mapping) failed at a material point";
+        "the stress update (return mapping) failed at a material point (\"after N step halvings\" where the halved steps failed too)";
         "use smaller steps; check the material parameters near the named point";
     RunNonFinite => "RUN_NON_FINITE":
         "a NaN or infinite value appeared in a point, node or monitor (named, with the step)";
@@ -121,8 +121,8 @@ error_ids! {
         "the explicit time step is not finite or is above the stability limit";
         "lower `solver.cfl` or `scene.dt`";
     RunLinearSolver => "RUN_LINEAR_SOLVER":
-        "the linear solver failed (a singular tangent: a body not held, a mechanism; the node where it is most singular is named)";
-        "fix the boundary conditions so that every body is held; see `solver.linear_solver`";
+        "the linear solver failed (a singular tangent: a body not held, a mechanism; the node where it is most singular is named, and \"after N step halvings\" where the halved steps failed too)";
+        "fix the boundary conditions so that every body is held; see `solver.linear_solver`. Past the peak of a quasi-static or path-following run the softened and heaved soil can make it singular (docs/theory.md §3.7): run the scene implicit dynamic";
     RunNonlocal => "RUN_NONLOCAL":
         "the nonlocal averaging failed (a non-finite position or volume)";
         "as RUN_NON_FINITE: reduce the step";
