@@ -1,8 +1,9 @@
 //! What a checkpoint holds: every piece of a run's state that a step changes
 //! (the model's material points, boundary devices, time, step, energies and
 //! removed points; the integrator's counters; the monitors' points; the work
-//! counters; the stage profile and the wall time so far) and the output cursors, and how it is put back into a freshly
-//! built [`Simulation`] of the same scene.
+//! counters; the stage profile and the wall time so far) and the output
+//! cursors, and how it is put back into a freshly built [`Simulation`] of the
+//! same scene.
 //!
 //! What a fresh build of the scene gives again is not stored: the grid, the
 //! materials, the Dirichlet conditions, the settings
@@ -198,8 +199,8 @@ impl SavedState {
             let now = sim.profile.work_count(work);
             sim.profile.count(work, saved.saturating_sub(now));
         }
-        // the stages' time is added: this process's build and set-up took
-        // time again, and the run's profile covers every process
+        // added to, not in place of, this process's own build: the run's
+        // profile covers every process
         sim.profile.add_stage_entries(&self.stages);
         self.cursor
     }
