@@ -3,7 +3,9 @@
 //! validation/studies/linear_solvers.toml and `mpm-solvers bench`).
 //!
 //! 1. An exported system read back equals the assembled one bit for bit and
-//!    the scene's solver reproduces the exported solution to 1e-12.
+//!    the scene's solver reproduces the exported solution to 1e-12; a system
+//!    the solver fails on is exported too, with the solver's error and no
+//!    solution, and fails again when read back.
 //! 2. Every solver agrees with faer LU to 1e-8 (PCG to its tolerance) on the
 //!    exported systems of an elastic scene (platen) and a softening one (coarse
 //!    biaxial, LU variants), and the runs' curve.csv agree to the Newton
@@ -114,6 +116,55 @@ fn exported_system_round_trips_and_resolves() {
         let d = relative_difference(&x, s.x.as_ref().unwrap());
         assert!(d <= 1e-12, "{}: {d:e}", s.name);
     }
+}
+
+/// A quasi-static body held in y alone has no stiffness against a
+/// translation in x (the background stiffness D19, cell by cell, leaves rigid
+/// motions free): the solve fails, and the failing systems are the ones a
+/// user needs to see why. Each is written with the solver's error in place of
+/// the correction, and the same solver fails on it again when it is read back.
+#[test]
+fn a_system_the_solver_fails_on_is_exported_with_its_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let overrides = [
+        "bc.fixed=[{ line = \"y=0\", dofs = [\"y\"] }]",
+        "bc.rigid=[]",
+        "monitor=[]",
+        "output.systems=[1, 2]",
+    ];
+    let scene = common::scene("elastic/platen.toml", &overrides);
+    let options = scene.solver.linear_options();
+    let outcome = run_scene(scene, dir.path(), false).unwrap();
+    let error = outcome.error.expect("a body free in x cannot be solved");
+    assert!(error.to_string().contains("singular"), "{error}");
+    let systems = list_systems(&dir.path().join("systems")).unwrap();
+    let (mut solved, mut failed) = (0, 0);
+    for json in &systems {
+        let s = read_system(json).unwrap();
+        let refusal = s.meta["solver_error"].as_str();
+        let mut solver = LinearSolver::new(options).unwrap();
+        let mut x = s.rhs.clone();
+        let again = solver
+            .factorize(&s.k, s.meta["symmetric"].as_bool().unwrap())
+            .and_then(|_| solver.solve_in_place(&mut x));
+        match refusal {
+            Some(message) => {
+                failed += 1;
+                assert!(s.x.is_none(), "{}: a failed solve has no solution", s.name);
+                assert!(message.contains("singular"), "{}: {message}", s.name);
+                assert_eq!(s.meta["linear_solver"], serde_json::Value::Null);
+                assert!(again.is_err(), "{}: solved when read back", s.name);
+            }
+            None => {
+                solved += 1;
+                assert!(again.is_ok() && s.x.is_some(), "{}", s.name);
+            }
+        }
+    }
+    assert!(
+        solved >= 1 && failed >= 1,
+        "{solved} solved, {failed} failed"
+    );
 }
 
 #[test]

@@ -122,7 +122,7 @@ error_ids! {
         "lower `solver.cfl` or `scene.dt`";
     RunLinearSolver => "RUN_LINEAR_SOLVER":
         "the linear solver failed (a singular tangent: a body not held, a mechanism; the node where it is most singular is named, and \"after N step halvings\" where the halved steps failed too)";
-        "fix the boundary conditions so that every body is held; see `solver.linear_solver`. Past the peak of a quasi-static or path-following run the softened and heaved soil can make it singular (docs/theory.md §3.7): run the scene implicit dynamic";
+        "fix the boundary conditions so that every body is held; see `solver.linear_solver`; `--set 'output.systems=[N]'` writes the systems of step N, the failing one included. Past the peak of a quasi-static or path-following run the softened and heaved soil can make it singular (a cell of heaved soil held by one node turns freely, docs/theory.md §3.7): run the scene implicit dynamic";
     RunNonlocal => "RUN_NONLOCAL":
         "the nonlocal averaging failed (a non-finite position or volume)";
         "as RUN_NON_FINITE: reduce the step";

@@ -2,7 +2,8 @@
 //! the chosen steps (tangent K, residual R, correction δu with K δu = R)
 //! written to `<out>/systems/` in Matrix Market format, with a JSON
 //! description (scene, step, iteration, dof map, the solver's time and
-//! work for it). Systems whose files would exceed `systems_max_mb` are
+//! work for it). A system the solver fails on is written too, with the
+//! solver's error in place of the correction. Systems whose files would exceed `systems_max_mb` are
 //! skipped with a warning (recorded in `run.json`).
 
 use std::path::PathBuf;
@@ -57,17 +58,17 @@ impl SystemExport {
     }
 
     /// Writes the system of this iteration if its step was asked for.
-    #[allow(clippy::too_many_arguments)]
+    /// Write the system `(k, rhs)` of the current Newton iteration if its
+    /// step is exported: with its correction and the solver that gave it,
+    /// or with the solver's error where the solve failed (no correction).
+    /// `solver` is the solver's counters before and after the solve.
     pub fn record(
         &mut self,
         system: &StepSystem,
-        k: &SparseMatrix,
-        rhs: &[f64],
-        x: &[f64],
+        (k, rhs): (&SparseMatrix, &[f64]),
+        outcome: Result<(&[f64], Used), String>,
         symmetric: bool,
-        used: Used,
-        before: &SolverStats,
-        after: &SolverStats,
+        (before, after): (&SolverStats, &SolverStats),
     ) {
         let iteration = self.iteration;
         self.iteration += 1;
@@ -102,7 +103,8 @@ impl SystemExport {
             "t": system.t,
             "dt": system.dt,
             "symmetric": symmetric,
-            "linear_solver": format!("{used:?}"),
+            "linear_solver": outcome.as_ref().map(|(_, used)| format!("{used:?}")).ok(),
+            "solver_error": outcome.as_ref().err(),
             "solver_seconds": {
                 "symbolic": after.symbolic_seconds - before.symbolic_seconds,
                 "numeric": after.numeric_seconds - before.numeric_seconds,
@@ -111,11 +113,11 @@ impl SystemExport {
             },
             "factor_nnz": after.factor_nnz,
             "pcg_iterations": after.pcg_iterations - before.pcg_iterations,
-            "equation": "K x = rhs: K the tangent, rhs the residual R at the free dofs, x the Newton correction",
-            "dof_map": "dofs[i] = [grid node, component (0 = x, 1 = y)] of unknown i",
+            "equation": "K x = rhs: K the tangent, rhs the residual R at the free dofs, x the Newton correction (absent where the solve failed); under path following the last unknown is the travel, and the last row the constraint (theory PF4)",
+            "dof_map": "dofs[i] = [grid node, component (0 = x, 1 = y)] of unknown i (the free dofs; the travel's unknown follows them)",
             "dofs": dofs,
         });
-        match mm::write_system(&self.dir, &stem, k, rhs, Some(x), meta) {
+        match mm::write_system(&self.dir, &stem, k, rhs, outcome.ok().map(|(x, _)| x), meta) {
             Ok(_) => self.written += 1,
             Err(e) => self
                 .warnings

@@ -5,7 +5,9 @@
 
 use rayon::prelude::*;
 
-use mpm_solvers::{Assembler, FactorKind, LinearSolver, SolverStats, SparseMatrix, Used};
+use mpm_solvers::{
+    Assembler, FactorKind, LinearSolver, SolverError, SolverStats, SparseMatrix, Used,
+};
 
 use super::export::SystemExport;
 use super::step_system::StepSystem;
@@ -216,7 +218,8 @@ impl Tangent {
     }
 
     /// Factorise the assembled `matrix` (Cholesky allowed where
-    /// `symmetric`) and solve for the correction ([`Self::solve`]).
+    /// `symmetric`) and solve for the correction ([`Self::solve`]). An
+    /// exported step's system is written whether or not the solve succeeds.
     fn factorise_and_solve(
         &mut self,
         system: &StepSystem,
@@ -227,18 +230,17 @@ impl Tangent {
         profile: &Profile,
     ) -> Result<Vec<f64>, StepError> {
         let before = self.solver.stats();
-        let kind = profile.time(Stage::Factorisation, || {
-            self.solver.factorize(matrix, symmetric)
-        });
-        let factorised = self.solver.stats();
-        count_factorisations(&before, &factorised, profile);
-        kind?;
+        let solved = self.factorise_then_solve(matrix, residual, symmetric, profile);
+        if let Some(export) = self.export.as_mut() {
+            let outcome = match &solved {
+                Ok((correction, used)) => Ok((&correction[..], *used)),
+                Err(e) => Err(e.to_string()),
+            };
+            let solver = (&before, &self.solver.stats());
+            export.record(system, (matrix, residual), outcome, symmetric, solver);
+        }
+        let (correction, used) = solved?;
         usage.max_unknowns = usage.max_unknowns.max(matrix.n());
-        let mut correction = residual.to_vec();
-        let used = profile.time(Stage::Solve, || self.solver.solve_in_place(&mut correction));
-        // `lu_reuse` factorises in the solve when GMRES gives up
-        count_factorisations(&factorised, &self.solver.stats(), profile);
-        let used = used?;
         // the multifrontal factorisation counts as the kind of its fronts
         let multifrontal_kind = self.solver.stats().last_factor;
         match used {
@@ -250,20 +252,30 @@ impl Tangent {
             Used::Pcg => usage.pcg += 1,
             Used::Ldl => usage.ldl += 1,
         }
-        if let Some(export) = self.export.as_mut() {
-            let after = self.solver.stats();
-            export.record(
-                system,
-                matrix,
-                residual,
-                &correction,
-                symmetric,
-                used,
-                &before,
-                &after,
-            );
-        }
         Ok(correction)
+    }
+
+    /// The factorisation and solve of [`Self::factorise_and_solve`], timed
+    /// and counted: the correction and the solver that gave it.
+    fn factorise_then_solve(
+        &mut self,
+        matrix: &SparseMatrix,
+        residual: &[f64],
+        symmetric: bool,
+        profile: &Profile,
+    ) -> Result<(Vec<f64>, Used), SolverError> {
+        let before = self.solver.stats();
+        let kind = profile.time(Stage::Factorisation, || {
+            self.solver.factorize(matrix, symmetric)
+        });
+        let factorised = self.solver.stats();
+        count_factorisations(&before, &factorised, profile);
+        kind?;
+        let mut correction = residual.to_vec();
+        let used = profile.time(Stage::Solve, || self.solver.solve_in_place(&mut correction));
+        // `lu_reuse` factorises in the solve when GMRES gives up
+        count_factorisations(&factorised, &self.solver.stats(), profile);
+        Ok((correction, used?))
     }
 
     /// The pattern of this step's elements: the previous one while every
