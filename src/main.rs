@@ -108,8 +108,9 @@ enum Command {
         campaign: CampaignArgs,
     },
     /// The whole paper: the biaxial, footing and vertical-cut campaigns (the
-    /// cut in both readings of its failure time) one after the other into
-    /// OUT/campaign-<name>/, and OUT/README.md putting
+    /// cut in both readings of its failure time), their runs from one queue
+    /// (--jobs at a time, a campaign's runs starting while the one before
+    /// finishes), into OUT/campaign-<name>/, and OUT/README.md putting
     /// each report beside the paper's figures and claim. Resumes like a
     /// campaign (finished runs are not run again). Measured at full size on
     /// 2 cores: hours (2026-11-28, a 2-core AMD EPYC VM: the biaxial campaign

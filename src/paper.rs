@@ -4,14 +4,20 @@
 //! directories of those names under the root (`validation/` by default), run one after the other, each
 //! into its own folder of the output (`campaign-<name>/`, as `mpm-geo
 //! campaign` writes it), and `README.md` there puts every campaign's report
-//! beside the paper's figures and the claim they test. Like a campaign it
-//! resumes (a finished run is not run again) and shards (`--shard K/N`
-//! shards every campaign; `--collect` then builds the reports and the index).
+//! beside the paper's figures and the claim they test. The campaigns share
+//! one queue of runs, `--jobs` at a time, in the paper's order and the
+//! longest of each campaign first: a campaign's runs start as soon as a job
+//! is free, without waiting for the last run of the one before. Like a
+//! campaign it resumes (a finished run is not run again) and shards
+//! (`--shard K/N` shards every campaign; `--collect` then builds the reports
+//! and the index).
 
 use std::path::Path;
 use std::time::Instant;
 
-use crate::campaign::{run_campaign, CampaignError, CampaignOptions, Part};
+use crate::campaign::{
+    finish_campaign, plan_campaign, run_queued, CampaignError, CampaignOptions, CampaignPlan, Part,
+};
 
 /// One benchmark of the paper: its campaign directory and what it tests.
 #[derive(Clone, Copy, Debug)]
@@ -57,24 +63,27 @@ pub struct PaperOutcome {
     pub runs: usize,
     /// Runs that stopped early.
     pub stopped: usize,
-    /// Wall time of the campaign in this command, s.
+    /// Time from the command's start until the campaign's last run in it
+    /// ended (or until it was planned, if it ran none), s.
     pub seconds: f64,
     /// Why the campaign could not run or report (`None`: it did).
     pub error: Option<String>,
 }
 
 /// Run the campaign of every benchmark found under `root` into
-/// `out/campaign-<name>`, then write `out/README.md` (not for a shard). A
-/// campaign that cannot run or report is recorded in its outcome and the
-/// next one runs; an interrupt stops the command at once.
+/// `out/campaign-<name>`, their runs in one queue ([`run_queued`]), then
+/// write each campaign's report and `out/README.md` (not for a shard). A
+/// campaign that cannot be planned, run or reported is recorded in its
+/// outcome and the others go on; an interrupt stops the command at once.
 pub fn run_paper(
     root: &Path,
     out: &Path,
     options: &CampaignOptions,
 ) -> Result<Vec<PaperOutcome>, CampaignError> {
-    let mut outcomes = Vec::new();
+    let start = Instant::now();
+    let mut plans: Vec<CampaignPlan> = Vec::new();
+    let mut planned: Vec<(PaperBenchmark, Result<(), String>, Instant)> = Vec::new();
     for (k, benchmark) in BENCHMARKS.into_iter().enumerate() {
-        // the campaigns' own lines do not say which benchmark they belong to
         eprintln!(
             "paper: {} ({} of {}, the paper's {})",
             benchmark.name,
@@ -82,18 +91,36 @@ pub fn run_paper(
             BENCHMARKS.len(),
             benchmark.figures
         );
-        let start = Instant::now();
-        let dir = root.join(benchmark.name);
-        let result = run_campaign(&dir, &campaign_dir(out, benchmark), options);
-        let (runs, stopped, error) = match result {
-            Err(e @ CampaignError::Interrupted { .. }) => return Err(e),
-            Err(e) => (0, 0, Some(e.to_string())),
-            Ok(runs) => {
-                let stopped = runs.iter().filter(|r| r.error.is_some()).count();
-                (runs.len(), stopped, None)
+        let (dir, out) = (root.join(benchmark.name), campaign_dir(out, benchmark));
+        // the campaigns' runs share the queue, and two have runs of one name
+        let label = out.file_name().map(|n| n.to_string_lossy().into_owned());
+        let label = label.unwrap_or_else(|| benchmark.name.to_string());
+        let plan = plan_campaign(&dir, &out, options, &label);
+        let result = plan.map(|plan| plans.push(plan)).map_err(|e| e.to_string());
+        planned.push((benchmark, result, Instant::now()));
+    }
+    run_queued(&mut plans, options);
+    let mut plans = plans.into_iter();
+    let mut outcomes = Vec::new();
+    for (benchmark, result, planned_at) in planned {
+        let (mut runs, mut stopped, mut ended) = (0, 0, planned_at);
+        let error = match result.map(|()| plans.next()) {
+            Err(e) => Some(e),
+            Ok(None) => Some("no plan: an internal error, please report it".into()),
+            Ok(Some(plan)) => {
+                ended = plan.last_ended().unwrap_or(planned_at);
+                match finish_campaign(plan, options) {
+                    Err(e @ CampaignError::Interrupted { .. }) => return Err(e),
+                    Err(e) => Some(e.to_string()),
+                    Ok(finished) => {
+                        runs = finished.len();
+                        stopped = finished.iter().filter(|r| r.error.is_some()).count();
+                        None
+                    }
+                }
             }
         };
-        let seconds = start.elapsed().as_secs_f64();
+        let seconds = ended.duration_since(start).as_secs_f64();
         eprintln!(
             "paper: {} {} in {seconds:.0} s",
             benchmark.name,
@@ -123,7 +150,7 @@ pub fn campaign_dir(out: &Path, benchmark: PaperBenchmark) -> std::path::PathBuf
 /// The index page: one row per benchmark, its report beside the claim.
 fn index(outcomes: &[PaperOutcome]) -> String {
     let mut text = String::from(
-        "# The paper's benchmarks\n\nWritten by `mpm-geo paper`. Each campaign's `report.md` holds its curves, metrics and figures.\n\n| benchmark | paper | claim tested | runs | stopped early | wall time, s | report |\n|---|---|---|---|---|---|---|\n",
+        "# The paper's benchmarks\n\nWritten by `mpm-geo paper`. Each campaign's `report.md` holds its curves, metrics and figures. The campaigns share the jobs: \"done after\" is the time from the command's start until the campaign's last run ended.\n\n| benchmark | paper | claim tested | runs | stopped early | done after, s | report |\n|---|---|---|---|---|---|---|\n",
     );
     for o in outcomes {
         let b = o.benchmark;

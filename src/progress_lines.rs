@@ -104,7 +104,7 @@ fn share_done(sim: &Simulation) -> f64 {
 /// far times the cost left over the cost done.
 #[derive(Debug)]
 pub struct BatchProgress {
-    label: &'static str,
+    label: String,
     total: usize,
     total_cost: f64,
     done: usize,
@@ -116,7 +116,7 @@ impl BatchProgress {
     /// Announce a batch of runs whose relative costs are `costs` (the runs
     /// to do; `earlier` more were done before and are not run again), with
     /// `jobs` at a time.
-    pub fn start(label: &'static str, costs: &[f64], earlier: usize, jobs: usize) -> Self {
+    pub fn start(label: &str, costs: &[f64], earlier: usize, jobs: usize) -> Self {
         let again = if earlier > 0 {
             format!(" ({earlier} finished earlier)")
         } else {
@@ -127,7 +127,7 @@ impl BatchProgress {
             costs.len()
         );
         Self {
-            label,
+            label: label.to_string(),
             total: costs.len(),
             total_cost: costs.iter().sum(),
             done: 0,

@@ -2,6 +2,8 @@
 //! of the coarsest validation scenes with their campaign specs, 4 steps):
 //! the three campaigns write their reports (each naming every run's scheme),
 //! the index links each beside its figures, and a second command resumes: no finished run is run again.
+//! The campaigns share one queue: with two jobs the footing's run starts
+//! while the biaxial one still runs, and every line names its campaign.
 
 mod common;
 
@@ -26,12 +28,13 @@ fn short_root(dir: &Path) {
     }
 }
 
-/// `mpm-geo paper` from `root` into `out`, 4 steps a run: its exit status
-/// and what it printed to stderr.
-fn paper(root: &Path, out: &Path) -> (std::process::ExitStatus, String) {
+/// `mpm-geo paper` from `root` into `out`, 4 steps a run, `jobs` runs at a
+/// time: its exit status and what it printed to stderr.
+fn paper(root: &Path, out: &Path, jobs: usize) -> (std::process::ExitStatus, String) {
     let output = Command::new(env!("CARGO_BIN_EXE_mpm-geo"))
         .args(["paper", "--from", root.to_str().unwrap(), "--out"])
         .arg(out)
+        .args(["--jobs", &jobs.to_string()])
         .args(["--set", "scene.steps=4", "--set", "output.snapshots=[]"])
         .output()
         .unwrap();
@@ -44,28 +47,34 @@ fn paper_runs_three_campaigns_indexes_them_and_resumes() {
     let dir = tempfile::tempdir().unwrap();
     let (root, out) = (dir.path().join("root"), dir.path().join("out"));
     short_root(&root);
-    let (status, progress) = paper(&root, &out);
+    let (status, progress) = paper(&root, &out, 2);
     assert!(status.success(), "{progress}");
-    // the progress names each benchmark before its campaign's lines, in the
-    // paper's order, and says when it is done
+    // the progress names each benchmark in the paper's order; each
+    // campaign's lines carry its folder's name, and its end follows them
+    let names = ["biaxial", "footing", "vertical_cut", "vertical_cut_late"];
     let mut from = 0;
-    for (k, name) in ["biaxial", "footing", "vertical_cut", "vertical_cut_late"]
-        .iter()
-        .enumerate()
-    {
+    for (k, name) in names.iter().enumerate() {
         let announced = format!("paper: {name} ({} of 4,", k + 1);
         let at = progress[from..]
             .find(&announced)
             .unwrap_or_else(|| panic!("no {announced:?} after byte {from}:\n{progress}"));
         from += at;
-        let campaign = progress[from..]
-            .find("campaign: ")
-            .expect("the campaign's lines");
-        let done = progress[from..]
+        let label = format!("campaign-{name}: ");
+        let last_line = progress.rfind(&label).expect("the campaign's lines");
+        let done = progress
             .find(&format!("paper: {name} done in "))
             .expect("done line");
-        assert!(campaign < done, "{progress}");
+        assert!(last_line < done, "{progress}");
     }
+    // one queue: the second job takes the footing's run while the biaxial
+    // run (the first job's) is still running
+    let footing_started = progress
+        .find("campaign-footing: local_h250 started")
+        .expect("the footing's start");
+    let biaxial_ended = progress
+        .find("campaign-biaxial: local_h300 finished in")
+        .expect("the biaxial run's end");
+    assert!(footing_started < biaxial_ended, "{progress}");
     let index = std::fs::read_to_string(out.join("README.md")).unwrap();
     for (name, figures) in [
         ("biaxial", "Figs. 3–5"),
@@ -112,6 +121,6 @@ fn paper_runs_three_campaigns_indexes_them_and_resumes() {
             .collect()
     };
     let first = written(&out);
-    assert!(paper(&root, &out).0.success());
+    assert!(paper(&root, &out, 1).0.success());
     assert_eq!(written(&out), first, "a finished run was run again");
 }

@@ -31,7 +31,9 @@ pub use history::{
 };
 pub use record::{fingerprint_text, Part, RunRecord, RECORD_FILE};
 pub use report::{compute_metrics, step_convergence, CurveColumns, RunMetrics, StepConvergence};
-pub use run::{run_campaign, CampaignOptions};
+pub use run::{
+    finish_campaign, plan_campaign, run_campaign, run_queued, CampaignOptions, CampaignPlan,
+};
 pub use spec::{Benchmark, CampaignSpec, IntegratorChoice, SPEC_FILE};
 
 use crate::run::FieldSnapshot;

@@ -75,6 +75,66 @@ pub fn run_campaign(
     out: &Path,
     options: &CampaignOptions,
 ) -> Result<Vec<CampaignRun>, CampaignError> {
+    let mut plans = [plan_campaign(dir, out, options, "campaign")?];
+    run_queued(&mut plans, options);
+    let [plan] = plans;
+    finish_campaign(plan, options)
+}
+
+/// A campaign's runs, planned before any of them runs: its scenes, which of
+/// them this part selects, the records of the runs finished earlier, and
+/// (filled by [`run_queued`]) what became of the others.
+pub struct CampaignPlan {
+    /// What its progress lines start with.
+    label: String,
+    spec: CampaignSpec,
+    out: PathBuf,
+    all: Vec<Planned>,
+    costs: Vec<f64>,
+    selected: Vec<bool>,
+    records: Vec<Option<RunRecord>>,
+    window: Option<crate::plot::Bounds>,
+    /// What each run done in this process ended in, by its index in `all`.
+    executed: Vec<(usize, Result<Executed, CampaignError>)>,
+    /// When the last of them ended.
+    last_ended: Option<Instant>,
+}
+
+impl CampaignPlan {
+    /// The runs to do: selected and not finished earlier, the longest
+    /// (finest meshes, refinements) first.
+    fn queue(&self) -> Vec<usize> {
+        let mut queue: Vec<usize> = (0..self.all.len())
+            .filter(|&i| self.selected[i] && self.records[i].is_none())
+            .collect();
+        queue.sort_by(|&a, &b| self.costs[a].total_cmp(&self.costs[b]));
+        queue.reverse();
+        queue
+    }
+
+    /// Runs selected and finished earlier.
+    fn earlier(&self) -> usize {
+        (0..self.all.len())
+            .filter(|&i| self.selected[i] && self.records[i].is_some())
+            .count()
+    }
+
+    /// When the last run this process did of the campaign ended (`None`:
+    /// it did none).
+    pub fn last_ended(&self) -> Option<Instant> {
+        self.last_ended
+    }
+}
+
+/// Plan the campaign of `dir` into `out` ([`run_campaign`]): load and
+/// validate every scene, and find the runs finished earlier. Its progress
+/// lines start with `label`.
+pub fn plan_campaign(
+    dir: &Path,
+    out: &Path,
+    options: &CampaignOptions,
+    label: &str,
+) -> Result<CampaignPlan, CampaignError> {
     let spec = CampaignSpec::load(dir)?;
     let paths = scenes_in(dir)?;
     let mut scenes: Vec<(String, String, Scene)> = Vec::new();
@@ -120,56 +180,80 @@ pub fn run_campaign(
             Ok(record) => record,
             Err(why) => {
                 if *selected {
-                    eprintln!("campaign: {} is run again: {why}", planned.name);
+                    eprintln!("{label}: {} is run again: {why}", planned.name);
                 }
                 None
             }
         };
         if record.is_some() && *selected {
-            eprintln!("campaign: {} finished earlier, not run again", planned.name);
+            eprintln!("{label}: {} finished earlier, not run again", planned.name);
         }
         records.push(record);
     }
-    // popped from the back: the longest runs (finest meshes, refinements) start first
-    let mut queue: Vec<usize> = (0..all.len())
-        .filter(|&i| selected[i] && records[i].is_none())
-        .collect();
-    queue.sort_by(|&a, &b| costs[a].total_cmp(&costs[b]));
-    let earlier = (0..all.len())
-        .filter(|&i| selected[i] && records[i].is_some())
-        .count();
-    let queued_costs: Vec<f64> = queue.iter().map(|&i| costs[i]).collect();
-    let progress = Mutex::new(BatchProgress::start(
-        "campaign",
-        &queued_costs,
-        earlier,
-        options.jobs.max(1).min(queue.len().max(1)),
-    ));
+    Ok(CampaignPlan {
+        label: label.to_string(),
+        spec,
+        out: out.to_path_buf(),
+        all,
+        costs,
+        selected,
+        records,
+        window,
+        executed: Vec::new(),
+        last_ended: None,
+    })
+}
+
+/// Run the queued runs of every plan, `options.jobs` at a time, into the
+/// plans' folders: the first plan's runs first (the longest first), and
+/// each next plan's as soon as a job is free, so that no core waits for
+/// the last run of a campaign while another campaign has runs to do. What
+/// each run ended in goes to its plan.
+pub fn run_queued(plans: &mut [CampaignPlan], options: &CampaignOptions) {
+    let jobs = options.jobs.max(1);
+    let mut queue: Vec<(usize, usize)> = Vec::new();
+    let mut progress = Vec::with_capacity(plans.len());
+    for (p, plan) in plans.iter().enumerate() {
+        let runs = plan.queue();
+        let costs: Vec<f64> = runs.iter().map(|&i| plan.costs[i]).collect();
+        let at_a_time = jobs.min(runs.len().max(1));
+        progress.push(Mutex::new(BatchProgress::start(
+            &plan.label,
+            &costs,
+            plan.earlier(),
+            at_a_time,
+        )));
+        queue.extend(runs.into_iter().map(|i| (p, i)));
+    }
+    // popped from the back
+    queue.reverse();
     let queue = Mutex::new(queue);
     let results = Mutex::new(Vec::new());
-    let run_queued = || loop {
+    let plans_read: &[CampaignPlan] = plans;
+    let run_next = || loop {
         // after SIGINT/SIGTERM no further run starts
         if crate::interrupt::requested().is_some() {
             break;
         }
         let next = queue.lock().map(|mut q| q.pop()).unwrap_or(None);
-        let Some(index) = next else {
+        let Some((p, index)) = next else {
             break;
         };
-        let planned = &all[index];
-        if let Ok(p) = progress.lock() {
-            p.started(&planned.name);
+        let plan = &plans_read[p];
+        let planned = &plan.all[index];
+        if let Ok(progress) = progress[p].lock() {
+            progress.started(&planned.name);
         }
-        let executed = execute(planned, &out.join(&planned.name), options.checkpoint_every);
-        say(&planned.name, &executed);
-        if let Ok(mut p) = progress.lock() {
-            eprintln!("{}", p.finished(costs[index]));
+        let out = plan.out.join(&planned.name);
+        let executed = execute(planned, &out, options.checkpoint_every, &plan.label);
+        say(&plan.label, &planned.name, &executed);
+        if let Ok(mut progress) = progress[p].lock() {
+            eprintln!("{}", progress.finished(plan.costs[index]));
         }
         if let Ok(mut r) = results.lock() {
-            r.push((index, executed));
+            r.push((p, index, executed, Instant::now()));
         }
     };
-    let jobs = options.jobs.max(1);
     // Every job's pool has all the threads, so a run left alone at the end
     // (the longest starts first, so it often is) keeps every core busy;
     // while jobs run side by side their pools share the cores (more threads
@@ -182,14 +266,38 @@ pub fn run_campaign(
             scope.spawn(|| {
                 // each job's parallel loops in a pool of its own, this thread one of its workers
                 match crate::parallel::job_pool(threads_per_job) {
-                    Some(pool) => pool.install(run_queued),
-                    None => run_queued(),
+                    Some(pool) => pool.install(run_next),
+                    None => run_next(),
                 }
             });
         }
     });
+    for (p, index, executed, ended) in results.into_inner().unwrap_or_default() {
+        let plan = &mut plans[p];
+        plan.executed.push((index, executed));
+        plan.last_ended = plan.last_ended.max(Some(ended));
+    }
+}
+
+/// The campaign's runs once [`run_queued`] has run them: every run's
+/// record, and (not for a shard) the combined outputs of its benchmark.
+/// Returns the runs in scene order, refinements after the scenes.
+pub fn finish_campaign(
+    plan: CampaignPlan,
+    options: &CampaignOptions,
+) -> Result<Vec<CampaignRun>, CampaignError> {
+    let CampaignPlan {
+        spec,
+        out,
+        all,
+        selected,
+        mut records,
+        window,
+        executed,
+        ..
+    } = plan;
     let (mut locked, mut stopped) = (Vec::new(), Vec::new());
-    for (index, executed) in results.into_inner().unwrap_or_default() {
+    for (index, executed) in executed {
         match executed? {
             Executed::Finished(record) | Executed::NotSetUp(record) => {
                 records[index] = Some(record)
@@ -240,11 +348,11 @@ pub fn run_campaign(
         .collect();
     let window = window.unwrap_or(crate::plot::Bounds::new(0.0, 1.0, 0.0, 1.0));
     match spec.benchmark {
-        Benchmark::VerticalCut => write_history_outputs(out, &scenes_as_written, window)?,
-        benchmark => write_outputs(out, &scenes_as_written, benchmark, window)?,
+        Benchmark::VerticalCut => write_history_outputs(&out, &scenes_as_written, window)?,
+        benchmark => write_outputs(&out, &scenes_as_written, benchmark, window)?,
     }
     if options.step_refinement.is_some() {
-        write_step_convergence(out, &runs)?;
+        write_step_convergence(&out, &runs)?;
     }
     Ok(runs)
 }
@@ -313,11 +421,11 @@ enum Executed {
     Interrupted(crate::interrupt::Interruption),
 }
 
-/// Print how a run ended.
-fn say(name: &str, executed: &Result<Executed, CampaignError>) {
+/// Print how a run ended, after `label`.
+fn say(label: &str, name: &str, executed: &Result<Executed, CampaignError>) {
     match executed {
         Ok(Executed::Finished(record)) | Ok(Executed::NotSetUp(record)) => eprintln!(
-            "campaign: {name} finished in {:.1} s{}",
+            "{label}: {name} finished in {:.1} s{}",
             record.wall_seconds,
             record
                 .error
@@ -325,12 +433,12 @@ fn say(name: &str, executed: &Result<Executed, CampaignError>) {
                 .map(|e| format!(" (stopped: {e})"))
                 .unwrap_or_default()
         ),
-        Ok(Executed::Locked(why)) => eprintln!("campaign: {name} not run here: {why}"),
+        Ok(Executed::Locked(why)) => eprintln!("{label}: {name} not run here: {why}"),
         Ok(Executed::Interrupted(signal)) => eprintln!(
-            "campaign: {name} interrupted by {} after a whole step",
+            "{label}: {name} interrupted by {} after a whole step",
             signal.name()
         ),
-        Err(e) => eprintln!("campaign: {name}: {e}"),
+        Err(e) => eprintln!("{label}: {name}: {e}"),
     }
 }
 
@@ -338,11 +446,12 @@ fn say(name: &str, executed: &Result<Executed, CampaignError>) {
 /// [`RunRecord`] there, written while the run's lock is still held. With
 /// `checkpoint_every`, the run writes checkpoints, and a run of the same
 /// scene stopped earlier in `out` (a killed campaign) is resumed from its
-/// checkpoint instead of started again.
+/// checkpoint instead of started again. `label` starts its progress line.
 fn execute(
     planned: &Planned,
     out: &Path,
     checkpoint_every: Option<usize>,
+    label: &str,
 ) -> Result<Executed, CampaignError> {
     let mut record = RunRecord::new(planned.fingerprint.clone());
     let start = Instant::now();
@@ -350,7 +459,7 @@ fn execute(
     let outcome = match checkpoint_every.and_then(|_| resumable(planned, out)) {
         Some(resumable) => {
             eprintln!(
-                "campaign: {} resumed from the checkpoint of step {}",
+                "{label}: {} resumed from the checkpoint of step {}",
                 planned.name,
                 resumable.step()
             );
