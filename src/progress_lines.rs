@@ -100,8 +100,8 @@ fn share_done(sim: &Simulation) -> f64 {
 /// The progress of a batch of runs (a campaign's, a study's), printed to
 /// stderr whatever stderr is: the runs take minutes to hours, so a line per
 /// run is never too many. The time left is estimated from the relative cost
-/// of the runs (points × steps, or the caller's measure): the wall time so
-/// far times the cost left over the cost done.
+/// of the runs (points × steps, or the caller's measure): the wall time
+/// since the first run started times the cost left over the cost done.
 #[derive(Debug)]
 pub struct BatchProgress {
     label: String,
@@ -109,7 +109,9 @@ pub struct BatchProgress {
     total_cost: f64,
     done: usize,
     done_cost: f64,
-    start: Instant,
+    /// When the first run started (`None` before): the batches of
+    /// `mpm-geo paper` share one queue, and a later one's runs wait.
+    start: Option<Instant>,
 }
 
 impl BatchProgress {
@@ -132,12 +134,13 @@ impl BatchProgress {
             total_cost: costs.iter().sum(),
             done: 0,
             done_cost: 0.0,
-            start: Instant::now(),
+            start: None,
         }
     }
 
-    /// A run starts.
-    pub fn started(&self, name: &str) {
+    /// A run starts (the first one starts the clock of the estimate).
+    pub fn started(&mut self, name: &str) {
+        self.start.get_or_insert_with(Instant::now);
         eprintln!("{}: {name} started", self.label);
     }
 
@@ -146,7 +149,8 @@ impl BatchProgress {
     pub fn finished(&mut self, cost: f64) -> String {
         self.done += 1;
         self.done_cost += cost;
-        let left = match self.estimate_left(self.start.elapsed().as_secs_f64()) {
+        let elapsed = self.start.map_or(0.0, |t| t.elapsed().as_secs_f64());
+        let left = match self.estimate_left(elapsed) {
             Some(seconds) if self.done < self.total => {
                 format!(", about {} left (estimate)", clock(seconds))
             }
@@ -188,10 +192,17 @@ mod tests {
     }
 
     /// A quarter of the cost done in 60 s leaves 180 s; nothing is
-    /// estimated before any cost is done.
+    /// estimated before any cost is done, and the clock starts with the
+    /// first run, not with the batch (a later batch of `mpm-geo paper`'s
+    /// queue waits for the runs before it).
     #[test]
     fn batch_estimate_scales_the_time_by_the_cost_left() {
         let mut batch = BatchProgress::start("test", &[1.0, 3.0], 0, 1);
+        assert!(batch.start.is_none());
+        batch.started("first");
+        let first = batch.start;
+        batch.started("second");
+        assert!(first.is_some() && batch.start == first);
         assert_eq!(batch.estimate_left(60.0), None);
         let line = batch.finished(1.0);
         assert!(line.starts_with("test: 1 of 2 runs done"), "{line}");

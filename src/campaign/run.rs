@@ -241,7 +241,7 @@ pub fn run_queued(plans: &mut [CampaignPlan], options: &CampaignOptions) {
         };
         let plan = &plans_read[p];
         let planned = &plan.all[index];
-        if let Ok(progress) = progress[p].lock() {
+        if let Ok(mut progress) = progress[p].lock() {
             progress.started(&planned.name);
         }
         let out = plan.out.join(&planned.name);

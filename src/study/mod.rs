@@ -201,7 +201,7 @@ pub fn run_spec(
                 if let Some(signal) = crate::interrupt::requested() {
                     return Err(StudyError::Interrupted { signal, run: None });
                 }
-                if let Some(p) = &progress {
+                if let Some(p) = &mut progress {
                     p.started(&planned.name);
                 }
                 let measured =
