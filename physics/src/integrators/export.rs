@@ -3,8 +3,9 @@
 //! written to `<out>/systems/` in Matrix Market format, with a JSON
 //! description (scene, step, iteration, dof map, the solver's time and
 //! work for it). A system the solver fails on is written too, with the
-//! solver's error in place of the correction. Systems whose files would exceed `systems_max_mb` are
-//! skipped with a warning (recorded in `run.json`).
+//! solver's error in place of the correction. Systems whose files would
+//! exceed `systems_max_mb` are skipped with a warning (recorded in
+//! `run.json`).
 
 use std::path::PathBuf;
 
@@ -57,7 +58,6 @@ impl SystemExport {
         self.iteration = 0;
     }
 
-    /// Writes the system of this iteration if its step was asked for.
     /// Write the system `(k, rhs)` of the current Newton iteration if its
     /// step is exported: with its correction and the solver that gave it,
     /// or with the solver's error where the solve failed (no correction).
